@@ -1,0 +1,21 @@
+"""dq-derive: dual-quaternion kinematics of serial robot arms.
+
+Quick start::
+
+    import derive
+    robot = derive.load_robot("ur5")
+    Q = derive.reference.fk(robot, [0, -1.57, 1.57, 0, 1.57, 0])   # unit dual quaternion (8,)
+    T = derive.reference.fk_matrix(robot, [0, -1.57, 1.57, 0, 1.57, 0])  # 4x4 matrix
+"""
+
+from . import dualquat, quaternion, reference
+from .errors import DeriveError, InputError, RobotFileError, UnknownRobotError
+from .robot import Robot, list_robots, load_robot
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
+    "Robot", "list_robots", "load_robot",
+    "dualquat", "quaternion", "reference", "__version__",
+]
