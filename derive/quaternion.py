@@ -276,13 +276,18 @@ def kunze_angles(q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return wrap_angle(alpha), beta, wrap_angle(gamma)
 
 
+def _compose(axes: str, named_angles) -> np.ndarray:
+    """Product of rotations about the coordinate axes ``axes`` (e.g. "zyx"), left to right."""
+    out = None
+    for axis, (name, value) in zip(axes, named_angles):
+        r = _from_axis_angle(np.eye(3)["xyz".index(axis)], as_finite_array(value, name, ndim_min=0))
+        out = r if out is None else _mul(out, r)
+    return out
+
+
 def from_kunze_angles(alpha, beta, gamma) -> np.ndarray:
     """Unit quaternion of Rx(alpha) Ry(beta) Rz(gamma) (Kunze eq. 5.30)."""
-    ex, ey, ez = np.eye(3)
-    a = as_finite_array(alpha, "alpha", ndim_min=0)
-    b = as_finite_array(beta, "beta", ndim_min=0)
-    g = as_finite_array(gamma, "gamma", ndim_min=0)
-    return _mul(_mul(_from_axis_angle(ex, a), _from_axis_angle(ey, b)), _from_axis_angle(ez, g))
+    return _compose("xyz", (("alpha", alpha), ("beta", beta), ("gamma", gamma)))
 
 
 def euler_zyx(q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -303,8 +308,4 @@ def euler_zyx(q) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def from_euler_zyx(yaw, pitch, roll) -> np.ndarray:
     """Unit quaternion of Rz(yaw) Ry(pitch) Rx(roll)."""
-    ex, ey, ez = np.eye(3)
-    y = as_finite_array(yaw, "yaw", ndim_min=0)
-    p = as_finite_array(pitch, "pitch", ndim_min=0)
-    r = as_finite_array(roll, "roll", ndim_min=0)
-    return _mul(_mul(_from_axis_angle(ez, y), _from_axis_angle(ey, p)), _from_axis_angle(ex, r))
+    return _compose("zyx", (("yaw", yaw), ("pitch", pitch), ("roll", roll)))
