@@ -40,19 +40,26 @@ def _v(v, name="v"):
 # --------------------------------------------------------------------------- #
 # Unchecked kernels
 # --------------------------------------------------------------------------- #
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product a b (seed 000 product table; Kunze eq. 1.15)."""
-    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    return np.stack(
-        (
-            aw * bw - ax * bx - ay * by - az * bz,
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-        ),
-        axis=-1,
+def hamilton(a, b) -> tuple:
+    """Hamilton product of two quaternions given as 4-sequences of scalars.
+
+    The single statement of the product rule (seed 000 product table; Kunze
+    eq. 1.15), shared by the numpy kernels (components are arrays) and the
+    symbolic derivation (components are sympy expressions).
+    """
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
     )
+
+
+def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a b on arrays (..., 4)."""
+    return np.stack(hamilton(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)), axis=-1)
 
 
 def _conj(q: np.ndarray) -> np.ndarray:

@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import sympy as sp
 import yaml
 
 from .errors import RobotFileError, UnknownRobotError
@@ -43,6 +44,8 @@ CONVENTIONS = ("standard_dh", "modified_dh", "kunze", "axis_angle")
 JOINT_TYPES = ("revolute", "prismatic")
 LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+_EXACT_FACTOR = {"m": sp.Integer(1), "cm": sp.Rational(1, 100), "mm": sp.Rational(1, 1000),
+                 "rad": sp.Integer(1), "deg": sp.pi / 180}
 
 #: A length above this many metres in a file declared in metres is taken for a unit mistake.
 MAX_LENGTH_M = 20.0
@@ -65,23 +68,46 @@ EX, EY, EZ = np.eye(3)
 # --------------------------------------------------------------------------- #
 # Data model
 # --------------------------------------------------------------------------- #
+class Num(float):
+    """A float read from a description file that also carries its exact value
+    ``sym``: a sympy expression in SI units over the file's named parameters
+    (``d1``, ``a2``, ...), with exact rationals and pi. The symbolic derivation
+    uses ``sym``; the numeric code sees a plain float."""
+
+    sym: sp.Expr
+
+    def __new__(cls, value, sym):
+        obj = super().__new__(cls, value)
+        obj.sym = sym
+        return obj
+
+
+def _exact(values) -> tuple:
+    """Exact sympy tuple of a vector of :class:`Num` (plain numbers made rational)."""
+    return tuple(v.sym if isinstance(v, Num) else sp.nsimplify(float(v), rational=True) for v in values)
+
+
 @dataclass(frozen=True)
 class Op:
     """Elementary rigid motion: ``kind`` "R" (rotation by ``angle`` about unit
-    ``axis``) or "T" (translation by ``vector``)."""
+    ``axis``) or "T" (translation by ``vector``). ``sym`` holds the exact form:
+    (axis, angle) for "R", the vector for "T"."""
 
     kind: str
     axis: np.ndarray | None = None
     angle: float = 0.0
     vector: np.ndarray | None = None
+    sym: tuple = ()
 
     @staticmethod
-    def rot(axis, angle: float) -> "Op":
-        return Op("R", axis=np.asarray(axis, dtype=float), angle=float(angle))
+    def rot(axis, angle) -> "Op":
+        exact_angle = angle.sym if isinstance(angle, Num) else sp.nsimplify(float(angle), rational=True)
+        return Op("R", axis=np.asarray(axis, dtype=float), angle=float(angle),
+                  sym=(_exact(axis), exact_angle))
 
     @staticmethod
     def trans(vector) -> "Op":
-        return Op("T", vector=np.asarray(vector, dtype=float))
+        return Op("T", vector=np.asarray(vector, dtype=float), sym=_exact(vector))
 
 
 @dataclass(frozen=True)
@@ -92,14 +118,16 @@ class Joint:
     type: str                      # "revolute" or "prismatic"
     parent: int                    # index of the parent joint, -1 for the base
     axis: np.ndarray               # unit motion axis in the parent frame (after ``pre``)
+                                   # (its exact form: derive.robot.exact_axis)
     pre: tuple[Op, ...]
     post: tuple[Op, ...]
-    offset: float                  # added to the joint value (rad or m)
+    offset: float                  # added to the joint value (rad or m); a Num (exact in .sym)
     limits: tuple[float, float] | None
     variable: int                  # index into q of the variable that drives this joint
     multiplier: float = 1.0        # joint value = multiplier * q[variable] + mimic_offset
     mimic_offset: float = 0.0
     params: dict = field(default_factory=dict)   # the file's fields, as written
+    exact_axis: tuple = ()         # the motion axis as exact sympy numbers
 
     @property
     def is_mimic(self) -> bool:
@@ -296,7 +324,7 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
     if not isinstance(joints_raw, list) or not joints_raw:
         raise RobotFileError(f"{where}: 'joints' must be a non-empty list")
 
-    ctx = _Context(where, conv, params, lf, af, au == "deg")
+    ctx = _Context(where, conv, params, lu, au)
     joints: list[Joint] = []
     names: dict[str, int] = {}
     nvar = 0
@@ -348,9 +376,11 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
 class _Context:
     """Per-file state while joints are read: units, parameters, parameter kinds."""
 
-    def __init__(self, where, conv, params, lf, af, degrees):
+    def __init__(self, where, conv, params, lu, au):
         self.where, self.conv, self.params = where, conv, params
-        self.lf, self.af, self.degrees = lf, af, degrees
+        self.lf, self.af, self.degrees = LENGTH_UNITS[lu], ANGLE_UNITS[au], au == "deg"
+        self.exact = {"length": _EXACT_FACTOR[lu], "angle": _EXACT_FACTOR[au], "unitless": sp.Integer(1)}
+        self.symbols = {p: sp.Symbol(p, real=True) for p in params}
         self.used: set[str] = set()
         self.kind_of: dict[str, str] = {}
 
@@ -365,17 +395,29 @@ class _Context:
             if self.kind_of.setdefault(p, kind) != kind:
                 raise RobotFileError(f"{where}: parameter {p!r} is used both as a length and an angle")
         self.used |= ev.used
-        return v
+        return Num(v, self._exact_value(raw, kind))
+
+    def _exact_value(self, raw, kind):
+        """The field as an exact SI expression; parameters stand for their SI values."""
+        if isinstance(raw, (int, float)):
+            e = sp.nsimplify(raw, rational=True)
+        else:
+            e = sp.sympify(raw, locals={**self.symbols, "pi": sp.pi})
+        f = self.exact[kind]
+        subs = {s: s / self.exact[self.kind_of.get(p, kind)] for p, s in self.symbols.items()}
+        return sp.nsimplify(f * e.subs(subs)) if f != 1 else e
 
     def length(self, where, raw, what):
-        v = self._value(where, raw, what, "length") * self.lf
+        v = self._value(where, raw, what, "length")
+        v = Num(v * self.lf, v.sym)
         if abs(v) > MAX_LENGTH_M:
             raise RobotFileError(f"{where}: {what} = {v:g} m is implausibly long; "
                                  "is the file in millimetres? set units.length: mm")
         return v
 
     def angle(self, where, raw, what, limit=MAX_ANGLE_RAD):
-        v = self._value(where, raw, what, "angle") * self.af
+        v = self._value(where, raw, what, "angle")
+        v = Num(v * self.af, v.sym)
         if abs(v) > limit:
             raise RobotFileError(f"{where}: {what} = {v:g} rad is out of range; "
                                  "is it in degrees? set units.angle: deg")
@@ -385,17 +427,18 @@ class _Context:
         if not isinstance(raw, (list, tuple)) or len(raw) != 3:
             raise RobotFileError(f"{where}: {what} must be a list of 3 numbers, got {raw!r}")
         if kind == "length":
-            return np.array([self.length(where, x, f"{what}[{k}]") for k, x in enumerate(raw)])
-        return np.array([self._value(where, x, f"{what}[{k}]", "unitless") for k, x in enumerate(raw)])
+            return [self.length(where, x, f"{what}[{k}]") for k, x in enumerate(raw)]
+        return [self._value(where, x, f"{what}[{k}]", "unitless") for k, x in enumerate(raw)]
 
     def axis(self, where, raw, what="axis"):
         v = self.vector(where, raw, what, kind="unitless")
-        n = float(np.linalg.norm(v))
+        n = float(np.linalg.norm(np.array(v, dtype=float)))
         if n < 1e-9:
             raise RobotFileError(f"{where}: {what} is the zero vector; a joint axis needs a direction")
         if abs(n - 1.0) > 1e-6:
             raise RobotFileError(f"{where}: {what} = {raw!r} has length {n:.6g}; give a unit vector")
-        return v / n
+        exact_norm = sp.sqrt(sum(x.sym**2 for x in v))
+        return [Num(float(x) / n, sp.nsimplify(x.sym / exact_norm)) for x in v]
 
     # -- joints --------------------------------------------------------------
     def joint(self, i, jr, names, joints, nvar) -> Joint:
@@ -432,6 +475,7 @@ class _Context:
             axis = self.axis(where, jr["axis"])
             link = self.vector(where, jr["link"], "link")
             pre, post = (), (Op.trans(link),)
+            axis = Op.rot(axis, 0.0)  # carries the exact axis
             offset_raw = jr.get("offset", 0)
         else:
             pre, axis, post, offset_raw = self._dh(where, jr, jtype)
@@ -440,9 +484,13 @@ class _Context:
                   else self.length(where, offset_raw, "offset"))
         limits = self._limits(where, jr.get("limits"), jtype)
         mimic = jr.get("mimic")
+        if isinstance(axis, Op):
+            exact_axis, axis = axis.sym[0], axis.axis
+        else:
+            exact_axis, axis = _exact(axis), np.asarray(axis, dtype=float)
         return Joint(name=jname, type=jtype, parent=parent, axis=axis, pre=pre, post=post,
                      offset=offset, limits=limits, variable=-1 if mimic else nvar,
-                     params={k: v for k, v in jr.items() if k != "name"})
+                     params={k: v for k, v in jr.items() if k != "name"}, exact_axis=exact_axis)
 
     def _dh(self, where, jr, jtype):
         keys = _DH_KEYS[self.conv]
@@ -461,17 +509,17 @@ class _Context:
         alpha = self.angle(where, jr["alpha"], "alpha")
         offset_raw = jr.get("offset", jr.get(var_key, 0))
         if jtype == "revolute":
-            motion_pre, motion_post = (), (Op.trans(d * EZ),)
+            motion_pre, motion_post = (), (Op.trans([0, 0, d]),)
         else:
             motion_pre, motion_post = ((Op.rot(EZ, theta),) if theta else ()), ()
-        link = (Op.trans(a * EX), Op.rot(EX, alpha))
+        link = (Op.trans([a, 0, 0]), Op.rot(EX, alpha))
         if self.conv == "modified_dh":
             pre = link + motion_pre
             post = motion_post
         else:
             pre = motion_pre
             post = motion_post + link
-        return pre, EZ.copy(), post, offset_raw
+        return pre, (0, 0, 1), post, offset_raw
 
     def _limits(self, where, raw, jtype):
         if raw is None:
@@ -533,7 +581,8 @@ class _Context:
             vn = float(np.linalg.norm(q[1:]))
             if vn == 0.0:
                 return []
-            return [Op.rot(q[1:] / vn, 2.0 * math.atan2(vn, q[0]))]
+            angle = 2.0 * math.atan2(vn, q[0])
+            return [Op.rot(q[1:] / vn, Num(angle, sp.nsimplify(angle, [sp.pi], tolerance=1e-12)))]
         if "rpy" in rot:
             r = rot["rpy"]
             if not isinstance(r, (list, tuple)) or len(r) != 3:
