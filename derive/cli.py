@@ -64,11 +64,29 @@ def cmd_fk(args) -> int:
     return 0
 
 
+def cmd_appendix(args) -> int:
+    from .appendix import write_appendix
+    t0 = time.perf_counter()
+    paths = write_appendix(args.robot, args.out, progress=not args.quiet)
+    for p in paths:
+        print(f"wrote {p}")
+    print(f"took {time.perf_counter() - t0:.2f} s")
+    return 0
+
+
 def cmd_generate(args) -> int:
-    """Print the robot list and an FK table; later issues add the emitted files."""
+    """Regenerate the outputs of the default robots and print an FK table."""
+    from .appendix import write_appendix
     t0 = time.perf_counter()
     robots = args.robots or list(DEFAULT_ROBOTS)
     print(f"dq-derive {__version__}: generate for {', '.join(robots)}")
+    written = []
+    for name in robots:
+        t = time.perf_counter()
+        paths = write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}")
+        written += paths
+        print(f"{name}: appendix B and C equations derived, verified and written in "
+              f"{time.perf_counter() - t:.2f} s")
     cmd_robots(args)
     print()
     print("Forward kinematics at reference configurations (dual-quaternion product;"
@@ -83,8 +101,9 @@ def cmd_generate(args) -> int:
             print(f"{name} q={label} ({_fmt(q, 7, 3)}), max |DQ - matrix| = {gap:.1e}")
             for line in _pose_lines(robot, q):
                 print(line)
-    print(f"wrote nothing yet under {args.out}/ (the emitters come with later issues); "
-          f"took {time.perf_counter() - t0:.2f} s")
+    for p in written:
+        print(f"wrote {p}")
+    print(f"generate took {time.perf_counter() - t0:.2f} s")
     return 0
 
 
@@ -103,6 +122,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--end", default=None, help="end frame (default: the robot's default end)")
     s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix")
     s.set_defaults(func=cmd_fk)
+
+    s = sub.add_parser("appendix", help="derive, verify and typeset the M_i = N_i equations")
+    s.add_argument("robot", help="library name or path to a description file")
+    s.add_argument("--out", default="generated", help="output folder (default: generated)")
+    s.add_argument("--quiet", action="store_true", help="no progress output")
+    s.set_defaults(func=cmd_appendix)
 
     s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
