@@ -133,7 +133,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
     s.add_argument("--out", default="generated", help="output folder (default: generated)")
     s.set_defaults(func=cmd_generate)
+
+    s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
+    s.add_argument("what", nargs="?", default="derivation", choices=["derivation"])
+    s.add_argument("--robot", default="ur3")
+    s.add_argument("--repeats", type=int, default=5)
+    s.set_defaults(func=cmd_bench)
     return p
+
+
+def cmd_bench(args) -> int:
+    from .bench import main as bench_main
+    return bench_main([args.what, "--robot", args.robot, "--repeats", str(args.repeats)])
 
 
 def main(argv=None) -> int:

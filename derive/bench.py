@@ -1,0 +1,71 @@
+"""Speed measurements (``dq-derive bench``). Not tests: numbers go to docs/benchmarks.md."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+_DERIVATION_RUN = r"""
+import json, sys, time
+t0 = time.perf_counter()
+import derive.appendix
+t1 = time.perf_counter()
+derive.appendix.write_appendix(sys.argv[1], sys.argv[2])
+t2 = time.perf_counter()
+print(json.dumps({"import_s": t1 - t0, "derive_verify_emit_s": t2 - t1}))
+"""
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()}"
+
+
+def bench_derivation(robot: str = "ur3", repeats: int = 5) -> dict:
+    """Whole derivation, simplification, verification and emission, each run in a fresh process."""
+    runs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for _ in range(repeats):
+            t = time.perf_counter()
+            res = subprocess.run([sys.executable, "-c", _DERIVATION_RUN, robot, tmp],
+                                 capture_output=True, text=True, check=True)
+            wall = time.perf_counter() - t
+            r = json.loads(res.stdout.strip().splitlines()[-1])
+            r["process_wall_s"] = wall
+            runs.append(r)
+    keys = ("import_s", "derive_verify_emit_s", "process_wall_s")
+    return {"robot": robot, "repeats": repeats, "machine": machine(),
+            **{f"median_{k}": statistics.median(r[k] for r in runs) for k in keys},
+            **{f"max_{k}": max(r[k] for r in runs) for k in keys}}
+
+
+def main(argv=None) -> int:
+    import argparse
+    p = argparse.ArgumentParser(prog="dq-derive bench")
+    p.add_argument("what", nargs="?", default="derivation", choices=["derivation"])
+    p.add_argument("--robot", default="ur3")
+    p.add_argument("--repeats", type=int, default=5)
+    args = p.parse_args(argv)
+    r = bench_derivation(args.robot, args.repeats)
+    print(f"derivation of {r['robot']} (sets B, W, C: derive, simplify, verify, emit), "
+          f"{r['repeats']} fresh processes on {r['machine']}:")
+    print(f"  derive + verify + emit: median {r['median_derive_verify_emit_s']:.2f} s, "
+          f"max {r['max_derive_verify_emit_s']:.2f} s")
+    print(f"  import of derive/sympy: median {r['median_import_s']:.2f} s")
+    print(f"  whole process:          median {r['median_process_wall_s']:.2f} s, "
+          f"max {r['max_process_wall_s']:.2f} s")
+    return 0
