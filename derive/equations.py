@@ -183,11 +183,8 @@ def verify_numeric(chain: SymChain, eset: EquationSet, seed: int = 0, n_angles: 
     args = thetas + params + list(eset.pose)
     fl = {e.id: (sp.lambdify(args, e.lhs, "numpy"), sp.lambdify(args, e.rhs, "numpy"))
           for e in eset.equations}
-    first_m = [sp.lambdify(args[:len(thetas) + len(params)], t, "numpy")
-               for t in eset.raw[f"{eset.key}.{7 * (eset.last - eset.first) + 1}"][0:1]]
     m_first_terms = [eset.raw[f"{eset.key}.{7 * (eset.last - eset.first) + j}"][0] for j in range(1, 8)]
     m_first = sp.lambdify(thetas + params, list(m_first_terms), "numpy")
-    del first_m
     worst = {e.id: 0.0 for e in eset.equations}
     fk_gap = 0.0
     for values in _samples(chain, rng, n_params):

@@ -309,7 +309,6 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
         raise RobotFileError(f"{where}: unknown length unit {lu!r}; use one of {sorted(LENGTH_UNITS)}")
     if au not in ANGLE_UNITS:
         raise RobotFileError(f"{where}: unknown angle unit {au!r}; use one of {sorted(ANGLE_UNITS)}")
-    lf, af = LENGTH_UNITS[lu], ANGLE_UNITS[au]
 
     params_raw = data.get("parameters") or {}
     if not isinstance(params_raw, dict):
@@ -407,21 +406,20 @@ class _Context:
         subs = {s: s / self.exact[self.kind_of.get(p, kind)] for p, s in self.symbols.items()}
         return sp.nsimplify(f * e.subs(subs)) if f != 1 else e
 
-    def length(self, where, raw, what):
-        v = self._value(where, raw, what, "length")
-        v = Num(v * self.lf, v.sym)
-        if abs(v) > MAX_LENGTH_M:
-            raise RobotFileError(f"{where}: {what} = {v:g} m is implausibly long; "
-                                 "is the file in millimetres? set units.length: mm")
+    def _scaled(self, where, raw, what, kind, limit, unit, hint):
+        v = self._value(where, raw, what, kind)
+        v = Num(v * (self.lf if kind == "length" else self.af), v.sym)
+        if abs(v) > limit:
+            raise RobotFileError(f"{where}: {what} = {v:g} {unit} is out of range; {hint}")
         return v
 
+    def length(self, where, raw, what):
+        return self._scaled(where, raw, what, "length", MAX_LENGTH_M, "m",
+                            "is the file in millimetres? set units.length: mm")
+
     def angle(self, where, raw, what, limit=MAX_ANGLE_RAD):
-        v = self._value(where, raw, what, "angle")
-        v = Num(v * self.af, v.sym)
-        if abs(v) > limit:
-            raise RobotFileError(f"{where}: {what} = {v:g} rad is out of range; "
-                                 "is it in degrees? set units.angle: deg")
-        return v
+        return self._scaled(where, raw, what, "angle", limit, "rad",
+                            "is it in degrees? set units.angle: deg")
 
     def vector(self, where, raw, what, kind="length"):
         if not isinstance(raw, (list, tuple)) or len(raw) != 3:

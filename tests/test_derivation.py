@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 import sympy as sp
 
-import derive
+
 from derive import DeriveError, reference
 from derive import dualquat as DQ
 from derive import quaternion as Q
 from derive.appendix import write_appendix
 from derive.chain import chain_from_robot, products
-from derive.equations import POSES, derive_equations, derive_set, verify_numeric, verify_symbolic
+from derive.equations import POSES, derive_equations, derive_set, verify_numeric
 from derive.trig import half_angle_normal_form
 
 ROOT = Path(__file__).resolve().parent.parent
