@@ -215,3 +215,106 @@ def pose_error(a, b) -> tuple[np.ndarray, np.ndarray]:
     rel = quat._mul(quat._conj(a[..., :4]), b[..., :4])
     ang = 2.0 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
     return dp, ang
+
+
+# --------------------------------------------------------------------------- #
+# Inverse kinematics (closed form, UR family)
+# --------------------------------------------------------------------------- #
+class IKSolutions(np.ndarray):
+    """Solutions (k, dof) of one pose, an ndarray with two attributes:
+
+    ``singular`` (k,) bool: the solution lies on the wrist singularity (theta6 free, taken
+    from the reference configuration); ``reason``: why there is no solution ("" otherwise).
+    """
+
+    def __new__(cls, q, singular, reason=""):
+        obj = np.asarray(q, dtype=float).view(cls)
+        obj.singular = np.asarray(singular, dtype=bool)
+        obj.reason = reason
+        return obj
+
+    def __array_finalize__(self, obj):
+        if obj is not None:
+            self.singular = getattr(obj, "singular", None)
+            self.reason = getattr(obj, "reason", "")
+
+
+def _geometry(robot):
+    from .ik import ur_geometry
+    return ur_geometry(robot)
+
+
+def ik_batch(robot, poses, q_ref=None):
+    """Closed-form IK of n poses: (solutions (n, 8, 6) NaN-padded, counts (n,)).
+
+    ``poses``: unit dual quaternions (n, 8) or matrices (n, 4, 4) of the robot's end frame.
+    ``q_ref`` (n, 6) or (6,): reference configuration(s) whose theta6 is used at the wrist
+    singularity (default 0). Solutions are wrapped to (-pi, pi] and checked by FK.
+    """
+    from .ik import as_pose_batch, solve
+    robot = load_robot(robot)
+    geo = _geometry(robot)
+    poses, _ = as_pose_batch(poses)
+    q6 = None
+    if q_ref is not None:
+        qr = as_finite_array(q_ref, "q_ref", ndim_min=1)
+        q6 = np.broadcast_to(qr[..., 5], (poses.shape[0],)).astype(float)
+    q, counts, _, _ = solve(robot, geo, poses, q6)
+    return q, counts
+
+
+def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IKSolutions:
+    """Every closed-form IK solution of one pose (thesis section 4.3, UR family).
+
+    pose: a unit dual quaternion (8,) or a 4x4 matrix of the robot's end frame; a pose
+    within 1e-6 of unit is normalised, one farther off raises InputError.
+    q_ref: reference configuration; its theta6 is used where theta6 is free (wrist
+    singularity, marked in ``.singular``).
+    within_limits: keep only solutions inside the robot's joint limits, adding the
+    +-2 pi alternatives of joints whose range allows them.
+    sort_by: a configuration; solutions are sorted by their distance to it.
+    An unreachable pose gives an empty (0, 6) result whose ``.reason`` says why.
+    """
+    from .ik import as_pose_batch, solve
+    robot = load_robot(robot)
+    geo = _geometry(robot)
+    poses, single = as_pose_batch(pose)
+    if not single:
+        raise InputError("pose: ik() takes one pose; use ik_batch() for several")
+    q6 = None
+    if q_ref is not None:
+        q_ref = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
+        q6 = np.array([q_ref[5]])
+    q, counts, singular, reasons = solve(robot, geo, poses, q6)
+    k = int(counts[0])
+    sols, sing = q[0, :k], singular[0, :k]
+    reason = reasons[0]
+    if within_limits:
+        sols, sing = _expand_within_limits(robot.limits, sols, sing)
+        if len(sols) == 0 and not reason:
+            reason = f"no solution inside the joint limits ({k} outside)"
+    if sort_by is not None and len(sols):
+        ref = as_finite_array(sort_by, "sort_by", last_dim=robot.dof)
+        order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
+        sols, sing = sols[order], sing[order]
+    return IKSolutions(sols.reshape(-1, robot.dof), sing, reason)
+
+
+def _expand_within_limits(limits, sols, sing):
+    """Every representation q + 2 pi k of each solution that lies inside the limits."""
+    out, out_sing = [], []
+    for q, s in zip(sols, sing):
+        options = []
+        for j, (lo, hi) in enumerate(limits):
+            ks = np.arange(-2, 3)
+            vals = q[j] + 2 * np.pi * ks
+            options.append(vals[(vals >= lo - 1e-12) & (vals <= hi + 1e-12)])
+        if any(len(o) == 0 for o in options):
+            continue
+        grids = np.meshgrid(*options, indexing="ij")
+        combos = np.stack([g.ravel() for g in grids], axis=-1)
+        out.extend(combos)
+        out_sing.extend([s] * len(combos))
+    if not out:
+        return np.zeros((0, len(limits))), np.zeros(0, dtype=bool)
+    return np.array(out), np.array(out_sing)

@@ -1,0 +1,251 @@
+"""Closed-form inverse kinematics of the UR family (numeric reference).
+
+The chain in thesis form (:mod:`derive.chain`): axes z, -y, -y, -y, -z, -y and links
+(0, 0, d1), (a2, 0, 0), (a3, -d4, 0), (0, 0, -d5), (0, -d6, 0), 0. The solving order is
+the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik_extract`):
+
+1. theta1 from W.6 (= 4.9): y5 cos t1 - x5 sin t1 = -d4, with the frame-5 point
+   p5 = p + d6 R e_y; two roots (4.11);
+2. theta5: cos t5 from B.13 (= 4.12) and |sin t5| from the rotation, t5 = atan2(+-s5, c5)
+   (the thesis's 4.13 uses acos, which loses accuracy near 0 and pi);
+3. theta6 from the pair B.29-B.32 (= 4.14-4.17): with A = Rz(t1)^T R, row 2 of A is
+   (-s5 c6, c5, s5 s6), so t6 = atan2(s5 A23, -s5 A21) (equivalent to 4.28 without its
+   divisions by cos(t5/2), sin(t5/2) and cos((t2+t3+t4)/2));
+   at the wrist singularity (sin t5 = 0) t6 is free: it is taken from a reference
+   configuration and the solution is marked singular;
+4. t2 + t3 + t4 from A R_-y(t6)^-1 R_-z(t5)^-1 = R_-y(t2+t3+t4) (exact also when t6 was
+   chosen freely);
+5. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
+6. theta2 from C.12, C.14 (4.39-4.41); theta4 = (t2+t3+t4) - t2 - t3 (C.1, C.3, 4.44).
+
+Every candidate is checked by the reference forward kinematics; candidates that do not
+reproduce the pose are dropped, near-duplicates (closer than :data:`MERGE_TOL` in every
+joint, modulo 2 pi) are merged. All angles are wrapped to (-pi, pi].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import dualquat as dq
+from . import quaternion as quat
+from .angles import wrap_angle
+from .errors import DeriveError, InputError, as_finite_array
+
+#: |sin theta5| below this is the wrist singularity (theta6 free)
+WRIST_SINGULAR = 1e-11
+#: Candidates whose FK misses the pose by more than this (m or rad) are dropped.
+ACCEPT_TOL = 1e-8
+#: Solutions closer than this in every joint (mod 2 pi) are one solution: such pairs only arise
+#: within about 1e-7 of a singular set, where a double root splits by rounding (sqrt of noise).
+MERGE_TOL = 1e-6
+#: Slack on |cos| <= 1 and on the discriminant before a branch counts as unreachable.
+REACH_TOL = 1e-10
+
+REASON_OK = ""
+REASON_WRIST_NEAR_AXIS = ("unreachable: the wrist centre is closer to the base axis than the "
+                          "shoulder offset d4 allows")
+REASON_ARM_REACH = ("unreachable: the distance from shoulder to wrist is outside the range the "
+                    "upper arm and forearm can span (| |a2| - |a3| | .. |a2| + |a3|)")
+REASON_NO_CANDIDATE = "unreachable: no candidate reproduces the pose"
+
+
+@dataclass(frozen=True)
+class URGeometry:
+    """Numbers of a UR-type chain and the constant end transform G (robot end = chain end * G)."""
+
+    d1: float
+    a2: float
+    a3: float
+    d4: float
+    d5: float
+    d6: float
+    g: np.ndarray          # unit dual quaternion (8,)
+
+
+def ur_geometry(robot) -> URGeometry:
+    """Extract the UR structure from a robot, or raise DeriveError when it does not have it."""
+    from .chain import chain_from_robot
+    from .robot import load_robot
+
+    robot = load_robot(robot)
+    chain = chain_from_robot(robot)
+    values = chain.parameters
+
+    def num(e):
+        import sympy as sp
+        return float(sp.sympify(e).subs(values))
+
+    axes = [tuple(num(v) for v in j.axis) for j in chain.joints]
+    links = [tuple(num(v) for v in j.link) for j in chain.joints]
+    want_axes = [(0, 0, 1), (0, -1, 0), (0, -1, 0), (0, -1, 0), (0, 0, -1), (0, -1, 0)]
+    ok = (chain.n == 6 and all(j.type == "revolute" for j in chain.joints)
+          and all(np.allclose(a, w, atol=1e-12) for a, w in zip(axes, want_axes)))
+    if ok:
+        d1, a2, (a3, md4), md5, md6 = links[0][2], links[1][0], links[2][:2], links[3][2], links[4][1]
+        shape = [(0, 0, d1), (a2, 0, 0), (a3, md4, 0), (0, 0, md5), (0, md6, 0), (0, 0, 0)]
+        ok = all(np.allclose(l, s, atol=1e-12) for l, s in zip(links, shape))
+    if not ok:
+        raise DeriveError(f"{robot.name}: closed-form IK is implemented for the UR family "
+                          "(axes z, -y, -y, -y, -z, -y in thesis form); this chain differs")
+    gq, gt = chain.end_transform
+    g = dq.from_rt(np.array([num(v) for v in gq]), np.array([num(v) for v in gt]))
+    return URGeometry(d1=d1, a2=a2, a3=a3, d4=-md4, d5=-md5, d6=-md6, g=g)
+
+
+# --------------------------------------------------------------------------- #
+# Batch solver
+# --------------------------------------------------------------------------- #
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _rmy(t):
+    """Rotation by t about -y."""
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, z, -s], -1), np.stack([z, o, z], -1), np.stack([s, z, c], -1)], -2)
+
+
+def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
+    """Rotation matrices (n,3,3) and translations (n,3) of the chain end frame (pose * G^-1)."""
+    chain = dq._mul(poses, dq.conj_quaternion(geo.g))
+    r = quat._to_matrix(chain[:, :4])
+    p = dq._translation(chain)
+    return r, p
+
+
+def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None):
+    """All 8 candidate branches for n poses: (q (n,8,6), singular (n,8), reason (n,8) codes).
+
+    reason codes: 0 ok, 1 theta1 unreachable, 2 theta3 unreachable. Candidates are not yet
+    checked by FK (see :func:`solve`).
+    """
+    n = poses.shape[0]
+    r, p = _chain_pose(geo, poses)
+    q6_ref = np.zeros(n) if q6_ref is None else q6_ref
+    out = np.full((n, 8, 6), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    code = np.zeros((n, 8), dtype=np.int8)
+
+    # theta1 (W.6): y5 cos t1 - x5 sin t1 = -d4
+    p5 = p + geo.d6 * r[:, :, 1]
+    x5, y5 = p5[:, 0], p5[:, 1]
+    rr = x5 * x5 + y5 * y5
+    disc = rr - geo.d4 * geo.d4
+    bad1 = disc < -REACH_TOL * max(1.0, geo.d4 * geo.d4)
+    root = np.sqrt(np.clip(disc, 0.0, None))
+    phi = np.arctan2(-x5, y5)
+    for i1, sgn1 in enumerate((1.0, -1.0)):
+        t1 = phi + sgn1 * np.arctan2(root, -geo.d4)
+        a = np.einsum("nji,njk->nik", _rz(t1), r)          # A = Rz(t1)^T R
+        c5 = a[:, 1, 1]
+        s5abs = np.hypot(a[:, 0, 1], a[:, 2, 1])
+        for i5, sgn5 in enumerate((1.0, -1.0)):
+            s5 = sgn5 * s5abs
+            sing = s5abs < WRIST_SINGULAR
+            s5 = np.where(sing, 0.0, s5)
+            t5 = np.arctan2(s5, np.where(sing, np.sign(c5) + (c5 == 0), c5))
+            t6 = np.where(sing, q6_ref, np.arctan2(sgn5 * a[:, 1, 2], -sgn5 * a[:, 1, 0]))
+            # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
+            m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(_rz(-t5), -1, -2)
+            t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
+            # wrist-1 point relative to the shoulder, in the plane of joints 2-4 (C.19, C.21)
+            p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", _rz(t1),
+                                         np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
+            v = np.einsum("nji,nj->ni", _rz(t1), p3 - np.array([0.0, 0.0, geo.d1]))
+            x4, z4 = v[:, 0], v[:, 2]
+            c3 = (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
+            bad3 = np.abs(c3) > 1 + REACH_TOL
+            c3 = np.clip(c3, -1.0, 1.0)
+            s3abs = np.sqrt(1.0 - c3 * c3)
+            for i3, sgn3 in enumerate((1.0, -1.0)):
+                s3 = sgn3 * s3abs
+                t3 = np.arctan2(s3, c3)
+                k1 = geo.a2 + geo.a3 * c3
+                k2 = geo.a3 * s3
+                t2 = np.arctan2(z4 * k1 - x4 * k2, x4 * k1 + z4 * k2)     # 4.41
+                t4 = t234 - t2 - t3
+                k = 4 * i1 + 2 * i5 + i3
+                out[:, k] = wrap_angle(np.stack([t1, t2, t3, t4, t5, t6], -1))
+                singular[:, k] = sing
+                code[:, k] = np.where(bad1, 1, np.where(bad3, 2, 0))
+    out[code > 0] = np.nan
+    return out, singular, code
+
+
+def _residuals(robot, poses_rep, cand):
+    from . import reference
+    fk = reference.fk(robot, cand)
+    dpos = np.linalg.norm(dq._translation(fk) - dq._translation(poses_rep), axis=-1)
+    rel = quat._mul(quat._conj(fk[:, :4]), poses_rep[:, :4])
+    drot = 2.0 * np.arctan2(np.linalg.norm(rel[:, 1:], axis=-1), np.abs(rel[:, 0]))
+    return dpos, drot
+
+
+def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,
+          chunk: int = 20000):
+    """Checked, merged solutions: (q (n,8,6) NaN-padded, counts (n,), singular (n,8), reasons list)."""
+    n = poses.shape[0]
+    q_all = np.full((n, 8, 6), np.nan)
+    sing_all = np.zeros((n, 8), dtype=bool)
+    counts = np.zeros(n, dtype=np.int64)
+    reasons = [REASON_OK] * n
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        cand, sing, code = solve_batch(geo, poses[s:e], None if q6_ref is None else q6_ref[s:e])
+        m = e - s
+        flat = cand.reshape(-1, 6)
+        valid = ~np.isnan(flat[:, 0])
+        ok = np.zeros(m * 8, dtype=bool)
+        if np.any(valid):
+            rep = np.repeat(poses[s:e], 8, axis=0)[valid]
+            dpos, drot = _residuals(robot, rep, flat[valid])
+            ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
+        ok = ok.reshape(m, 8)
+        cand = np.where(ok[..., None], cand, np.nan)
+        # merge near-duplicates: keep the first of every group
+        diff = np.abs(wrap_angle(cand[:, :, None, :] - cand[:, None, :, :]))
+        close = np.all(diff < MERGE_TOL, axis=-1)
+        earlier = np.tril(np.ones((8, 8), dtype=bool), -1)
+        dup = np.any(close & earlier[None], axis=-1)
+        keep = ok & ~dup
+        order = np.argsort(~keep, axis=1, kind="stable")
+        cand = np.take_along_axis(cand, order[..., None], axis=1)
+        keep_sorted = np.take_along_axis(keep, order, axis=1)
+        sing = np.take_along_axis(sing, order, axis=1)
+        cand[~keep_sorted] = np.nan
+        q_all[s:e] = cand
+        sing_all[s:e] = sing & keep_sorted
+        counts[s:e] = keep_sorted.sum(axis=1)
+        for k in np.nonzero(counts[s:e] == 0)[0]:
+            codes = code[k]
+            reasons[s + k] = (REASON_WRIST_NEAR_AXIS if np.all(codes == 1) else
+                              REASON_ARM_REACH if np.all(codes > 0) else REASON_NO_CANDIDATE)
+    return q_all, counts, sing_all, reasons
+
+
+# --------------------------------------------------------------------------- #
+# Pose input
+# --------------------------------------------------------------------------- #
+def as_pose_batch(pose) -> tuple:
+    """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4) or (n, 4, 4) input; single flag."""
+    arr = as_finite_array(pose, "pose", ndim_min=1)
+    if arr.shape[-2:] == (4, 4):
+        single = arr.ndim == 2
+        m = arr[None] if single else arr
+        r = m[:, :3, :3]
+        err = np.max(np.abs(np.einsum("nji,njk->nik", r, r) - np.eye(3)), axis=(1, 2))
+        if np.any(err > 1e-6) or np.any(np.linalg.det(r) < 0):
+            raise InputError(f"pose: the 3x3 block is not a rotation matrix "
+                             f"(max |R^T R - I| = {float(np.max(err)):.3g})")
+        return dq.from_matrix(m), single
+    if arr.shape[-1] != 8 or arr.ndim > 2:
+        raise InputError(f"pose: expected a dual quaternion (8,) / (n, 8) or a matrix (4, 4) / "
+                         f"(n, 4, 4), got shape {arr.shape}")
+    single = arr.ndim == 1
+    return dq.check_unit(arr[None] if single else arr, "pose"), single
