@@ -53,14 +53,40 @@ def bench_derivation(robot: str = "ur3", repeats: int = 5) -> dict:
             **{f"max_{k}": max(r[k] for r in runs) for k in keys}}
 
 
+def bench_ik(robot: str = "ur5", n: int = 100_000, single: int = 2000, seed: int = 0) -> dict:
+    """Reference IK (numpy): time per pose on a batch of n poses, and per single call."""
+    import numpy as np
+    from . import reference
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-np.pi, np.pi, size=(n, 6))
+    poses = reference.fk(robot, q)
+    reference.ik_batch(robot, poses[:100])                     # warm-up (chain extraction)
+    t = time.perf_counter()
+    _, counts = reference.ik_batch(robot, poses)
+    batch = (time.perf_counter() - t) / n
+    t = time.perf_counter()
+    for p in poses[:single]:
+        reference.ik(robot, p)
+    one = (time.perf_counter() - t) / single
+    return {"robot": robot, "n": n, "machine": machine(), "batch_us": batch * 1e6,
+            "single_us": one * 1e6, "mean_solutions": float(counts.mean())}
+
+
 def main(argv=None) -> int:
     import argparse
     p = argparse.ArgumentParser(prog="dq-derive bench")
-    p.add_argument("what", nargs="?", default="derivation", choices=["derivation"])
-    p.add_argument("--robot", default="ur3")
+    p.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik"])
+    p.add_argument("--robot", default=None)
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args(argv)
-    r = bench_derivation(args.robot, args.repeats)
+    if args.what == "ik":
+        r = bench_ik(args.robot or "ur5")
+        print(f"reference IK of {r['robot']} (numpy, all solutions, each checked by FK) on {r['machine']}:")
+        print(f"  batch of {r['n']} poses: {r['batch_us']:.1f} us per pose "
+              f"({r['mean_solutions']:.2f} solutions per pose on average)")
+        print(f"  single calls (reference.ik): {r['single_us']:.0f} us per pose")
+        return 0
+    r = bench_derivation(args.robot or "ur3", args.repeats)
     print(f"derivation of {r['robot']} (sets B, W, C: derive, simplify, verify, emit), "
           f"{r['repeats']} fresh processes on {r['machine']}:")
     print(f"  derive + verify + emit: median {r['median_derive_verify_emit_s']:.2f} s, "

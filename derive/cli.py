@@ -74,9 +74,30 @@ def cmd_appendix(args) -> int:
     return 0
 
 
+def cmd_ik(args) -> int:
+    from .ik_report import write_ik
+    t0 = time.perf_counter()
+    if args.pose is not None:
+        q = np.array(args.pose, dtype=float)
+        robot = load_robot(args.robot)
+        if args.deg:
+            q = np.radians(q)
+        pose = reference.fk(robot, q)
+        sols = reference.ik(robot, pose, q_ref=q)
+        print(f"{robot.name}: pose of q = {_fmt(q, 8, 4)} has {len(sols)} solution(s){sols.reason}")
+        for s, sing in zip(sols, sols.singular):
+            print("   ", _fmt(s, 9, 5), "(singular: theta6 from q)" if sing else "")
+        return 0
+    for p in write_ik(args.robot, args.out, progress=not args.quiet):
+        print(f"wrote {p}")
+    print(f"took {time.perf_counter() - t0:.2f} s")
+    return 0
+
+
 def cmd_generate(args) -> int:
     """Regenerate the outputs of the default robots and print an FK table."""
     from .appendix import write_appendix
+    from .ik_report import write_ik
     t0 = time.perf_counter()
     robots = args.robots or list(DEFAULT_ROBOTS)
     print(f"dq-derive {__version__}: generate for {', '.join(robots)}")
@@ -84,8 +105,9 @@ def cmd_generate(args) -> int:
     for name in robots:
         t = time.perf_counter()
         paths = write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}")
+        paths += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}")
         written += paths
-        print(f"{name}: appendix B and C equations derived, verified and written in "
+        print(f"{name}: appendix B and C equations and the closed-form IK derived, verified and written in "
               f"{time.perf_counter() - t:.2f} s")
     cmd_robots(args)
     print()
@@ -129,14 +151,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress output")
     s.set_defaults(func=cmd_appendix)
 
+    s = sub.add_parser("ik", help="extract and typeset the closed-form IK (or solve the pose of --pose q)")
+    s.add_argument("robot", help="library name or path to a description file (UR family)")
+    s.add_argument("--out", default="generated", help="output folder (default: generated)")
+    s.add_argument("--pose", nargs=6, type=float, default=None, metavar="Q",
+                   help="instead of typesetting: solve the pose of this configuration")
+    s.add_argument("--deg", action="store_true", help="--pose values in degrees")
+    s.add_argument("--quiet", action="store_true", help="no progress output")
+    s.set_defaults(func=cmd_ik)
+
     s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
     s.add_argument("--out", default="generated", help="output folder (default: generated)")
     s.set_defaults(func=cmd_generate)
 
     s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
-    s.add_argument("what", nargs="?", default="derivation", choices=["derivation"])
-    s.add_argument("--robot", default="ur3")
+    s.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik"])
+    s.add_argument("--robot", default=None)
     s.add_argument("--repeats", type=int, default=5)
     s.set_defaults(func=cmd_bench)
     return p
@@ -144,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def cmd_bench(args) -> int:
     from .bench import main as bench_main
-    return bench_main([args.what, "--robot", args.robot, "--repeats", str(args.repeats)])
+    argv = [args.what, "--repeats", str(args.repeats)] + (["--robot", args.robot] if args.robot else [])
+    return bench_main(argv)
 
 
 def main(argv=None) -> int:

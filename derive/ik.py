@@ -65,12 +65,26 @@ class URGeometry:
     g: np.ndarray          # unit dual quaternion (8,)
 
 
+_GEOMETRY: dict = {}
+
+
 def ur_geometry(robot) -> URGeometry:
-    """Extract the UR structure from a robot, or raise DeriveError when it does not have it."""
-    from .chain import chain_from_robot
+    """Extract the UR structure from a robot, or raise DeriveError when it does not have it
+    (cached per description file)."""
     from .robot import load_robot
 
     robot = load_robot(robot)
+    if robot.path == "<dict>":            # built in memory: no stable key, not cached
+        return _ur_geometry(robot)
+    key = (robot.name, robot.path)
+    if key not in _GEOMETRY:
+        _GEOMETRY[key] = _ur_geometry(robot)
+    return _GEOMETRY[key]
+
+
+def _ur_geometry(robot) -> URGeometry:
+    from .chain import chain_from_robot
+
     chain = chain_from_robot(robot)
     values = chain.parameters
 

@@ -72,42 +72,48 @@ def _rot(q):
                       [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
-def _joint_pair(j, inverse=False):
-    runs = [(j.axis, (-1 if inverse else 1) * j.theta)]
-    q = runs_quaternion(runs)
+def _joint_triple(j, inverse=False):
+    """(quaternion, rotation matrix, translation) of Q_j or Q_j^-1."""
+    q = runs_quaternion([(j.axis, (-1 if inverse else 1) * j.theta)])
     r = runs_matrix([(j.axis, j.theta)])
-    p = r * sp.Matrix(j.link)
     if inverse:
-        return q, -(r.T * p)
-    return q, p
+        return q, r.T, -sp.Matrix(j.link)          # -R^T (R l) = -l exactly
+    return q, r, r * sp.Matrix(j.link)
 
 
-def _pmul(a, b, rot_a=None):
-    qa, pa = a
-    qb, pb = b
-    ra = rot_a if rot_a is not None else _rot(qa)
-    return tuple(sp.expand(e) for e in hamilton(qa, qb)), (ra * pb + pa).applyfunc(sp.expand)
+def _tmul(a, b):
+    """Pair product on triples: (q1 q2, R1 R2, R1 p2 + p1)."""
+    qa, ra, pa = a
+    qb, rb, pb = b
+    return (tuple(sp.expand(e) for e in hamilton(qa, qb)), (ra * rb).applyfunc(sp.expand),
+            (ra * pb + pa).applyfunc(sp.expand))
+
+
+def _translation_only(v):
+    return ((sp.Integer(1), 0, 0, 0), sp.eye(3), sp.Matrix(v))
+
+
+#: Entries r_ij of the rotation matrix of the pose quaternion (w, a, b, c).
+R_SYMS = sp.Matrix(3, 3, lambda i, j: sp.Symbol(f"r{i + 1}{j + 1}", real=True))
 
 
 def _definitions(chain: SymChain) -> dict:
-    """Intermediate pose symbols of sets W and C as functions of the pose and the angles."""
+    """Intermediate pose symbols of sets W and C as functions of the pose and the angles
+    (translations written with the entries r_ij of the pose's rotation matrix)."""
     w, a, b, c, x, y, z = POSES["B"]
-    pose_q, pose_p = (w, a, b, c), sp.Matrix([x, y, z])
-    r_pose = _rot(pose_q)
+    pose = ((w, a, b, c), R_SYMS, sp.Matrix([x, y, z]))
     j = chain.joints
     defs = {}
     # W: N1_W = N1 Q6^-1 (1, -l5)
-    q6i = _joint_pair(j[5], inverse=True)
-    nw = _pmul((pose_q, pose_p), q6i, r_pose)
-    nw = _pmul(nw, ((1, 0, 0, 0), -sp.Matrix(j[4].link)))
-    for sym, e in zip(POSES["W"], list(nw[0]) + list(nw[1])):
-        defs[sym] = sp.simplify(e) if e.has(j[5].theta) else e
+    nw = _tmul(_tmul(pose, _joint_triple(j[5], inverse=True)), _translation_only(-sp.Matrix(j[4].link)))
+    for sym, e in zip(POSES["W"], list(nw[0]) + list(nw[2])):
+        defs[sym] = e
     # C: N2_C = Q1^-1 N1 Q6^-1 Q5^-1 (1, -l4)
-    nc = _pmul(_joint_pair(j[0], inverse=True), (pose_q, pose_p))
-    nc = _pmul(nc, q6i)
-    nc = _pmul(nc, _joint_pair(j[4], inverse=True))
-    nc = _pmul(nc, ((1, 0, 0, 0), -sp.Matrix(j[3].link)))
-    for sym, e in zip(POSES["C"], list(nc[0]) + list(nc[1])):
+    nc = _tmul(_joint_triple(j[0], inverse=True), pose)
+    nc = _tmul(nc, _joint_triple(j[5], inverse=True))
+    nc = _tmul(nc, _joint_triple(j[4], inverse=True))
+    nc = _tmul(nc, _translation_only(-sp.Matrix(j[3].link)))
+    for sym, e in zip(POSES["C"], list(nc[0]) + list(nc[2])):
         defs[sym] = e
     return defs
 
@@ -231,7 +237,8 @@ def _numeric_envs(chain: SymChain, defs: dict, count: int, seed: int, generic: b
     robot = robot_from_dict({"name": "numeric", "convention": "axis_angle", "joints": [
         {"name": j.name, "axis": [float(v) for v in j.axis],
          "link": [float(sp.sympify(v).subs(params)) for v in j.link]} for j in chain.joints]})
-    def_fns = {s: sp.lambdify(thetas + list(params) + list(POSES["B"]), e, "math")
+    rsyms = list(R_SYMS)
+    def_fns = {s: sp.lambdify(thetas + list(params) + list(POSES["B"]) + rsyms, e, "math")
                for s, e in defs.items()}
     rng = np.random.default_rng(seed)
     envs = []
@@ -243,7 +250,9 @@ def _numeric_envs(chain: SymChain, defs: dict, count: int, seed: int, generic: b
         frame = reference._frames_dq(robot, q[None, :])[-1][0]      # exact product, its own sign
         pose = list(frame[:4]) + list(dq._translation(frame))
         env = {**params, **dict(zip(POSES["B"], pose)), **dict(zip(thetas, q))}
-        args = list(q) + [params[p] for p in params] + pose
+        rvals = [float(v) for v in _rot(frame[:4]).reshape(9, 1)]
+        env.update(zip(rsyms, rvals))
+        args = list(q) + [params[p] for p in params] + pose + rvals
         for s, f in def_fns.items():
             env[s] = float(f(*args))
         envs.append(env)
@@ -371,8 +380,22 @@ def _form_name(form, thetas) -> str:
     return sp.sstr(lin)
 
 
+_CACHE: dict = {}
+
+
 def extract(robot, progress: bool = False) -> Extraction:
-    """Find a solving order and the closed forms for every joint angle of a 6R chain."""
+    """Find a solving order and the closed forms for every joint angle of a 6R chain
+    (cached per chain structure: a family is extracted once)."""
+    from .chain import chain_from_robot
+    chain = chain_from_robot(robot)
+    key = (chain.joints, tuple(chain.parameters))
+    if key not in _CACHE:
+        _CACHE[key] = _extract(robot, progress)
+    cached = _CACHE[key]
+    return Extraction(chain.robot, chain, cached.definitions, cached.steps)
+
+
+def _extract(robot, progress: bool) -> Extraction:
     chain, sets = derive_equations(robot, progress=progress, symbolic=False)
     if chain.n != 6 or len(sets) < 3:
         raise DeriveError(f"{chain.robot}: IK extraction needs a 6R chain with the B, W and C sets")
@@ -392,6 +415,10 @@ def extract(robot, progress: bool = False) -> Extraction:
         cands.sort(key=lambda c: (c[0], c[1], [_id_key(i) for i in c[2].equations]))
         _, _, step, forms = cands[0]
         step.forms = [_fold_form(f) for f in step.forms]
+        if progress:
+            import sys
+            print(f"[{chain.robot}] IK step {len(ext.steps) + 1}: {step.unknown} by {step.pattern} "
+                  f"from {', '.join(step.equations)}", file=sys.stderr, flush=True)
         unknown = sp.sympify(step.unknown, locals={str(t): t for t in thetas})
         n_sigma = sum(1 for st in ext.steps if st.symbol is not None and st.symbol not in thetas)
         step.symbol = unknown if unknown in thetas else sp.Symbol(f"sigma{n_sigma + 1}", real=True)

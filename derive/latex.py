@@ -37,6 +37,10 @@ class ThesisLatexPrinter(LatexPrinter):
             out += s
         return out
 
+    def _print_atan2(self, expr, exp=None):
+        y, x = expr.args
+        return r"\operatorname{atan2}\left(%s,\ %s\right)" % (self._print(y), self._print(x))
+
     def _print_cos(self, expr, exp=None):
         return self._trig("cos", expr.args[0], exp)
 

@@ -142,9 +142,11 @@ def test_json_records_verification():
 
 
 def test_generated_is_byte_identical_to_a_fresh_regeneration(tmp_path):
+    from derive.ik_report import write_ik
     for robot in ("ur3", "ur5"):
         write_appendix(robot, tmp_path, command=f"dq-derive appendix {robot}")
-        for name in ("appendix.md", "appendix.tex", "equations.json"):
+        write_ik(robot, tmp_path, command=f"dq-derive ik {robot}")
+        for name in ("appendix.md", "appendix.tex", "equations.json", "ik.md", "ik.tex"):
             fresh, committed = tmp_path / robot / name, GENERATED / robot / name
             assert committed.exists(), f"{committed} is missing: run make generate"
             assert filecmp.cmp(fresh, committed, shallow=False), f"{committed} differs: run make generate"
@@ -152,11 +154,12 @@ def test_generated_is_byte_identical_to_a_fresh_regeneration(tmp_path):
 
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")
 def test_latex_appendix_compiles(tmp_path):
-    shutil.copy(GENERATED / "ur3" / "appendix.tex", tmp_path)
-    res = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "appendix.tex"],
-                         cwd=tmp_path, capture_output=True, text=True, timeout=120)
-    assert res.returncode == 0, res.stdout[-2000:]
-    assert (tmp_path / "appendix.pdf").stat().st_size > 10000
+    for name in ("appendix", "ik"):
+        shutil.copy(GENERATED / "ur3" / f"{name}.tex", tmp_path)
+        res = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", f"{name}.tex"],
+                             cwd=tmp_path, capture_output=True, text=True, timeout=120)
+        assert res.returncode == 0, res.stdout[-2000:]
+        assert (tmp_path / f"{name}.pdf").stat().st_size > 10000
 
 
 @pytest.mark.parametrize("robot, keys", [("kunze-2r", ["B"]), ("seed-arm", ["B"])])

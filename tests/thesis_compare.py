@@ -18,7 +18,7 @@ from derive import load_robot, reference
 from derive.equations import derive_equations
 from derive.trig import half_angle_normal_form
 
-DATA = Path(__file__).with_name("data") / "thesis_printed.yaml"
+DATA = Path(__file__).resolve().parent.parent / "derive" / "data" / "thesis_printed.yaml"
 THETAS = [sp.Symbol(f"theta{k}", real=True) for k in range(1, 7)]
 NAMES = {f"t{k}": THETAS[k - 1] for k in range(1, 7)}
 for n in ("d1 a2 a3 d4 d5 d6 w a b c x y z w4 a4 b4 c4 x4 y4 z4 x5 y5 z5 "
