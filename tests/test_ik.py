@@ -61,7 +61,7 @@ def test_accuracy_on_100000_random_configurations(name):
     assert np.mean(best[generic] < 1e-9) > 0.999
     # every pose of the workspace has a solution; counts are even (branch pairs)
     assert counts.min() >= 2 and np.all(counts[generic] % 2 == 0)
-    assert (counts == 8).mean() > 0.6
+    assert (counts == 8).mean() > 0.6   # 67-79 % across the family (docs/ik.md)
 
 
 def _numeric_solutions(robot, pose, restarts=96, seed=0):
