@@ -283,3 +283,19 @@ def products(chain: SymChain, first: int, last: int, pose: tuple, zero_last_link
         i = first + k + 1
         n_side[i] = Product(f"N{i}", q + tuple(trans))
     return m_side, n_side
+
+
+def numeric_robot(chain: SymChain, values: dict, first: int = 1, last: int | None = None,
+                  zero_last_link: bool = False):
+    """The sub-chain first..last as a numeric ``axis_angle`` description (parameters from
+    ``values``), for the independent reference FK."""
+    from .robot import robot_from_dict
+
+    last = chain.n if last is None else last
+    joints = []
+    for j in chain.joints[first - 1:last]:
+        link = [float(sp.sympify(v).subs(values)) for v in j.link]
+        if zero_last_link and j.index == last:
+            link = [0.0, 0.0, 0.0]
+        joints.append({"name": j.name, "type": j.type, "axis": [float(a) for a in j.axis], "link": link})
+    return robot_from_dict({"name": f"{chain.robot}-numeric", "convention": "axis_angle", "joints": joints})

@@ -35,9 +35,8 @@ import numpy as np
 import sympy as sp
 
 from . import reference
-from .chain import SymChain, chain_from_robot, products
+from .chain import SymChain, chain_from_robot, numeric_robot, products
 from .errors import DeriveError
-from .robot import robot_from_dict
 from .trig import as_expr, compact, half_angle_normal_form
 
 NUMERIC_TOL = 1e-12
@@ -155,17 +154,6 @@ def verify_symbolic(chain: SymChain, eset: EquationSet) -> None:
         e.symbolic = bool(ok)
 
 
-def _numeric_robot(chain: SymChain, values: dict, first: int, last: int, zero_last_link: bool):
-    """The sub-chain first..last as an axis_angle description with numbers (independent FK)."""
-    joints = []
-    for j in chain.joints[first - 1:last]:
-        link = [float(sp.sympify(v).subs(values)) for v in j.link]
-        if zero_last_link and j.index == last:
-            link = [0.0, 0.0, 0.0]
-        joints.append({"name": j.name, "type": j.type, "axis": [float(a) for a in j.axis], "link": link})
-    return robot_from_dict({"name": f"{chain.robot}-sub", "convention": "axis_angle", "joints": joints})
-
-
 def _samples(chain: SymChain, rng, count: int) -> list:
     """Parameter sets: the robot's own numbers, then random ones (0.05-0.8 m, either sign)."""
     out = [dict(chain.parameters)]
@@ -188,7 +176,7 @@ def verify_numeric(chain: SymChain, eset: EquationSet, seed: int = 0, n_angles: 
     worst = {e.id: 0.0 for e in eset.equations}
     fk_gap = 0.0
     for values in _samples(chain, rng, n_params):
-        sub = _numeric_robot(chain, values, eset.first, eset.last, eset.zero_last_link)
+        sub = numeric_robot(chain, values, eset.first, eset.last, eset.zero_last_link)
         th = rng.uniform(-np.pi, np.pi, size=(n_angles, chain.n))
         q_sub = th[:, eset.first - 1:eset.last]
         pose = reference.fk(sub, q_sub)

@@ -194,11 +194,7 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
 
 def _residuals(robot, poses_rep, cand):
     from . import reference
-    fk = reference.fk(robot, cand)
-    dpos = np.linalg.norm(dq._translation(fk) - dq._translation(poses_rep), axis=-1)
-    rel = quat._mul(quat._conj(fk[:, :4]), poses_rep[:, :4])
-    drot = 2.0 * np.arctan2(np.linalg.norm(rel[:, 1:], axis=-1), np.abs(rel[:, 0]))
-    return dpos, drot
+    return reference._pose_error(reference.fk(robot, cand), poses_rep)
 
 
 def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,

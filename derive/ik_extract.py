@@ -230,13 +230,11 @@ def _numeric_envs(chain: SymChain, defs: dict, count: int, seed: int, generic: b
     independent reference FK (quaternion sign = the product), and the intermediate poses."""
     from . import dualquat as dq
     from . import reference
-    from .robot import robot_from_dict
+    from .chain import numeric_robot
 
     thetas = [j.theta for j in chain.joints]
     params = dict(chain.parameters)
-    robot = robot_from_dict({"name": "numeric", "convention": "axis_angle", "joints": [
-        {"name": j.name, "axis": [float(v) for v in j.axis],
-         "link": [float(sp.sympify(v).subs(params)) for v in j.link]} for j in chain.joints]})
+    robot = numeric_robot(chain, params)
     rsyms = list(R_SYMS)
     def_fns = {s: sp.lambdify(thetas + list(params) + list(POSES["B"]) + rsyms, e, "math")
                for s, e in defs.items()}

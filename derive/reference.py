@@ -209,8 +209,11 @@ def fk_matrix(robot, q, end: str | None = None) -> np.ndarray:
 # --------------------------------------------------------------------------- #
 def pose_error(a, b) -> tuple[np.ndarray, np.ndarray]:
     """(position error in m, rotation angle error in rad) between two unit dual quaternions."""
-    a = dq.check_unit(a, "a")
-    b = dq.check_unit(b, "b")
+    return _pose_error(dq.check_unit(a, "a"), dq.check_unit(b, "b"))
+
+
+def _pose_error(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unchecked :func:`pose_error` for inner loops."""
     dp = np.linalg.norm(dq._translation(a) - dq._translation(b), axis=-1)
     rel = quat._mul(quat._conj(a[..., :4]), b[..., :4])
     ang = 2.0 * np.arctan2(np.linalg.norm(rel[..., 1:], axis=-1), np.abs(rel[..., 0]))
