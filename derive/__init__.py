@@ -12,10 +12,17 @@ from . import dualquat, quaternion, reference
 from .errors import DeriveError, InputError, RobotFileError, UnknownRobotError
 from .robot import Robot, list_robots, load_robot
 
+
+def kernels(robot, backend: str = "numpy"):
+    """Generated FK kernels of ``robot`` ("python", "numpy" or "c"); see :mod:`derive.loader`."""
+    from .loader import kernels as _kernels
+    return _kernels(robot, backend)
+
+
 __version__ = "0.1.0"
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
-    "Robot", "list_robots", "load_robot",
+    "Robot", "list_robots", "load_robot", "kernels",
     "dualquat", "quaternion", "reference", "__version__",
 ]

@@ -72,13 +72,34 @@ def bench_ik(robot: str = "ur5", n: int = 100_000, single: int = 2000, seed: int
             "single_us": one * 1e6, "mean_solutions": float(counts.mean())}
 
 
+def bench_fk(robot: str = "ur5", n: int = 100_000, seed: int = 0) -> dict:
+    """Generated FK kernels: ns per pose on a batch of n poses, for each backend."""
+    import numpy as np
+    from .loader import kernels
+    q = np.random.default_rng(seed).uniform(-np.pi, np.pi, size=(n, 6))
+    out = {"robot": robot, "n": n, "machine": machine()}
+    for backend, count in (("c", n), ("numpy", n), ("python", n // 10)):
+        k = kernels(robot, backend)
+        k.fk(q[:10])
+        t = time.perf_counter()
+        k.fk(q[:count])
+        out[backend] = (time.perf_counter() - t) / count * 1e9
+    return out
+
+
 def main(argv=None) -> int:
     import argparse
     p = argparse.ArgumentParser(prog="dq-derive bench")
-    p.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik"])
+    p.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik", "fk"])
     p.add_argument("--robot", default=None)
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args(argv)
+    if args.what == "fk":
+        r = bench_fk(args.robot or "ur5")
+        print(f"generated FK kernels of {r['robot']}, batch of {r['n']} poses, on {r['machine']}:")
+        for backend in ("c", "numpy", "python"):
+            print(f"  {backend:<6} {r[backend]:9.1f} ns per pose (including the call from numpy)")
+        return 0
     if args.what == "ik":
         r = bench_ik(args.robot or "ur5")
         print(f"reference IK of {r['robot']} (numpy, all solutions, each checked by FK) on {r['machine']}:")

@@ -94,9 +94,17 @@ def cmd_ik(args) -> int:
     return 0
 
 
+def cmd_kernels(args) -> int:
+    from .emit import write_kernels
+    for p in write_kernels(args.robot, args.out):
+        print(f"wrote {p}")
+    return 0
+
+
 def cmd_generate(args) -> int:
     """Regenerate the outputs of the default robots and print an FK table."""
     from .appendix import write_appendix
+    from .emit import write_kernels
     from .ik_report import write_ik
     t0 = time.perf_counter()
     robots = args.robots or list(DEFAULT_ROBOTS)
@@ -106,6 +114,7 @@ def cmd_generate(args) -> int:
         t = time.perf_counter()
         paths = write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}")
         paths += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}")
+        paths += write_kernels(name, args.out, command=f"dq-derive kernels {name}")
         written += paths
         print(f"{name}: appendix B and C equations and the closed-form IK derived, verified and written in "
               f"{time.perf_counter() - t:.2f} s")
@@ -160,13 +169,18 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--quiet", action="store_true", help="no progress output")
     s.set_defaults(func=cmd_ik)
 
+    s = sub.add_parser("kernels", help="emit the FK kernels (pure Python, numpy, C99)")
+    s.add_argument("robot", help="library name or path to a description file")
+    s.add_argument("--out", default="generated", help="output folder (default: generated)")
+    s.set_defaults(func=cmd_kernels)
+
     s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
     s.add_argument("--out", default="generated", help="output folder (default: generated)")
     s.set_defaults(func=cmd_generate)
 
     s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
-    s.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik"])
+    s.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik", "fk"])
     s.add_argument("--robot", default=None)
     s.add_argument("--repeats", type=int, default=5)
     s.set_defaults(func=cmd_bench)

@@ -142,11 +142,15 @@ def test_json_records_verification():
 
 
 def test_generated_is_byte_identical_to_a_fresh_regeneration(tmp_path):
+    from derive.emit import write_kernels
     from derive.ik_report import write_ik
     for robot in ("ur3", "ur5"):
         write_appendix(robot, tmp_path, command=f"dq-derive appendix {robot}")
         write_ik(robot, tmp_path, command=f"dq-derive ik {robot}")
-        for name in ("appendix.md", "appendix.tex", "equations.json", "ik.md", "ik.tex"):
+        write_kernels(robot, tmp_path, command=f"dq-derive kernels {robot}")
+        for name in ("appendix.md", "appendix.tex", "equations.json", "ik.md", "ik.tex",
+                     f"{robot}_kinematics.py", f"{robot}_kinematics_numpy.py",
+                     f"{robot}_kinematics.h", f"{robot}_kinematics.c"):
             fresh, committed = tmp_path / robot / name, GENERATED / robot / name
             assert committed.exists(), f"{committed} is missing: run make generate"
             assert filecmp.cmp(fresh, committed, shallow=False), f"{committed} differs: run make generate"
