@@ -5,22 +5,46 @@
 #include <math.h>
 #include "ur3_kinematics.h"
 
+/* sin and cos of x without a library call and without branches, so the batch loop can be
+ * vectorised. x is reduced to r = x - k pi/2, |r| <= pi/4 (k rounded with the 1.5 * 2^52
+ * trick, pi/2 split in two parts as in fdlibm), then Taylor polynomials to degree 15 and 16
+ * (truncation below 1e-16 on |r| <= pi/4); the quadrant k mod 4 picks signs and swaps.
+ * Accurate to a few ulp for |x| up to about 1e6. */
+static inline void dq_sincos(double x, double *restrict s, double *restrict c)
+{
+    const double round_magic = 6755399441055744.0;
+    const double k = (x * 0.63661977236758134308 + round_magic) - round_magic;
+    const double r = (x - k * 1.57079632673412561417e+00) - k * 6.07710050650619224932e-11;
+    const double r2 = r * r;
+    const double ps = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0
+                     + r2 * (1.0 / 362880.0 + r2 * (-1.0 / 39916800.0 + r2 * (1.0 / 6227020800.0
+                     + r2 * (-1.0 / 1307674368000.0))))))));
+    const double pc = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0
+                     + r2 * (1.0 / 40320.0 + r2 * (-1.0 / 3628800.0 + r2 * (1.0 / 479001600.0
+                     + r2 * (-1.0 / 87178291200.0 + r2 * (1.0 / 20922789888000.0))))))));
+    const long n = (long)k;
+    const double a = (n & 1) ? pc : ps;
+    const double b = (n & 1) ? ps : pc;
+    *s = (n & 2) ? -a : a;
+    *c = ((n + 1) & 2) ? -b : b;
+}
+
 void ur3_fk(const double *restrict q, double *restrict out)
 {
-    const double s0 = sin((1.0/2.0)*q[0]);
-    const double c0 = cos((1.0/2.0)*q[0]);
-    const double s1 = sin(q[1]);
-    const double c1 = cos(q[1]);
-    const double s2 = sin((1.0/2.0)*q[4]);
-    const double c2 = cos((1.0/2.0)*q[4]);
-    const double s3 = sin(q[1] + q[2]);
-    const double c3 = cos(q[1] + q[2]);
-    const double s4 = sin(q[1] + q[2] + q[3]);
-    const double c4 = cos(q[1] + q[2] + q[3]);
-    const double s5 = sin((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5]);
-    const double c5 = cos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5]);
-    const double s6 = sin((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5]);
-    const double c6 = cos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5]);
+    double s0, c0;
+    dq_sincos((1.0/2.0)*q[0], &s0, &c0);
+    double s1, c1;
+    dq_sincos(q[1], &s1, &c1);
+    double s2, c2;
+    dq_sincos((1.0/2.0)*q[4], &s2, &c2);
+    double s3, c3;
+    dq_sincos(q[1] + q[2], &s3, &c3);
+    double s4, c4;
+    dq_sincos(q[1] + q[2] + q[3], &s4, &c4);
+    double s5, c5;
+    dq_sincos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5], &s5, &c5);
+    double s6, c6;
+    dq_sincos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5], &s6, &c6);
     const double s7 = 2.0*s0*c0;
     const double c7 = 1.0 - 2.0*s0*s0;
     const double s8 = 2.0*s2*c2;
