@@ -11,6 +11,9 @@ import sys
 import tempfile
 import time
 
+#: What `dq-derive bench` measures.
+BENCHES = ("derivation", "ik", "fk")
+
 _DERIVATION_RUN = r"""
 import json, sys, time
 t0 = time.perf_counter()
@@ -90,7 +93,7 @@ def bench_fk(robot: str = "ur5", n: int = 100_000, seed: int = 0) -> dict:
 def main(argv=None) -> int:
     import argparse
     p = argparse.ArgumentParser(prog="dq-derive bench")
-    p.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik", "fk"])
+    p.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
     p.add_argument("--robot", default=None)
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args(argv)

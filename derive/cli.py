@@ -64,14 +64,18 @@ def cmd_fk(args) -> int:
     return 0
 
 
+def _report(paths, t0=None) -> int:
+    for p in paths:
+        print(f"wrote {p}")
+    if t0 is not None:
+        print(f"took {time.perf_counter() - t0:.2f} s")
+    return 0
+
+
 def cmd_appendix(args) -> int:
     from .appendix import write_appendix
     t0 = time.perf_counter()
-    paths = write_appendix(args.robot, args.out, progress=not args.quiet)
-    for p in paths:
-        print(f"wrote {p}")
-    print(f"took {time.perf_counter() - t0:.2f} s")
-    return 0
+    return _report(write_appendix(args.robot, args.out, progress=not args.quiet), t0)
 
 
 def cmd_ik(args) -> int:
@@ -88,17 +92,12 @@ def cmd_ik(args) -> int:
         for s, sing in zip(sols, sols.singular):
             print("   ", _fmt(s, 9, 5), "(singular: theta6 from q)" if sing else "")
         return 0
-    for p in write_ik(args.robot, args.out, progress=not args.quiet):
-        print(f"wrote {p}")
-    print(f"took {time.perf_counter() - t0:.2f} s")
-    return 0
+    return _report(write_ik(args.robot, args.out, progress=not args.quiet), t0)
 
 
 def cmd_kernels(args) -> int:
     from .emit import write_kernels
-    for p in write_kernels(args.robot, args.out):
-        print(f"wrote {p}")
-    return 0
+    return _report(write_kernels(args.robot, args.out))
 
 
 def cmd_generate(args) -> int:
@@ -132,8 +131,7 @@ def cmd_generate(args) -> int:
             print(f"{name} q={label} ({_fmt(q, 7, 3)}), max |DQ - matrix| = {gap:.1e}")
             for line in _pose_lines(robot, q):
                 print(line)
-    for p in written:
-        print(f"wrote {p}")
+    _report(written)
     print(f"generate took {time.perf_counter() - t0:.2f} s")
     return 0
 
@@ -154,25 +152,23 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix")
     s.set_defaults(func=cmd_fk)
 
-    s = sub.add_parser("appendix", help="derive, verify and typeset the M_i = N_i equations")
-    s.add_argument("robot", help="library name or path to a description file")
-    s.add_argument("--out", default="generated", help="output folder (default: generated)")
-    s.add_argument("--quiet", action="store_true", help="no progress output")
-    s.set_defaults(func=cmd_appendix)
+    def emitter(name, help_text, func, quiet=True):
+        """A subcommand that writes files for one robot into --out."""
+        s = sub.add_parser(name, help=help_text)
+        s.add_argument("robot", help="library name or path to a description file")
+        s.add_argument("--out", default="generated", help="output folder (default: generated)")
+        if quiet:
+            s.add_argument("--quiet", action="store_true", help="no progress output")
+        s.set_defaults(func=func)
+        return s
 
-    s = sub.add_parser("ik", help="extract and typeset the closed-form IK (or solve the pose of --pose q)")
-    s.add_argument("robot", help="library name or path to a description file (UR family)")
-    s.add_argument("--out", default="generated", help="output folder (default: generated)")
+    emitter("appendix", "derive, verify and typeset the M_i = N_i equations", cmd_appendix)
+    s = emitter("ik", "extract and typeset the closed-form IK (UR family), or solve the pose of --pose q",
+                cmd_ik)
     s.add_argument("--pose", nargs=6, type=float, default=None, metavar="Q",
                    help="instead of typesetting: solve the pose of this configuration")
     s.add_argument("--deg", action="store_true", help="--pose values in degrees")
-    s.add_argument("--quiet", action="store_true", help="no progress output")
-    s.set_defaults(func=cmd_ik)
-
-    s = sub.add_parser("kernels", help="emit the FK kernels (pure Python, numpy, C99)")
-    s.add_argument("robot", help="library name or path to a description file")
-    s.add_argument("--out", default="generated", help="output folder (default: generated)")
-    s.set_defaults(func=cmd_kernels)
+    emitter("kernels", "emit the FK kernels (pure Python, numpy, C99)", cmd_kernels, quiet=False)
 
     s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
@@ -180,7 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_generate)
 
     s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
-    s.add_argument("what", nargs="?", default="derivation", choices=["derivation", "ik", "fk"])
+    from .bench import BENCHES
+    s.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
     s.add_argument("--robot", default=None)
     s.add_argument("--repeats", type=int, default=5)
     s.set_defaults(func=cmd_bench)

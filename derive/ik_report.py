@@ -14,6 +14,7 @@ from .appendix import template_environment
 from .equations import POSES, derive_equations
 from .ik_extract import R_SYMS, check_numerically, extract
 from .latex import latex, side
+from .robot import load_robot
 from .trig import as_expr, compact
 
 THESIS_DATA = Path(__file__).with_name("data") / "thesis_printed.yaml"
@@ -97,17 +98,15 @@ def build_ik_context(robot_name: str, command: str) -> dict:
             "thesis_equations": ", ".join(theirs), "pipeline_equations": ", ".join(ours),
             "same": set(theirs) == set(ours) or (theirs and set(theirs) <= set(ours)),
         })
-    thesis_order = [names[f["angle"]] for f in formulas]
-    thesis_order_sorted = [t for t in sorted(thesis_order, key=lambda t: [f["id"] for f in formulas
-                                                                           if names[f["angle"]] == t][0])]
+    thesis_order = [names[f["angle"]] for f in formulas]      # the data lists 4.11 ... 4.44 in order
     return {
-        "version": __version__, "command": command, "robot": chain.robot, "title": robot_name,
+        "version": __version__, "command": command, "robot": chain.robot,
+        "title": load_robot(robot_name).title,
         "parameters": [(latex(p), v) for p, v in chain.parameters.items()],
         "steps": steps, "definitions": definitions,
         "order": ", ".join(latex(t) for t in known_order),
-        "order_plain": [str(t) for t in known_order],
-        "thesis_order": ", ".join(latex(t) for t in thesis_order_sorted),
-        "same_order": [str(t) for t in known_order] == [str(t) for t in thesis_order_sorted],
+        "thesis_order": ", ".join(latex(t) for t in thesis_order),
+        "same_order": [str(t) for t in known_order] == [str(t) for t in thesis_order],
         "thesis": thesis_rows,
         "g_identity": tuple(sp.sympify(v) for v in chain.end_transform[0]) == (1, 0, 0, 0),
     }
@@ -117,8 +116,6 @@ def write_ik(robot_name: str, out_dir, progress: bool = False, command: str | No
     t0 = time.perf_counter()
     command = command or f"dq-derive ik {robot_name}"
     ctx = build_ik_context(robot_name, command)
-    from .robot import load_robot
-    ctx["title"] = load_robot(robot_name).title
     env = template_environment()
     out = Path(out_dir) / robot_name
     out.mkdir(parents=True, exist_ok=True)
