@@ -10,6 +10,7 @@ from pathlib import Path
 
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
+from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from . import __version__
@@ -22,26 +23,119 @@ def identifier(robot_name: str) -> str:
     return robot_name.replace("-", "_").replace(".", "_")
 
 
+def _is_half(e) -> bool:
+    return e == sp.S.Half or (e.is_Float and float(e) == 0.5)
+
+
+def _square(printer, expr):
+    b = printer._print(expr.base)
+    return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
+
+
 class _Py(PythonCodePrinter):
+    """Pure Python with ``math`` imported as names (sqrt, atan2, copysign)."""
+
     def _print_Pow(self, expr, rational=False):
         if expr.exp == 2:
-            b = self._print(expr.base)
-            return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
+            return _square(self, expr)
+        if _is_half(expr.exp):
+            return f"sqrt({self._print(expr.base)})"
         return super()._print_Pow(expr, rational)
 
     def _print_Float(self, expr):
         return repr(float(expr))
 
+    def _print_Pi(self, expr):
+        return repr(float(sp.pi))
+
+    def _print_atan2(self, expr):
+        return f"atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+    def _print_Abs(self, expr):
+        return f"abs({self._print(expr.args[0])})"
+
+    def _print_Max(self, expr):
+        return f"max({', '.join(self._print(a) for a in expr.args)})"
+
+    def _print_Function(self, expr):
+        name = expr.func.__name__
+        if name == "sgn":
+            return f"copysign(1.0, {self._print(expr.args[0])})"
+        if name == "pos":
+            return f"max({self._print(expr.args[0])}, 0.0)"
+        return super()._print_Function(expr)
+
+
+class _Np(NumPyPrinter):
+    """numpy with ``import numpy as np``; elementwise over a batch."""
+
+    def __init__(self):
+        super().__init__({"fully_qualified_modules": False})
+
+    def _module_format(self, fqn, register=True):
+        return "np." + fqn.split(".")[-1] if fqn.startswith("numpy.") else fqn
+
+    def _print_Pow(self, expr, rational=False):
+        if expr.exp == 2:
+            return _square(self, expr)
+        if _is_half(expr.exp):
+            return f"np.sqrt({self._print(expr.base)})"
+        return super()._print_Pow(expr, rational)
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+    def _print_Pi(self, expr):
+        return repr(float(sp.pi))
+
+    def _print_Max(self, expr):
+        a, b = expr.args
+        return f"np.maximum({self._print(a)}, {self._print(b)})"
+
+    def _print_Function(self, expr):
+        name = expr.func.__name__
+        if name == "sgn":
+            return f"np.copysign(1.0, {self._print(expr.args[0])})"
+        if name == "pos":
+            return f"np.maximum({self._print(expr.args[0])}, 0.0)"
+        return super()._print_Function(expr)
+
 
 class _C(C99CodePrinter):
     def _print_Pow(self, expr):
         if expr.exp == 2:
-            b = self._print(expr.base)
-            return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
+            return _square(self, expr)
+        if _is_half(expr.exp):
+            return f"sqrt({self._print(expr.base)})"
         return super()._print_Pow(expr)
 
     def _print_Float(self, expr):
         return repr(float(expr))
+
+    def _print_Pi(self, expr):
+        return repr(float(sp.pi))
+
+    def _print_Max(self, expr):          # a compare, not fmax (a library call without -ffast-math)
+        a, b = (self._print(e) for e in expr.args)
+        return f"(({a}) > ({b}) ? ({a}) : ({b}))"
+
+    def _print_And(self, expr):         # flags are 0/1 ints: no short circuit, so loops vectorise
+        return " & ".join(f"({self._print(a)})" for a in expr.args)
+
+    def _print_Not(self, expr):
+        return f"!({self._print(expr.args[0])})"
+
+    def _print_atan2(self, expr):
+        return f"dq_atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+    def _print_Function(self, expr):
+        name = expr.func.__name__
+        if name == "sgn":
+            return f"copysign(1.0, {self._print(expr.args[0])})"
+        if name == "pos":
+            a = self._print(expr.args[0])
+            return f"(({a}) > 0.0 ? ({a}) : 0.0)"
+        return super()._print_Function(expr)
 
 
 def _arg(printer, a, column):
@@ -69,7 +163,110 @@ def _context(robot_name: str, command: str) -> dict:
         "version": __version__, "command": command, "robot": robot, "id": identifier(robot.name),
         "dof": robot.dof, "parameters": [(str(p), v) for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
+        **_ik_context(robot_name),
     }
+
+
+def _ik_context(robot_name: str) -> dict:
+    """The IK program's lines printed for each language ("ik" is None when the robot has none)."""
+    from .errors import DeriveError
+    from .ik import MERGE_TOL
+    from .ik_codegen import ik_program
+
+    try:
+        prog = ik_program(robot_name)
+    except DeriveError as exc:
+        return {"ik": None, "ik_missing": str(exc)}
+    printers = {"py": _Py(), "np": _Np(), "cc": _C()}
+
+    def numeric(e):
+        e = sp.sympify(e)
+        if isinstance(e, (sp.Rel, sp.And, sp.Or, sp.Not)):
+            return e.func(*[numeric(a) for a in e.args])
+        return e if e.is_Symbol else sp.N(e, 17)
+
+    def pr(e):
+        e = numeric(e)
+        return {lang: p.doprint(e) for lang, p in printers.items()}
+
+    ops = []
+    branch_index = []
+    for op in prog.ops:
+        d = {"kind": op.kind, "name": op.name, "name2": op.name2, "depth": op.depth}
+        if op.kind in ("let", "sincos", "require", "flag"):
+            d["e"] = pr(op.expr)
+        if op.kind == "select":
+            d["e"], d["cond"], d["other"] = pr(op.expr), pr(op.cond), pr(op.other)
+        if op.kind == "double":
+            d["hs"], d["hc"] = op.args
+        if op.kind == "solution":
+            d["q"] = [pr(e) for e in op.args]
+        if op.kind == "branch":
+            d["index"] = "b" + op.name[2:]
+            branch_index.append(d["index"])
+        ops.append(d)
+    k = len(branch_index)
+    leaf = " + ".join(f"{2 ** (k - 1 - i)}*{b}" if k - 1 - i else b for i, b in enumerate(branch_index))
+    flat = _flat_ops(prog, printers["cc"], numeric)
+    step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
+    return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
+                   "free_joint": prog.free_joint, "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
+            "ik_missing": ""}
+
+
+def _flat_ops(prog, printer, numeric) -> list:
+    """The IK program with every branch unrolled (C, for the vectorised batch loop).
+
+    A name defined at depth d gets the suffix of the first d branch bits of the path it
+    belongs to (theta1_0, theta1_1, ...); branch signs become constants; "require" lines
+    become validity flags ok_<path>; each leaf writes its candidate and its flag."""
+    import itertools
+
+    depth_of: dict = {}
+    for op in prog.ops:
+        if op.kind in ("let", "flag", "select", "branch"):
+            depth_of[op.name] = op.depth
+        if op.kind in ("sincos", "double"):
+            depth_of[op.name] = depth_of[op.name2] = op.depth
+
+    def name(n, path):
+        d = depth_of[n]
+        return n if d == 0 else f"{n}_{''.join(map(str, path[:d]))}"
+
+    def rename(e, path):
+        e = sp.sympify(e)
+        return e.xreplace({s_: sp.Symbol(name(s_.name, path), real=True)
+                           for s_ in e.free_symbols if s_.name in depth_of})
+
+    def pr(e, path):
+        return printer.doprint(numeric(rename(e, path)))
+
+    def ok(path):
+        return "ok_" + "".join(map(str, path)) if path else "ok"
+
+    out = [{"kind": "ok_init", "name": "ok"}]
+    for op in prog.ops:
+        for path in itertools.product((0, 1), repeat=op.depth):
+            d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
+            if op.kind == "branch":
+                d = {"kind": "let", "name": name(op.name, path), "e": "-1.0" if path[-1] else "1.0"}
+                out.append({"kind": "ok_copy", "name": ok(path), "e": ok(path[:-1])})
+            elif op.kind in ("let", "flag"):
+                d["e"] = pr(op.expr, path)
+            elif op.kind == "select":
+                d["e"], d["cond"], d["other"] = pr(op.expr, path), pr(op.cond, path), pr(op.other, path)
+            elif op.kind == "sincos":
+                d["e"], d["name2"] = pr(op.expr, path), name(op.name2, path)
+            elif op.kind == "double":
+                d["name2"] = name(op.name2, path)
+                d["hs"], d["hc"] = (name(a, path) for a in op.args)
+            elif op.kind == "require":
+                d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
+            elif op.kind == "solution":
+                leaf = int("".join(map(str, path)) or "0", 2)
+                d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args]}
+            out.append(d)
+    return out
 
 
 FILES = {
