@@ -12,7 +12,7 @@ import tempfile
 import time
 
 #: What `dq-derive bench` measures.
-BENCHES = ("derivation", "ik", "fk")
+BENCHES = ("derivation", "ik", "fk", "kernels", "chain")
 
 _DERIVATION_RUN = r"""
 import json, sys, time
@@ -96,7 +96,40 @@ def main(argv=None) -> int:
     p.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
     p.add_argument("--robot", default=None)
     p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--json", default=None, help="also write the results as JSON to this file")
+    p.add_argument("--plot", default=None, help="chain: write the figure to this file (PNG)")
     args = p.parse_args(argv)
+    if args.what == "kernels":
+        from .bench_kernels import bench_kernels, report
+        r = bench_kernels(args.robot or "ur5", repeats=args.repeats)
+        print(report(r))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(r, fh, indent=1)
+        return 0
+    if args.what == "chain":
+        from .bench_chain import bench_chain_c, bench_chain_numpy, op_counts, plot
+        c_rows = bench_chain_c(repeats=args.repeats)
+        np_rows = bench_chain_numpy(repeats=max(1, args.repeats // 2))
+        print(f"all joint origins of an n-joint DH chain, ns per configuration, on {machine()}")
+        print("   n | C: quat reuse  matrix reuse  quat scratch  matrix scratch | numpy: quat reuse  "
+              "matrix reuse | mul (quat / matrix, reuse)")
+        for c, npr in zip(c_rows, np_rows):
+            if c["n"] in (1, 2, 3, 6, 10, 20, 30, 50):
+                ops = op_counts(c["n"])
+                print(f"  {c['n']:2d} | {c['quat_reuse_ns']:13.1f} {c['matrix_reuse_ns']:13.1f} "
+                      f"{c['quat_scratch_ns']:13.1f} {c['matrix_scratch_ns']:15.1f} | "
+                      f"{npr['quat_reuse_ns']:17.1f} {npr['matrix_reuse_ns']:13.1f} | "
+                      f"{ops['quat_reuse'][0]} / {ops['matrix_reuse'][0]}")
+        print(f"max |quaternion - matrix| origin difference: C {max(r['max_diff'] for r in c_rows):.1e}, "
+              f"numpy {max(r['max_diff'] for r in np_rows):.1e}")
+        if args.plot:
+            plot(c_rows, np_rows, args.plot)
+            print(f"wrote {args.plot}")
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"machine": machine(), "c": c_rows, "numpy": np_rows}, fh, indent=1)
+        return 0
     if args.what == "fk":
         r = bench_fk(args.robot or "ur5")
         print(f"generated FK kernels of {r['robot']}, batch of {r['n']} poses, on {r['machine']}:")

@@ -180,6 +180,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
     s.add_argument("--robot", default=None)
     s.add_argument("--repeats", type=int, default=5)
+    s.add_argument("--json", default=None, help="also write the results as JSON to this file")
+    s.add_argument("--plot", default=None, help="chain: write the figure to this file (PNG)")
     s.set_defaults(func=cmd_bench)
     return p
 
@@ -187,6 +189,7 @@ def build_parser() -> argparse.ArgumentParser:
 def cmd_bench(args) -> int:
     from .bench import main as bench_main
     argv = [args.what, "--repeats", str(args.repeats)] + (["--robot", args.robot] if args.robot else [])
+    argv += (["--json", args.json] if args.json else []) + (["--plot", args.plot] if args.plot else [])
     return bench_main(argv)
 
 

@@ -1,0 +1,133 @@
+/* Benchmark harness for the generated kernels (dq-derive bench kernels). Not generated: it is
+ * compiled by derive/bench_kernels.py with the flags of the C backend, next to a copy of the
+ * robot's generated kernel file, with -DPREFIX=<robot id>.
+ *
+ * It times, per pose, on n poses read from files: the generated FK and IK, batch and single
+ * calls, and the same FK done by plain 4x4 homogeneous-matrix code (standard DH,
+ * T_i = Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i), libm sin/cos, a 4x4 product per joint), which is
+ * what a controller would write without a kinematics library. Usage:
+ *   harness n repeats dh.bin q.bin poses.bin out_fk_matrix.bin
+ * dh.bin: 6 x (d, a, alpha); prints one JSON object. */
+#define _POSIX_C_SOURCE 199309L
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+
+#define CAT2(a, b) a##b
+#define CAT(a, b) CAT2(a, b)
+#define FK CAT(PREFIX, _fk)
+#define FK_BATCH CAT(PREFIX, _fk_batch)
+#define IK CAT(PREFIX, _ik)
+#define IK_BATCH CAT(PREFIX, _ik_batch)
+
+void FK(const double *restrict q, double *restrict out);
+void FK_BATCH(size_t n, const double *restrict q, double *restrict out);
+int IK(const double *restrict pose, double *restrict sols);
+void IK_BATCH(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
+
+static double now(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* Plain 4x4 matrix FK of a 6-joint standard-DH arm: out = 4x4 row-major end pose. */
+static void matrix_fk(const double *restrict dh, const double *restrict q, double *restrict out)
+{
+    double t[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    for (int i = 0; i < 6; ++i) {
+        const double d = dh[3 * i], a = dh[3 * i + 1], al = dh[3 * i + 2];
+        const double ct = cos(q[i]), st = sin(q[i]), ca = cos(al), sa = sin(al);
+        const double m[16] = {ct, -st * ca, st * sa, a * ct,
+                              st, ct * ca, -ct * sa, a * st,
+                              0.0, sa, ca, d,
+                              0.0, 0.0, 0.0, 1.0};
+        double r[16];
+        for (int row = 0; row < 4; ++row) {
+            for (int col = 0; col < 4; ++col) {
+                double s = 0.0;
+                for (int k = 0; k < 4; ++k) {
+                    s += t[4 * row + k] * m[4 * k + col];
+                }
+                r[4 * row + col] = s;
+            }
+        }
+        for (int k = 0; k < 16; ++k) {
+            t[k] = r[k];
+        }
+    }
+    for (int k = 0; k < 16; ++k) {
+        out[k] = t[k];
+    }
+}
+
+static double *load(const char *path, size_t count)
+{
+    double *buf = malloc(count * sizeof(double));
+    FILE *f = fopen(path, "rb");
+    if (buf == NULL || f == NULL || fread(buf, sizeof(double), count, f) != count) {
+        fprintf(stderr, "cannot read %s\n", path);
+        exit(1);
+    }
+    fclose(f);
+    return buf;
+}
+
+static double best(double a, double b) { return a < b ? a : b; }
+
+int main(int argc, char **argv)
+{
+    if (argc != 7) {
+        fprintf(stderr, "usage: harness n repeats dh.bin q.bin poses.bin out_fk_matrix.bin\n");
+        return 2;
+    }
+    const size_t n = (size_t)strtoul(argv[1], NULL, 10);
+    const int repeats = atoi(argv[2]);
+    double *dh = load(argv[3], 18), *q = load(argv[4], n * 6), *poses = load(argv[5], n * 8);
+    double *fk = malloc(n * 8 * sizeof(double)), *mat = malloc(n * 16 * sizeof(double));
+    double *sols = malloc(n * 48 * sizeof(double)), one[48];
+    int *counts = malloc(n * sizeof(int));
+    double t_fk = 1e9, t_fk1 = 1e9, t_mat = 1e9, t_ik = 1e9, t_ik1 = 1e9;
+    volatile double sink = 0.0;
+    for (int r = 0; r < repeats; ++r) {
+        double t0 = now();
+        FK_BATCH(n, q, fk);
+        double t1 = now();
+        t_fk = best(t_fk, t1 - t0);
+        t0 = now();
+        for (size_t i = 0; i < n; ++i) {
+            FK(q + 6 * i, fk + 8 * i);
+        }
+        t1 = now();
+        t_fk1 = best(t_fk1, t1 - t0);
+        t0 = now();
+        for (size_t i = 0; i < n; ++i) {
+            matrix_fk(dh, q + 6 * i, mat + 16 * i);
+        }
+        t1 = now();
+        t_mat = best(t_mat, t1 - t0);
+        t0 = now();
+        IK_BATCH(n, poses, sols, counts);
+        t1 = now();
+        t_ik = best(t_ik, t1 - t0);
+        t0 = now();
+        for (size_t i = 0; i < n; ++i) {
+            sink += IK(poses + 8 * i, one);
+        }
+        t1 = now();
+        t_ik1 = best(t_ik1, t1 - t0);
+    }
+    FILE *f = fopen(argv[6], "wb");
+    if (f == NULL || fwrite(mat, sizeof(double), n * 16, f) != n * 16) {
+        fprintf(stderr, "cannot write %s\n", argv[6]);
+        return 1;
+    }
+    fclose(f);
+    printf("{\"fk_batch_ns\": %.3f, \"fk_single_ns\": %.3f, \"matrix_fk_ns\": %.3f, "
+           "\"ik_batch_ns\": %.3f, \"ik_single_ns\": %.3f, \"sink\": %g}\n",
+           t_fk / n * 1e9, t_fk1 / n * 1e9, t_mat / n * 1e9, t_ik / n * 1e9, t_ik1 / n * 1e9, sink);
+    free(dh); free(q); free(poses); free(fk); free(mat); free(sols); free(counts);
+    return 0;
+}
