@@ -166,7 +166,8 @@ def _ikgeo(robot, mats):
     bot = ik_geo.Robot.three_parallel_two_intersecting(axes, links)
     sols = np.full((len(mats), 8, 6), np.nan)
     t = time.perf_counter()
-    out = [bot.get_ik((m[:3, :3] @ rg.T).tolist(), m[:3, 3].tolist()) for m in mats]
+    # ik_geo takes (and its forward_kinematics returns) the rotation as a list of columns
+    out = [bot.get_ik((m[:3, :3] @ rg.T).T.tolist(), m[:3, 3].tolist()) for m in mats]
     single = (time.perf_counter() - t) / len(mats)
     flagged = 0
     for i, res in enumerate(out):
@@ -255,7 +256,8 @@ def report(r: dict) -> str:
     if "ikgeo" in r:
         g = r["ikgeo"]
         lines.append(f"IK-Geo get_ik (Python loop): {g['single_ns']:.0f} ns per pose; exact solution found for "
-                     f"{100 * g['exact_fraction']:.2f} % of random poses")
+                     f"{100 * g['exact_fraction']:.2f} % of random poses (0 %: its solver for this axis "
+                     "family does not reproduce even its own FK here, see docs/benchmarks.md)")
     s = r["singular"]
     lines.append(f"wrist singularity (theta5 = 0), {s['n']} poses: poses solved exactly / approximate solutions")
     for tool in ("ours", "eaik", "ikgeo"):
