@@ -27,26 +27,38 @@ def _is_half(e) -> bool:
     return e == sp.S.Half or (e.is_Float and float(e) == 0.5)
 
 
-def _square(printer, expr):
-    b = printer._print(expr.base)
-    return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
+class _Shared:
+    """Rules all three printers share: floats and pi as plain literals, x**2 as x*x, x**0.5 as
+    a square root, and the program's functions sgn(x) and pos(x) = max(x, 0). Each printer names
+    its spellings in SQRT, SGN and POS (format strings of the argument)."""
 
+    SQRT = SGN = POS = ""
 
-class _Py(PythonCodePrinter):
-    """Pure Python with ``math`` imported as names (sqrt, atan2, copysign)."""
-
-    def _print_Pow(self, expr, rational=False):
+    def _print_Pow(self, expr, *args, **kwargs):
         if expr.exp == 2:
-            return _square(self, expr)
+            b = self._print(expr.base)
+            return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
         if _is_half(expr.exp):
-            return f"sqrt({self._print(expr.base)})"
-        return super()._print_Pow(expr, rational)
+            return self.SQRT.format(self._print(expr.base))
+        return super()._print_Pow(expr, *args, **kwargs)
 
     def _print_Float(self, expr):
         return repr(float(expr))
 
     def _print_Pi(self, expr):
         return repr(float(sp.pi))
+
+    def _print_Function(self, expr):
+        spelling = {"sgn": self.SGN, "pos": self.POS}.get(expr.func.__name__)
+        if spelling:
+            return spelling.format(self._print(expr.args[0]))
+        return super()._print_Function(expr)
+
+
+class _Py(_Shared, PythonCodePrinter):
+    """Pure Python with ``math`` imported as names (sqrt, atan2, copysign)."""
+
+    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "max({}, 0.0)"
 
     def _print_atan2(self, expr):
         return f"atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
@@ -57,17 +69,11 @@ class _Py(PythonCodePrinter):
     def _print_Max(self, expr):
         return f"max({', '.join(self._print(a) for a in expr.args)})"
 
-    def _print_Function(self, expr):
-        name = expr.func.__name__
-        if name == "sgn":
-            return f"copysign(1.0, {self._print(expr.args[0])})"
-        if name == "pos":
-            return f"max({self._print(expr.args[0])}, 0.0)"
-        return super()._print_Function(expr)
 
-
-class _Np(NumPyPrinter):
+class _Np(_Shared, NumPyPrinter):
     """numpy with ``import numpy as np``; elementwise over a batch."""
+
+    SQRT, SGN, POS = "np.sqrt({})", "np.copysign(1.0, {})", "np.maximum({}, 0.0)"
 
     def __init__(self):
         super().__init__({"fully_qualified_modules": False})
@@ -75,47 +81,16 @@ class _Np(NumPyPrinter):
     def _module_format(self, fqn, register=True):
         return "np." + fqn.split(".")[-1] if fqn.startswith("numpy.") else fqn
 
-    def _print_Pow(self, expr, rational=False):
-        if expr.exp == 2:
-            return _square(self, expr)
-        if _is_half(expr.exp):
-            return f"np.sqrt({self._print(expr.base)})"
-        return super()._print_Pow(expr, rational)
-
-    def _print_Float(self, expr):
-        return repr(float(expr))
-
-    def _print_Pi(self, expr):
-        return repr(float(sp.pi))
-
     def _print_Max(self, expr):
         a, b = expr.args
         return f"np.maximum({self._print(a)}, {self._print(b)})"
 
-    def _print_Function(self, expr):
-        name = expr.func.__name__
-        if name == "sgn":
-            return f"np.copysign(1.0, {self._print(expr.args[0])})"
-        if name == "pos":
-            return f"np.maximum({self._print(expr.args[0])}, 0.0)"
-        return super()._print_Function(expr)
 
+class _C(_Shared, C99CodePrinter):
+    # compares, not fmax (a library call without -ffast-math)
+    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "(({0}) > 0.0 ? ({0}) : 0.0)"
 
-class _C(C99CodePrinter):
-    def _print_Pow(self, expr):
-        if expr.exp == 2:
-            return _square(self, expr)
-        if _is_half(expr.exp):
-            return f"sqrt({self._print(expr.base)})"
-        return super()._print_Pow(expr)
-
-    def _print_Float(self, expr):
-        return repr(float(expr))
-
-    def _print_Pi(self, expr):
-        return repr(float(sp.pi))
-
-    def _print_Max(self, expr):          # a compare, not fmax (a library call without -ffast-math)
+    def _print_Max(self, expr):
         a, b = (self._print(e) for e in expr.args)
         return f"(({a}) > ({b}) ? ({a}) : ({b}))"
 
@@ -127,15 +102,6 @@ class _C(C99CodePrinter):
 
     def _print_atan2(self, expr):
         return f"dq_atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
-
-    def _print_Function(self, expr):
-        name = expr.func.__name__
-        if name == "sgn":
-            return f"copysign(1.0, {self._print(expr.args[0])})"
-        if name == "pos":
-            a = self._print(expr.args[0])
-            return f"(({a}) > 0.0 ? ({a}) : 0.0)"
-        return super()._print_Function(expr)
 
 
 def _arg(printer, a, column):

@@ -33,7 +33,6 @@ from functools import lru_cache
 
 import sympy as sp
 
-from .chain import SymChain
 from .equations import POSES, derive_equations
 from .errors import DeriveError
 from .ik import REACH_TOL, WRIST_SINGULAR
@@ -78,7 +77,7 @@ class IKProgram:
 
 
 class _Builder:
-    def __init__(self, chain: SymChain, values: dict):
+    def __init__(self, values: dict):
         self.ops: list = []
         self.depth = 0
         self.values = values
@@ -88,8 +87,8 @@ class _Builder:
         self.n_tmp = 0
 
     def _num(self, e):
-        e = sp.sympify(e).xreplace(self.values)
-        return e
+        """The robot's numbers substituted for the parameters."""
+        return sp.sympify(e).xreplace(self.values)
 
     def let(self, name, expr) -> sp.Symbol:
         expr = self._trig(self._num(expr))
@@ -214,7 +213,7 @@ def ik_program(robot_name: str) -> IKProgram:
     loc = {str(t): t for t in thetas}
     values = {k: (sp.Integer(int(v)) if float(v).is_integer() else sp.Float(v, 17))
               for k, v in chain.parameters.items()}
-    bld = _Builder(chain, values)
+    bld = _Builder(values)
     _chain_pose(bld, chain.end_transform)
     defs = {k: v for k, v in ext.definitions.items()}
     emitted_defs: set = set()
