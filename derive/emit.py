@@ -119,7 +119,7 @@ def _context(robot_name: str, command: str) -> dict:
         if isinstance(a, tuple):
             trig.append({"s": s, "c": co, "double": True, "hs": a[1], "hc": a[2]})
         else:
-            trig.append({"s": s, "c": co, "double": False,
+            trig.append({"s": s, "c": co, "double": False, "k": sum(not t["double"] for t in trig),
                          "py": _arg(py, a, lambda i: f"q[{i}]"),
                          "np": _arg(py, a, lambda i: f"Q[:, {i}]"),
                          "cc": _arg(c, a, lambda i: f"q[{i}]")})
@@ -129,6 +129,7 @@ def _context(robot_name: str, command: str) -> dict:
         "version": __version__, "command": command, "robot": robot, "id": identifier(robot.name),
         "dof": robot.dof, "parameters": [(str(p), v) for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
+        "n_sincos_padded": -(-k.n_sincos // 4) * 4,
         **_ik_context(robot_name),
     }
 
@@ -176,7 +177,8 @@ def _ik_context(robot_name: str) -> dict:
     flat = _flat_ops(prog, printers["cc"], numeric)
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
     return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
-                   "free_joint": prog.free_joint, "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
+                   "free_joint": prog.free_joint, "free_rule": prog.free_rule,
+                   "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
             "ik_missing": ""}
 
 

@@ -12,7 +12,8 @@ the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik_e
    (-s5 c6, c5, s5 s6), so t6 = atan2(s5 A23, -s5 A21) (equivalent to 4.28 without its
    divisions by cos(t5/2), sin(t5/2) and cos((t2+t3+t4)/2));
    at the wrist singularity (sin t5 = 0) t6 is free: it is taken from a reference
-   configuration and the solution is marked singular;
+   configuration when one is given, else chosen for reach (:func:`_free_theta6`), and the
+   solution is marked singular;
 4. t2 + t3 + t4 from A R_-y(t6)^-1 R_-z(t5)^-1 = R_-y(t2+t3+t4) (exact also when t6 was
    chosen freely);
 5. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
@@ -133,6 +134,29 @@ def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
     return r, p
 
 
+def _free_theta6(geo: URGeometry, wrist1, n: int) -> np.ndarray:
+    """theta6 at the wrist singularity, chosen for reach.
+
+    With sin t5 = 0 any theta6 gives a solution; it moves the wrist-1 point on a circle of
+    radius |d5| in the arm plane, so cos t3 = (x4^2 + z4^2 - a2^2 - a3^2) / (2 a2 a3) (C.19,
+    C.21) is alpha + beta cos t6 + gamma sin t6. The chosen theta6 solves cos t3 = 0 (elbow
+    at a right angle, the middle of the reach) when it can, and otherwise puts the wrist-1
+    point as close to that as the circle allows: atan2(gamma, beta) + acos(clip(-alpha / R)),
+    R = hypot(beta, gamma). So the singular branch is returned whenever some theta6 reaches.
+    The coefficients are sampled at theta6 = 0, pi/2, pi (exact: the form is linear).
+    """
+    def cos3(t):
+        _, x4, z4 = wrist1(np.full(n, t))
+        return (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
+
+    v0, v90, v180 = cos3(0.0), cos3(np.pi / 2), cos3(np.pi)
+    alpha = 0.5 * (v0 + v180)
+    beta = 0.5 * (v0 - v180)
+    gamma = v90 - alpha
+    disc = np.clip(beta * beta + gamma * gamma - alpha * alpha, 0.0, None)
+    return np.arctan2(gamma, beta) + np.arctan2(np.sqrt(disc), -alpha)
+
+
 def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None):
     """All 8 candidate branches for n poses: (q (n,8,6), singular (n,8), reason (n,8) codes).
 
@@ -141,7 +165,6 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     """
     n = poses.shape[0]
     r, p = _chain_pose(geo, poses)
-    q6_ref = np.zeros(n) if q6_ref is None else q6_ref
     out = np.full((n, 8, 6), np.nan)
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
@@ -154,25 +177,31 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     bad1 = disc < -REACH_TOL * max(1.0, geo.d4 * geo.d4)
     root = np.sqrt(np.clip(disc, 0.0, None))
     phi = np.arctan2(-x5, y5)
+
+    def wrist1(t1, a, t5, t6):
+        """t2+t3+t4 and the wrist-1 point (x4, z4) in the arm plane (C.19, C.21)."""
+        # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
+        m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(_rz(-t5), -1, -2)
+        t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
+        p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", _rz(t1),
+                                     np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
+        v = np.einsum("nji,nj->ni", _rz(t1), p3 - np.array([0.0, 0.0, geo.d1]))
+        return t234, v[:, 0], v[:, 2]
+
     for i1, sgn1 in enumerate((1.0, -1.0)):
         t1 = phi + sgn1 * np.arctan2(root, -geo.d4)
         a = np.einsum("nji,njk->nik", _rz(t1), r)          # A = Rz(t1)^T R
         c5 = a[:, 1, 1]
         s5abs = np.hypot(a[:, 0, 1], a[:, 2, 1])
+        sing = s5abs < WRIST_SINGULAR
         for i5, sgn5 in enumerate((1.0, -1.0)):
-            s5 = sgn5 * s5abs
-            sing = s5abs < WRIST_SINGULAR
-            s5 = np.where(sing, 0.0, s5)
+            s5 = np.where(sing, 0.0, sgn5 * s5abs)
             t5 = np.arctan2(s5, np.where(sing, np.sign(c5) + (c5 == 0), c5))
-            t6 = np.where(sing, q6_ref, np.arctan2(sgn5 * a[:, 1, 2], -sgn5 * a[:, 1, 0]))
-            # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
-            m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(_rz(-t5), -1, -2)
-            t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
-            # wrist-1 point relative to the shoulder, in the plane of joints 2-4 (C.19, C.21)
-            p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", _rz(t1),
-                                         np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
-            v = np.einsum("nji,nj->ni", _rz(t1), p3 - np.array([0.0, 0.0, geo.d1]))
-            x4, z4 = v[:, 0], v[:, 2]
+            t6 = np.arctan2(sgn5 * a[:, 1, 2], -sgn5 * a[:, 1, 0])
+            if np.any(sing):
+                free = _free_theta6(geo, lambda t: wrist1(t1, a, t5, t), n) if q6_ref is None else q6_ref
+                t6 = np.where(sing, free, t6)
+            t234, x4, z4 = wrist1(t1, a, t5, t6)
             c3 = (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
             bad3 = np.abs(c3) > 1 + REACH_TOL
             c3 = np.clip(c3, -1.0, 1.0)

@@ -20,7 +20,8 @@ the singular sets):
   to rounding at u = 0 and u = pi.
 * **Singular steps.** Where sin u = 0 (the wrist singularity) one of those S2 steps is
   undetermined; the span step that relates the two compounds (theta6 = sigma2 - sigma1)
-  then takes its joint from a reference value (0) and the undetermined compound follows.
+  then takes its joint (free there) at the value that puts the later S3 step mid-reach
+  (:func:`_free_for_reach`), and the undetermined compound follows.
 
 Reachability: an S1 step with A^2 + B^2 < C^2, or an acos argument beyond +-1, by more than
 :data:`derive.ik.REACH_TOL` (relative), drops the branch; within it the root is clipped.
@@ -71,7 +72,8 @@ class IKProgram:
     dof: int
     ops: list = field(default_factory=list)
     branches: int = 1
-    free_joint: int | None = None           # joint taken from a reference value when singular
+    free_joint: int | None = None           # joint that is free at the singular set
+    free_rule: str = "set to 0"             # how the program chooses it there
     steps: list = field(default_factory=list)   # (unknown, pattern, equations) for the header
     parameters: dict = field(default_factory=dict)
 
@@ -279,6 +281,11 @@ def ik_program(robot_name: str) -> IKProgram:
                 sym, ns, nc, k = halves[kind]
                 sk = 1 if k > 0 else -1
                 base[kind] = bld.tmp(sp.atan2(sk * ns, sk * nc), "h")
+            free = span.symbol
+            prog.free_joint = thetas.index(free)
+            free_val = _free_for_reach(bld, ext, free, defs, with_defs)
+            if free_val != 0:
+                prog.free_rule = "chosen for reach (the cosine of the next acos step nearest to 0)"
             sing = bld.flag("singular", sing_val < WRIST_SINGULAR)
             cos_small = bld.flag("cos_small", hc < hs)
             n_branch += 1
@@ -287,13 +294,11 @@ def ik_program(robot_name: str) -> IKProgram:
             at_sing = bld.select(f"{u}_singular", cos_small, sp.pi, 0)
             value[u] = bld.select(str(u), sing, at_sing, 2 * sg * half)
             raw = {"cos": base["cos"], "sin": bld.tmp(base["sin"] + sp.pi * (1 - sg) / 2, "h")}
-            free = span.symbol
-            prog.free_joint = thetas.index(free)
             lhs = span.forms[0]
             s_sin, s_cos = halves["sin"][0], halves["cos"][0]
             # sin(u/2) = 0: the "sin" compound follows from the other and the free joint
-            sol_sin = sp.solve(sp.Eq(free, lhs), s_sin)[0].xreplace({s_cos: raw["cos"], free: 0})
-            sol_cos = sp.solve(sp.Eq(free, lhs), s_cos)[0].xreplace({s_sin: raw["sin"], free: 0})
+            sol_sin = sp.solve(sp.Eq(free, lhs), s_sin)[0].xreplace({s_cos: raw["cos"], free: free_val})
+            sol_cos = sp.solve(sp.Eq(free, lhs), s_cos)[0].xreplace({s_sin: raw["sin"], free: free_val})
             value[s_sin] = bld.select(str(s_sin), sp.And(sing, sp.Not(cos_small)), sol_sin, raw["sin"])
             value[s_cos] = bld.select(str(s_cos), sp.And(sing, cos_small), sol_cos, raw["cos"])
             handled.update({s_sin, s_cos})
@@ -330,6 +335,46 @@ def ik_program(robot_name: str) -> IKProgram:
     prog.ops = bld.ops
     prog.branches = 2 ** n_branch
     return prog
+
+
+def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):
+    """Lines for the free joint's value at the singular set, chosen for reach.
+
+    The later S3 step (theta3 from C.19, C.21) has cos u = v, where v depends on the free
+    joint f through coordinates (x4, z4) linear in sin f, cos f. Written out, v = alpha +
+    beta cos f + gamma sin f plus terms of second order whose sum is constant on the
+    singular set (the wrist-1 point moves on a circle). The value solves v = 0 (the middle
+    of the reach) when possible and otherwise takes f nearest to it:
+    f = atan2(gamma, beta) + atan2(sqrt(max(R^2 - alpha^2, 0)), -alpha), R^2 = beta^2 + gamma^2.
+    Without such an S3 step the free joint is 0.
+    """
+    s3 = next((st for st in ext.steps if st.pattern == "S3" and isinstance(st.forms[0], sp.acos)), None)
+    if s3 is None:
+        return sp.Integer(0)
+    v = sp.sympify(s3.forms[0].args[0])
+    dep = sorted((d for d in v.free_symbols & set(defs) if free in defs[d].free_symbols), key=str)
+    if not dep:
+        return sp.Integer(0)
+    S, C = sp.symbols("S_free C_free", real=True)
+    rep = {}
+    for d in dep:
+        e = sp.expand(sp.expand_trig(defs[d]).xreplace({sp.sin(free): S, sp.cos(free): C}))
+        if free in e.free_symbols:
+            return sp.Integer(0)
+        poly = sp.Poly(e, S, C)
+        if poly.total_degree() > 1:
+            return sp.Integer(0)
+        k0, ks, kc = (poly.coeff_monomial(m) for m in (1, S, C))
+        k0, ks, kc = (bld.tmp(with_defs(k), "f") for k in (k0, ks, kc))
+        rep[d] = k0 + ks * S + kc * C
+    poly = sp.Poly(sp.expand(with_defs(v.xreplace(rep))), S, C)
+    if poly.total_degree() > 2:
+        return sp.Integer(0)
+    co = {m: poly.coeff_monomial(m) for m in (1, S, C, S * S, C * C)}
+    alpha = bld.tmp(co[1] + (co[S * S] + co[C * C]) / 2, "f")
+    beta, gamma = bld.tmp(co[C], "f"), bld.tmp(co[S], "f")
+    disc = bld.tmp(beta * beta + gamma * gamma - alpha * alpha, "f")
+    return bld.tmp(sp.atan2(gamma, beta) + sp.atan2(sp.sqrt(pos(disc)), -alpha), "f")
 
 
 def _is_acos(step) -> bool:

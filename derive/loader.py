@@ -149,7 +149,7 @@ class Kernels:
 
         P: unit dual quaternions (n, 8) / (8,) or matrices (n, 4, 4) / (4, 4) of the end frame;
         a pose farther than 1e-6 from unit raises InputError. At the wrist singularity the free
-        joint is set to 0 (see the generated file's header)."""
+        joint is chosen for reach (see the generated file's header)."""
         from .ik import as_pose_batch
 
         if not self.has_ik:

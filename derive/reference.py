@@ -226,8 +226,9 @@ def _pose_error(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class IKSolutions(np.ndarray):
     """Solutions (k, dof) of one pose, an ndarray with two attributes:
 
-    ``singular`` (k,) bool: the solution lies on the wrist singularity (theta6 free, taken
-    from the reference configuration); ``reason``: why there is no solution ("" otherwise).
+    ``singular`` (k,) bool: the solution lies on the wrist singularity (theta6 free: from the
+    reference configuration if given, else chosen for reach); ``reason``: why there is no
+    solution ("" otherwise).
     """
 
     def __new__(cls, q, singular, reason=""):
@@ -252,7 +253,7 @@ def ik_batch(robot, poses, q_ref=None):
 
     ``poses``: unit dual quaternions (n, 8) or matrices (n, 4, 4) of the robot's end frame.
     ``q_ref`` (n, 6) or (6,): reference configuration(s) whose theta6 is used at the wrist
-    singularity (default 0). Solutions are wrapped to (-pi, pi] and checked by FK.
+    singularity (default: theta6 chosen for reach, see :func:`derive.ik._free_theta6`). Solutions are wrapped to (-pi, pi] and checked by FK.
     """
     from .ik import as_pose_batch, solve
     robot = load_robot(robot)
@@ -272,7 +273,8 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     pose: a unit dual quaternion (8,) or a 4x4 matrix of the robot's end frame; a pose
     within 1e-6 of unit is normalised, one farther off raises InputError.
     q_ref: reference configuration; its theta6 is used where theta6 is free (wrist
-    singularity, marked in ``.singular``).
+    singularity, marked in ``.singular``); without it theta6 is chosen for reach (the
+    elbow nearest to a right angle).
     within_limits: keep only solutions inside the robot's joint limits, adding the
     +-2 pi alternatives of joints whose range allows them.
     sort_by: a configuration; solutions are sorted by their distance to it.

@@ -10,7 +10,7 @@ ik(P) takes unit dual quaternions of the end frame (either sign), shape (n, 8) (
 returns (solutions (n, 8, 6) NaN-padded, counts (n,)): all solutions, angles in (-pi, pi],
 the first counts[i] rows of solutions[i] filled; counts 0 when the pose is out of reach.
 Solutions closer than 1e-06 rad in every joint are one. At a singular set (sin theta5 = 0)
-joint 6 is free and set to 0. Steps (from the derived equations):
+joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). Steps (from the derived equations):
     theta1: S1 (W.6)
     theta5: S1 (B.13)
     theta2/2 + theta3/2 + theta4/2 - theta6/2: S2 (B.30, B.32)
@@ -171,31 +171,42 @@ def ik(P):
         h10 = 2.0*h7*h8/(h7*h7 + h8*h8)
         h11 = np.arctan2(a*s1 - b*c1, c*s1 + c1*w)
         h12 = np.arctan2(a*c1 + b*s1, -c*c1 + s1*w)
+        s2 = 2.0*s1*c1
+        c2 = 1.0 - 2.0*s1*s1
+        f13 = 0.0819*c2*r12 + c2*x + 0.0819*r22*s2 + s2*y
+        f14 = 0.08535*c2*r11 + 0.08535*r21*s2
+        f15 = 0.08535*c2*r13 + 0.08535*r23*s2
+        f16 = 0.0819*r32 + z - 0.1519
+        f17 = 0.08535*r31
+        f18 = 0.08535*r33
+        f19 = 9.623090027134708*f13*f13 + 4.811545013567354*f14*f14 + 4.811545013567354*f15*f15 + 9.623090027134708*f16*f16 + 4.811545013567354*f17*f17 + 4.811545013567354*f18*f18 - 1.0088932748794768
+        f20 = 19.246180054269416*f13*f15 + 19.246180054269416*f16*f18
+        f21 = 19.246180054269416*f13*f14 + 19.246180054269416*f16*f17
+        f22 = -f19*f19 + f20*f20 + f21*f21
+        f23 = np.arctan2(f21, f20) + np.arctan2(np.sqrt(np.maximum(f22, 0.0)), -f19)
         singular = np.less(h10, 1e-11)
         cos_small = np.less(h8, h7)
         for b2, sg2 in ((0, 1.0), (1, -1.0)):
             ok2 = ok1
             theta5_singular = np.where(cos_small, 3.141592653589793, 0)
             theta5 = np.where(singular, theta5_singular, 2.0*h9*sg2)
-            h13 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966
-            sigma1 = np.where(np.logical_and.reduce((singular,np.logical_not(cos_small))), h11, h13)
-            sigma2 = np.where(np.logical_and.reduce((cos_small,singular)), h13, h11)
+            h24 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966
+            sigma1 = np.where(np.logical_and.reduce((singular,np.logical_not(cos_small))), -f23 + h11, h24)
+            sigma2 = np.where(np.logical_and.reduce((cos_small,singular)), f23 + h24, h11)
             theta6 = -sigma1 + sigma2
-            s2 = 2.0*s1*c1
-            c2 = 1.0 - 2.0*s1*s1
             s3 = np.sin(theta6)
             c3 = np.cos(theta6)
             x4 = 0.08535*c2*c3*r13 + 0.08535*c2*r11*s3 + 0.0819*c2*r12 + c2*x + 0.08535*c3*r23*s2 + 0.08535*r21*s2*s3 + 0.0819*r22*s2 + s2*y
             z4 = 0.08535*c3*r33 + 0.08535*r31*s3 + 0.0819*r32 + z - 0.1519
-            k14 = 9.623090027134708*x4*x4 + 9.623090027134708*z4*z4 - 1.0088932748794768
-            ok2 = ok2 & (np.less_equal(abs(k14), 1.0000000001))
-            k15 = np.sqrt(np.maximum(1 - k14*k14, 0.0))
-            k16 = np.arctan2(k15, k14)
+            k25 = 9.623090027134708*x4*x4 + 9.623090027134708*z4*z4 - 1.0088932748794768
+            ok2 = ok2 & (np.less_equal(abs(k25), 1.0000000001))
+            k26 = np.sqrt(np.maximum(1 - k25*k25, 0.0))
+            k27 = np.arctan2(k26, k25)
             for b3, sg3 in ((0, 1.0), (1, -1.0)):
                 ok3 = ok2
-                theta3 = k16*sg3
-                k17 = np.copysign(1.0, -x4*x4 - z4*z4)
-                sigma3 = np.arctan2(k17*(0.24365*k14*z4 + 0.24365*k15*sg3*x4 + 0.21325*z4), k17*(0.24365*k14*x4 - 0.24365*k15*sg3*z4 + 0.21325*x4))
+                theta3 = k27*sg3
+                k28 = np.copysign(1.0, -x4*x4 - z4*z4)
+                sigma3 = np.arctan2(k28*(0.24365*k25*z4 + 0.24365*k26*sg3*x4 + 0.21325*z4), k28*(0.24365*k25*x4 - 0.24365*k26*sg3*z4 + 0.21325*x4))
                 theta2 = sigma3 - theta3
                 theta4 = sigma1 + sigma2 - sigma3
                 sol = np.stack([theta1, theta2, theta3, theta4, theta5, theta6], axis=-1)

@@ -91,9 +91,65 @@ DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
     out[7] = 0.3535533905932738*t11*t20 - 0.3535533905932738*t14*t7 + 0.3535533905932738*t21*t8;
 }
 
+/* One pose: the 7 sines and cosines in one short loop (padded to 8), which the compiler
+ * can vectorise, then the products. */
 void ur5_fk(const double *restrict q, double *restrict out)
 {
-    fk_core(q, out);
+    const double x[8] = {
+        (1.0/2.0)*q[0],
+        q[1],
+        (1.0/2.0)*q[4],
+        q[1] + q[2],
+        q[1] + q[2] + q[3],
+        (1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5],
+        (1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5],
+        0.0,
+    };
+    double sv[8], cv[8];
+    for (int k = 0; k < 8; ++k) {
+        dq_sincos(x[k], &sv[k], &cv[k]);
+    }
+    const double s0 = sv[0], c0 = cv[0];
+    const double s1 = sv[1], c1 = cv[1];
+    const double s2 = sv[2], c2 = cv[2];
+    const double s3 = sv[3], c3 = cv[3];
+    const double s4 = sv[4], c4 = cv[4];
+    const double s5 = sv[5], c5 = cv[5];
+    const double s6 = sv[6], c6 = cv[6];
+    const double s7 = 2.0*s0*c0;
+    const double c7 = 1.0 - 2.0*s0*s0;
+    const double s8 = 2.0*s2*c2;
+    const double c8 = 1.0 - 2.0*s2*s2;
+    const double t0 = c0*s2;
+    const double t1 = s5*t0;
+    const double t2 = c2*s6;
+    const double t3 = s0*t2;
+    const double t4 = c2*c6;
+    const double t5 = s0*s2;
+    const double t6 = c0*t4 + c5*t5;
+    const double t7 = -t1 - t3 + t6;
+    const double t8 = t1 + t3 + t6;
+    const double t9 = c5*t0;
+    const double t10 = c0*t2 - s5*t5;
+    const double t11 = -c2*c6*s0 + t10 + t9;
+    const double t12 = s0*t4 + t10 - t9;
+    const double t13 = 0.0823*s8;
+    const double t14 = 0.09465*c4 + 0.425*s1 + 0.39225*s3 + s4*t13 - 0.089159;
+    const double t15 = 0.425*c1;
+    const double t16 = 0.39225*c3;
+    const double t17 = 0.09465*s4;
+    const double t18 = 0.0823*c8;
+    const double t19 = c4*t13;
+    const double t20 = c7*t15 + c7*t16 - c7*t17 + c7*t19 - s7*t18 - 0.10915*s7;
+    const double t21 = c7*t18 + 0.10915*c7 + s7*t15 + s7*t16 - s7*t17 + s7*t19;
+    out[0] = 0.7071067811865476*t7;
+    out[1] = 0.7071067811865476*t8;
+    out[2] = -0.7071067811865476*t11;
+    out[3] = 0.7071067811865476*t12;
+    out[4] = -0.3535533905932738*t11*t21 + 0.3535533905932738*t12*t14 + 0.3535533905932738*t20*t8;
+    out[5] = -0.3535533905932738*t11*t14 - 0.3535533905932738*t12*t21 - 0.3535533905932738*t20*t7;
+    out[6] = 0.3535533905932738*t12*t20 - 0.3535533905932738*t14*t8 - 0.3535533905932738*t21*t7;
+    out[7] = 0.3535533905932738*t11*t20 - 0.3535533905932738*t14*t7 + 0.3535533905932738*t21*t8;
 }
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
@@ -238,33 +294,44 @@ int ur5_ik(const double *restrict pose, double *restrict sols)
         const double h10 = 2.0*h7*h8/(h7*h7 + h8*h8);
         const double h11 = dq_atan2(a*s1 - b*c1, c*s1 + c1*w);
         const double h12 = dq_atan2(a*c1 + b*s1, -c*c1 + s1*w);
+        const double s2 = 2.0*s1*c1;
+        const double c2 = 1.0 - 2.0*s1*s1;
+        const double f13 = 0.0823*c2*r12 + c2*x + 0.0823*r22*s2 + s2*y;
+        const double f14 = 0.09465*c2*r11 + 0.09465*r21*s2;
+        const double f15 = 0.09465*c2*r13 + 0.09465*r23*s2;
+        const double f16 = 0.0823*r32 + z - 0.089159;
+        const double f17 = 0.09465*r31;
+        const double f18 = 0.09465*r33;
+        const double f19 = 2.99928766917857*f13*f13 + 1.499643834589285*f14*f14 + 1.499643834589285*f15*f15 + 2.99928766917857*f16*f16 + 1.499643834589285*f17*f17 + 1.499643834589285*f18*f18 - 1.0032169234806734;
+        const double f20 = 5.99857533835714*f13*f15 + 5.99857533835714*f16*f18;
+        const double f21 = 5.99857533835714*f13*f14 + 5.99857533835714*f16*f17;
+        const double f22 = -f19*f19 + f20*f20 + f21*f21;
+        const double f23 = dq_atan2(f21, f20) + dq_atan2(sqrt(((f22) > 0.0 ? (f22) : 0.0)), -f19);
         const int singular = h10 < 1e-11;
         const int cos_small = h8 < h7;
         for (int b2 = 0; b2 < 2; ++b2) {
             const double sg2 = b2 ? -1.0 : 1.0;
             const double theta5_singular = (cos_small) ? 3.141592653589793 : 0;
             const double theta5 = (singular) ? theta5_singular : 2.0*h9*sg2;
-            const double h13 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966;
-            const double sigma1 = ((singular) & (!(cos_small))) ? h11 : h13;
-            const double sigma2 = ((cos_small) & (singular)) ? h13 : h11;
+            const double h24 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966;
+            const double sigma1 = ((singular) & (!(cos_small))) ? -f23 + h11 : h24;
+            const double sigma2 = ((cos_small) & (singular)) ? f23 + h24 : h11;
             const double theta6 = -sigma1 + sigma2;
-            const double s2 = 2.0*s1*c1;
-            const double c2 = 1.0 - 2.0*s1*s1;
             double s3, c3;
             dq_sincos(theta6, &s3, &c3);
             const double x4 = 0.09465*c2*c3*r13 + 0.09465*c2*r11*s3 + 0.0823*c2*r12 + c2*x + 0.09465*c3*r23*s2 + 0.09465*r21*s2*s3 + 0.0823*r22*s2 + s2*y;
             const double z4 = 0.09465*c3*r33 + 0.09465*r31*s3 + 0.0823*r32 + z - 0.089159;
-            const double k14 = 2.99928766917857*x4*x4 + 2.99928766917857*z4*z4 - 1.0032169234806734;
-            if (!(fabs(k14) <= 1.0000000001)) {
+            const double k25 = 2.99928766917857*x4*x4 + 2.99928766917857*z4*z4 - 1.0032169234806734;
+            if (!(fabs(k25) <= 1.0000000001)) {
                 continue;
             }
-            const double k15 = sqrt(((1 - k14*k14) > 0.0 ? (1 - k14*k14) : 0.0));
-            const double k16 = dq_atan2(k15, k14);
+            const double k26 = sqrt(((1 - k25*k25) > 0.0 ? (1 - k25*k25) : 0.0));
+            const double k27 = dq_atan2(k26, k25);
             for (int b3 = 0; b3 < 2; ++b3) {
                 const double sg3 = b3 ? -1.0 : 1.0;
-                const double theta3 = k16*sg3;
-                const double k17 = copysign(1.0, -x4*x4 - z4*z4);
-                const double sigma3 = dq_atan2(k17*(0.425*k14*z4 + 0.425*k15*sg3*x4 + 0.39225*z4), k17*(0.425*k14*x4 - 0.425*k15*sg3*z4 + 0.39225*x4));
+                const double theta3 = k27*sg3;
+                const double k28 = copysign(1.0, -x4*x4 - z4*z4);
+                const double sigma3 = dq_atan2(k28*(0.425*k25*z4 + 0.425*k26*sg3*x4 + 0.39225*z4), k28*(0.425*k25*x4 - 0.425*k26*sg3*z4 + 0.39225*x4));
                 const double theta2 = sigma3 - theta3;
                 const double theta4 = sigma1 + sigma2 - sigma3;
                 {
@@ -348,6 +415,32 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             const double h11_1 = dq_atan2(a*s1_1 - b*c1_1, c*s1_1 + c1_1*w);
             const double h12_0 = dq_atan2(a*c1_0 + b*s1_0, -c*c1_0 + s1_0*w);
             const double h12_1 = dq_atan2(a*c1_1 + b*s1_1, -c*c1_1 + s1_1*w);
+            const double s2_0 = 2.0*s1_0*c1_0;
+            const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
+            const double s2_1 = 2.0*s1_1*c1_1;
+            const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
+            const double f13_0 = 0.0823*c2_0*r12 + c2_0*x + 0.0823*r22*s2_0 + s2_0*y;
+            const double f13_1 = 0.0823*c2_1*r12 + c2_1*x + 0.0823*r22*s2_1 + s2_1*y;
+            const double f14_0 = 0.09465*c2_0*r11 + 0.09465*r21*s2_0;
+            const double f14_1 = 0.09465*c2_1*r11 + 0.09465*r21*s2_1;
+            const double f15_0 = 0.09465*c2_0*r13 + 0.09465*r23*s2_0;
+            const double f15_1 = 0.09465*c2_1*r13 + 0.09465*r23*s2_1;
+            const double f16_0 = 0.0823*r32 + z - 0.089159;
+            const double f16_1 = 0.0823*r32 + z - 0.089159;
+            const double f17_0 = 0.09465*r31;
+            const double f17_1 = 0.09465*r31;
+            const double f18_0 = 0.09465*r33;
+            const double f18_1 = 0.09465*r33;
+            const double f19_0 = 2.99928766917857*f13_0*f13_0 + 1.499643834589285*f14_0*f14_0 + 1.499643834589285*f15_0*f15_0 + 2.99928766917857*f16_0*f16_0 + 1.499643834589285*f17_0*f17_0 + 1.499643834589285*f18_0*f18_0 - 1.0032169234806734;
+            const double f19_1 = 2.99928766917857*f13_1*f13_1 + 1.499643834589285*f14_1*f14_1 + 1.499643834589285*f15_1*f15_1 + 2.99928766917857*f16_1*f16_1 + 1.499643834589285*f17_1*f17_1 + 1.499643834589285*f18_1*f18_1 - 1.0032169234806734;
+            const double f20_0 = 5.99857533835714*f13_0*f15_0 + 5.99857533835714*f16_0*f18_0;
+            const double f20_1 = 5.99857533835714*f13_1*f15_1 + 5.99857533835714*f16_1*f18_1;
+            const double f21_0 = 5.99857533835714*f13_0*f14_0 + 5.99857533835714*f16_0*f17_0;
+            const double f21_1 = 5.99857533835714*f13_1*f14_1 + 5.99857533835714*f16_1*f17_1;
+            const double f22_0 = -f19_0*f19_0 + f20_0*f20_0 + f21_0*f21_0;
+            const double f22_1 = -f19_1*f19_1 + f20_1*f20_1 + f21_1*f21_1;
+            const double f23_0 = dq_atan2(f21_0, f20_0) + dq_atan2(sqrt(((f22_0) > 0.0 ? (f22_0) : 0.0)), -f19_0);
+            const double f23_1 = dq_atan2(f21_1, f20_1) + dq_atan2(sqrt(((f22_1) > 0.0 ? (f22_1) : 0.0)), -f19_1);
             const int singular_0 = h10_0 < 1e-11;
             const int singular_1 = h10_1 < 1e-11;
             const int cos_small_0 = h8_0 < h7_0;
@@ -368,30 +461,22 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             const double theta5_01 = (singular_0) ? theta5_singular_01 : 2.0*h9_0*sg2_01;
             const double theta5_10 = (singular_1) ? theta5_singular_10 : 2.0*h9_1*sg2_10;
             const double theta5_11 = (singular_1) ? theta5_singular_11 : 2.0*h9_1*sg2_11;
-            const double h13_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
-            const double h13_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
-            const double h13_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
-            const double h13_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
-            const double sigma1_00 = ((singular_0) & (!(cos_small_0))) ? h11_0 : h13_00;
-            const double sigma1_01 = ((singular_0) & (!(cos_small_0))) ? h11_0 : h13_01;
-            const double sigma1_10 = ((singular_1) & (!(cos_small_1))) ? h11_1 : h13_10;
-            const double sigma1_11 = ((singular_1) & (!(cos_small_1))) ? h11_1 : h13_11;
-            const double sigma2_00 = ((cos_small_0) & (singular_0)) ? h13_00 : h11_0;
-            const double sigma2_01 = ((cos_small_0) & (singular_0)) ? h13_01 : h11_0;
-            const double sigma2_10 = ((cos_small_1) & (singular_1)) ? h13_10 : h11_1;
-            const double sigma2_11 = ((cos_small_1) & (singular_1)) ? h13_11 : h11_1;
+            const double h24_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
+            const double h24_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
+            const double h24_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
+            const double h24_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
+            const double sigma1_00 = ((singular_0) & (!(cos_small_0))) ? -f23_0 + h11_0 : h24_00;
+            const double sigma1_01 = ((singular_0) & (!(cos_small_0))) ? -f23_0 + h11_0 : h24_01;
+            const double sigma1_10 = ((singular_1) & (!(cos_small_1))) ? -f23_1 + h11_1 : h24_10;
+            const double sigma1_11 = ((singular_1) & (!(cos_small_1))) ? -f23_1 + h11_1 : h24_11;
+            const double sigma2_00 = ((cos_small_0) & (singular_0)) ? f23_0 + h24_00 : h11_0;
+            const double sigma2_01 = ((cos_small_0) & (singular_0)) ? f23_0 + h24_01 : h11_0;
+            const double sigma2_10 = ((cos_small_1) & (singular_1)) ? f23_1 + h24_10 : h11_1;
+            const double sigma2_11 = ((cos_small_1) & (singular_1)) ? f23_1 + h24_11 : h11_1;
             const double theta6_00 = -sigma1_00 + sigma2_00;
             const double theta6_01 = -sigma1_01 + sigma2_01;
             const double theta6_10 = -sigma1_10 + sigma2_10;
             const double theta6_11 = -sigma1_11 + sigma2_11;
-            const double s2_00 = 2.0*s1_0*c1_0;
-            const double c2_00 = 1.0 - 2.0*s1_0*s1_0;
-            const double s2_01 = 2.0*s1_0*c1_0;
-            const double c2_01 = 1.0 - 2.0*s1_0*s1_0;
-            const double s2_10 = 2.0*s1_1*c1_1;
-            const double c2_10 = 1.0 - 2.0*s1_1*s1_1;
-            const double s2_11 = 2.0*s1_1*c1_1;
-            const double c2_11 = 1.0 - 2.0*s1_1*s1_1;
             double s3_00, c3_00;
             dq_sincos(theta6_00, &s3_00, &c3_00);
             double s3_01, c3_01;
@@ -400,30 +485,30 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             dq_sincos(theta6_10, &s3_10, &c3_10);
             double s3_11, c3_11;
             dq_sincos(theta6_11, &s3_11, &c3_11);
-            const double x4_00 = 0.09465*c2_00*c3_00*r13 + 0.09465*c2_00*r11*s3_00 + 0.0823*c2_00*r12 + c2_00*x + 0.09465*c3_00*r23*s2_00 + 0.09465*r21*s2_00*s3_00 + 0.0823*r22*s2_00 + s2_00*y;
-            const double x4_01 = 0.09465*c2_01*c3_01*r13 + 0.09465*c2_01*r11*s3_01 + 0.0823*c2_01*r12 + c2_01*x + 0.09465*c3_01*r23*s2_01 + 0.09465*r21*s2_01*s3_01 + 0.0823*r22*s2_01 + s2_01*y;
-            const double x4_10 = 0.09465*c2_10*c3_10*r13 + 0.09465*c2_10*r11*s3_10 + 0.0823*c2_10*r12 + c2_10*x + 0.09465*c3_10*r23*s2_10 + 0.09465*r21*s2_10*s3_10 + 0.0823*r22*s2_10 + s2_10*y;
-            const double x4_11 = 0.09465*c2_11*c3_11*r13 + 0.09465*c2_11*r11*s3_11 + 0.0823*c2_11*r12 + c2_11*x + 0.09465*c3_11*r23*s2_11 + 0.09465*r21*s2_11*s3_11 + 0.0823*r22*s2_11 + s2_11*y;
+            const double x4_00 = 0.09465*c2_0*c3_00*r13 + 0.09465*c2_0*r11*s3_00 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_00*r23*s2_0 + 0.09465*r21*s2_0*s3_00 + 0.0823*r22*s2_0 + s2_0*y;
+            const double x4_01 = 0.09465*c2_0*c3_01*r13 + 0.09465*c2_0*r11*s3_01 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_01*r23*s2_0 + 0.09465*r21*s2_0*s3_01 + 0.0823*r22*s2_0 + s2_0*y;
+            const double x4_10 = 0.09465*c2_1*c3_10*r13 + 0.09465*c2_1*r11*s3_10 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_10*r23*s2_1 + 0.09465*r21*s2_1*s3_10 + 0.0823*r22*s2_1 + s2_1*y;
+            const double x4_11 = 0.09465*c2_1*c3_11*r13 + 0.09465*c2_1*r11*s3_11 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_11*r23*s2_1 + 0.09465*r21*s2_1*s3_11 + 0.0823*r22*s2_1 + s2_1*y;
             const double z4_00 = 0.09465*c3_00*r33 + 0.09465*r31*s3_00 + 0.0823*r32 + z - 0.089159;
             const double z4_01 = 0.09465*c3_01*r33 + 0.09465*r31*s3_01 + 0.0823*r32 + z - 0.089159;
             const double z4_10 = 0.09465*c3_10*r33 + 0.09465*r31*s3_10 + 0.0823*r32 + z - 0.089159;
             const double z4_11 = 0.09465*c3_11*r33 + 0.09465*r31*s3_11 + 0.0823*r32 + z - 0.089159;
-            const double k14_00 = 2.99928766917857*x4_00*x4_00 + 2.99928766917857*z4_00*z4_00 - 1.0032169234806734;
-            const double k14_01 = 2.99928766917857*x4_01*x4_01 + 2.99928766917857*z4_01*z4_01 - 1.0032169234806734;
-            const double k14_10 = 2.99928766917857*x4_10*x4_10 + 2.99928766917857*z4_10*z4_10 - 1.0032169234806734;
-            const double k14_11 = 2.99928766917857*x4_11*x4_11 + 2.99928766917857*z4_11*z4_11 - 1.0032169234806734;
-            ok_00 = ok_00 & (fabs(k14_00) <= 1.0000000001);
-            ok_01 = ok_01 & (fabs(k14_01) <= 1.0000000001);
-            ok_10 = ok_10 & (fabs(k14_10) <= 1.0000000001);
-            ok_11 = ok_11 & (fabs(k14_11) <= 1.0000000001);
-            const double k15_00 = sqrt(((1 - k14_00*k14_00) > 0.0 ? (1 - k14_00*k14_00) : 0.0));
-            const double k15_01 = sqrt(((1 - k14_01*k14_01) > 0.0 ? (1 - k14_01*k14_01) : 0.0));
-            const double k15_10 = sqrt(((1 - k14_10*k14_10) > 0.0 ? (1 - k14_10*k14_10) : 0.0));
-            const double k15_11 = sqrt(((1 - k14_11*k14_11) > 0.0 ? (1 - k14_11*k14_11) : 0.0));
-            const double k16_00 = dq_atan2(k15_00, k14_00);
-            const double k16_01 = dq_atan2(k15_01, k14_01);
-            const double k16_10 = dq_atan2(k15_10, k14_10);
-            const double k16_11 = dq_atan2(k15_11, k14_11);
+            const double k25_00 = 2.99928766917857*x4_00*x4_00 + 2.99928766917857*z4_00*z4_00 - 1.0032169234806734;
+            const double k25_01 = 2.99928766917857*x4_01*x4_01 + 2.99928766917857*z4_01*z4_01 - 1.0032169234806734;
+            const double k25_10 = 2.99928766917857*x4_10*x4_10 + 2.99928766917857*z4_10*z4_10 - 1.0032169234806734;
+            const double k25_11 = 2.99928766917857*x4_11*x4_11 + 2.99928766917857*z4_11*z4_11 - 1.0032169234806734;
+            ok_00 = ok_00 & (fabs(k25_00) <= 1.0000000001);
+            ok_01 = ok_01 & (fabs(k25_01) <= 1.0000000001);
+            ok_10 = ok_10 & (fabs(k25_10) <= 1.0000000001);
+            ok_11 = ok_11 & (fabs(k25_11) <= 1.0000000001);
+            const double k26_00 = sqrt(((1 - k25_00*k25_00) > 0.0 ? (1 - k25_00*k25_00) : 0.0));
+            const double k26_01 = sqrt(((1 - k25_01*k25_01) > 0.0 ? (1 - k25_01*k25_01) : 0.0));
+            const double k26_10 = sqrt(((1 - k25_10*k25_10) > 0.0 ? (1 - k25_10*k25_10) : 0.0));
+            const double k26_11 = sqrt(((1 - k25_11*k25_11) > 0.0 ? (1 - k25_11*k25_11) : 0.0));
+            const double k27_00 = dq_atan2(k26_00, k25_00);
+            const double k27_01 = dq_atan2(k26_01, k25_01);
+            const double k27_10 = dq_atan2(k26_10, k25_10);
+            const double k27_11 = dq_atan2(k26_11, k25_11);
             int ok_000 = ok_00;
             const double sg3_000 = 1.0;
             int ok_001 = ok_00;
@@ -440,30 +525,30 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             const double sg3_110 = 1.0;
             int ok_111 = ok_11;
             const double sg3_111 = -1.0;
-            const double theta3_000 = k16_00*sg3_000;
-            const double theta3_001 = k16_00*sg3_001;
-            const double theta3_010 = k16_01*sg3_010;
-            const double theta3_011 = k16_01*sg3_011;
-            const double theta3_100 = k16_10*sg3_100;
-            const double theta3_101 = k16_10*sg3_101;
-            const double theta3_110 = k16_11*sg3_110;
-            const double theta3_111 = k16_11*sg3_111;
-            const double k17_000 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
-            const double k17_001 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
-            const double k17_010 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
-            const double k17_011 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
-            const double k17_100 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
-            const double k17_101 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
-            const double k17_110 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
-            const double k17_111 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
-            const double sigma3_000 = dq_atan2(k17_000*(0.425*k14_00*z4_00 + 0.425*k15_00*sg3_000*x4_00 + 0.39225*z4_00), k17_000*(0.425*k14_00*x4_00 - 0.425*k15_00*sg3_000*z4_00 + 0.39225*x4_00));
-            const double sigma3_001 = dq_atan2(k17_001*(0.425*k14_00*z4_00 + 0.425*k15_00*sg3_001*x4_00 + 0.39225*z4_00), k17_001*(0.425*k14_00*x4_00 - 0.425*k15_00*sg3_001*z4_00 + 0.39225*x4_00));
-            const double sigma3_010 = dq_atan2(k17_010*(0.425*k14_01*z4_01 + 0.425*k15_01*sg3_010*x4_01 + 0.39225*z4_01), k17_010*(0.425*k14_01*x4_01 - 0.425*k15_01*sg3_010*z4_01 + 0.39225*x4_01));
-            const double sigma3_011 = dq_atan2(k17_011*(0.425*k14_01*z4_01 + 0.425*k15_01*sg3_011*x4_01 + 0.39225*z4_01), k17_011*(0.425*k14_01*x4_01 - 0.425*k15_01*sg3_011*z4_01 + 0.39225*x4_01));
-            const double sigma3_100 = dq_atan2(k17_100*(0.425*k14_10*z4_10 + 0.425*k15_10*sg3_100*x4_10 + 0.39225*z4_10), k17_100*(0.425*k14_10*x4_10 - 0.425*k15_10*sg3_100*z4_10 + 0.39225*x4_10));
-            const double sigma3_101 = dq_atan2(k17_101*(0.425*k14_10*z4_10 + 0.425*k15_10*sg3_101*x4_10 + 0.39225*z4_10), k17_101*(0.425*k14_10*x4_10 - 0.425*k15_10*sg3_101*z4_10 + 0.39225*x4_10));
-            const double sigma3_110 = dq_atan2(k17_110*(0.425*k14_11*z4_11 + 0.425*k15_11*sg3_110*x4_11 + 0.39225*z4_11), k17_110*(0.425*k14_11*x4_11 - 0.425*k15_11*sg3_110*z4_11 + 0.39225*x4_11));
-            const double sigma3_111 = dq_atan2(k17_111*(0.425*k14_11*z4_11 + 0.425*k15_11*sg3_111*x4_11 + 0.39225*z4_11), k17_111*(0.425*k14_11*x4_11 - 0.425*k15_11*sg3_111*z4_11 + 0.39225*x4_11));
+            const double theta3_000 = k27_00*sg3_000;
+            const double theta3_001 = k27_00*sg3_001;
+            const double theta3_010 = k27_01*sg3_010;
+            const double theta3_011 = k27_01*sg3_011;
+            const double theta3_100 = k27_10*sg3_100;
+            const double theta3_101 = k27_10*sg3_101;
+            const double theta3_110 = k27_11*sg3_110;
+            const double theta3_111 = k27_11*sg3_111;
+            const double k28_000 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+            const double k28_001 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+            const double k28_010 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+            const double k28_011 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+            const double k28_100 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+            const double k28_101 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+            const double k28_110 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+            const double k28_111 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+            const double sigma3_000 = dq_atan2(k28_000*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_000*x4_00 + 0.39225*z4_00), k28_000*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_000*z4_00 + 0.39225*x4_00));
+            const double sigma3_001 = dq_atan2(k28_001*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_001*x4_00 + 0.39225*z4_00), k28_001*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_001*z4_00 + 0.39225*x4_00));
+            const double sigma3_010 = dq_atan2(k28_010*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_010*x4_01 + 0.39225*z4_01), k28_010*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_010*z4_01 + 0.39225*x4_01));
+            const double sigma3_011 = dq_atan2(k28_011*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_011*x4_01 + 0.39225*z4_01), k28_011*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_011*z4_01 + 0.39225*x4_01));
+            const double sigma3_100 = dq_atan2(k28_100*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_100*x4_10 + 0.39225*z4_10), k28_100*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_100*z4_10 + 0.39225*x4_10));
+            const double sigma3_101 = dq_atan2(k28_101*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_101*x4_10 + 0.39225*z4_10), k28_101*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_101*z4_10 + 0.39225*x4_10));
+            const double sigma3_110 = dq_atan2(k28_110*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_110*x4_11 + 0.39225*z4_11), k28_110*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_110*z4_11 + 0.39225*x4_11));
+            const double sigma3_111 = dq_atan2(k28_111*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_111*x4_11 + 0.39225*z4_11), k28_111*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_111*z4_11 + 0.39225*x4_11));
             const double theta2_000 = sigma3_000 - theta3_000;
             const double theta2_001 = sigma3_001 - theta3_001;
             const double theta2_010 = sigma3_010 - theta3_010;

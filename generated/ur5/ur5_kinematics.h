@@ -24,7 +24,7 @@ void ur5_fk_batch(size_t n, const double *restrict q, double *restrict out);
 /* All IK solutions of one pose: pose[8] a unit dual quaternion of the end frame (either sign);
  * writes up to 8 solutions of 6 angles in (-pi, pi] to sols (8 x 6, row-major)
  * and returns their number (0: out of reach). Solutions closer than 1e-06 rad in every
- * joint are one; at a singular set (sin theta5 = 0) joint 6 is free and set to 0. */
+ * joint are one; at a singular set (sin theta5 = 0) joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). */
 int ur5_ik(const double *restrict pose, double *restrict sols);
 
 /* n poses (n x 8): sols is n x 8 x 6, rows past counts[i] set to NaN. */

@@ -9,7 +9,7 @@ joint transforms gives (-Q is the same pose). 7 sin/cos evaluations per call.
 ik(pose) takes a unit dual quaternion of the end frame (either sign) and returns the list of all
 solutions, each a tuple of 6 joint values in (-pi, pi]; an empty list when the pose is out of
 reach. Solutions closer than 1e-06 rad in every joint are one. At a singular set
-(sin theta5 = 0) joint 6 is free and set to 0. Steps (from the derived equations):
+(sin theta5 = 0) joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). Steps (from the derived equations):
     theta1: S1 (W.6)
     theta5: S1 (B.13)
     theta2/2 + theta3/2 + theta4/2 - theta6/2: S2 (B.30, B.32)
@@ -145,30 +145,41 @@ def ik(pose):
         h10 = 2.0*h7*h8/(h7*h7 + h8*h8)
         h11 = atan2(a*s1 - b*c1, c*s1 + c1*w)
         h12 = atan2(a*c1 + b*s1, -c*c1 + s1*w)
+        s2 = 2.0*s1*c1
+        c2 = 1.0 - 2.0*s1*s1
+        f13 = 0.0823*c2*r12 + c2*x + 0.0823*r22*s2 + s2*y
+        f14 = 0.09465*c2*r11 + 0.09465*r21*s2
+        f15 = 0.09465*c2*r13 + 0.09465*r23*s2
+        f16 = 0.0823*r32 + z - 0.089159
+        f17 = 0.09465*r31
+        f18 = 0.09465*r33
+        f19 = 2.99928766917857*f13*f13 + 1.499643834589285*f14*f14 + 1.499643834589285*f15*f15 + 2.99928766917857*f16*f16 + 1.499643834589285*f17*f17 + 1.499643834589285*f18*f18 - 1.0032169234806734
+        f20 = 5.99857533835714*f13*f15 + 5.99857533835714*f16*f18
+        f21 = 5.99857533835714*f13*f14 + 5.99857533835714*f16*f17
+        f22 = -f19*f19 + f20*f20 + f21*f21
+        f23 = atan2(f21, f20) + atan2(sqrt(max(f22, 0.0)), -f19)
         singular = (h10 < 1e-11)
         cos_small = (h8 < h7)
         for b2, sg2 in ((0, 1.0), (1, -1.0)):
             theta5_singular = 3.141592653589793 if cos_small else 0
             theta5 = theta5_singular if singular else 2.0*h9*sg2
-            h13 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966
-            sigma1 = h11 if singular and not cos_small else h13
-            sigma2 = h13 if cos_small and singular else h11
+            h24 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966
+            sigma1 = -f23 + h11 if singular and not cos_small else h24
+            sigma2 = f23 + h24 if cos_small and singular else h11
             theta6 = -sigma1 + sigma2
-            s2 = 2.0*s1*c1
-            c2 = 1.0 - 2.0*s1*s1
             s3 = sin(theta6)
             c3 = cos(theta6)
             x4 = 0.09465*c2*c3*r13 + 0.09465*c2*r11*s3 + 0.0823*c2*r12 + c2*x + 0.09465*c3*r23*s2 + 0.09465*r21*s2*s3 + 0.0823*r22*s2 + s2*y
             z4 = 0.09465*c3*r33 + 0.09465*r31*s3 + 0.0823*r32 + z - 0.089159
-            k14 = 2.99928766917857*x4*x4 + 2.99928766917857*z4*z4 - 1.0032169234806734
-            if not ((abs(k14) <= 1.0000000001)):
+            k25 = 2.99928766917857*x4*x4 + 2.99928766917857*z4*z4 - 1.0032169234806734
+            if not ((abs(k25) <= 1.0000000001)):
                 continue
-            k15 = sqrt(max(1 - k14*k14, 0.0))
-            k16 = atan2(k15, k14)
+            k26 = sqrt(max(1 - k25*k25, 0.0))
+            k27 = atan2(k26, k25)
             for b3, sg3 in ((0, 1.0), (1, -1.0)):
-                theta3 = k16*sg3
-                k17 = copysign(1.0, -x4*x4 - z4*z4)
-                sigma3 = atan2(k17*(0.425*k14*z4 + 0.425*k15*sg3*x4 + 0.39225*z4), k17*(0.425*k14*x4 - 0.425*k15*sg3*z4 + 0.39225*x4))
+                theta3 = k27*sg3
+                k28 = copysign(1.0, -x4*x4 - z4*z4)
+                sigma3 = atan2(k28*(0.425*k25*z4 + 0.425*k26*sg3*x4 + 0.39225*z4), k28*(0.425*k25*x4 - 0.425*k26*sg3*z4 + 0.39225*x4))
                 theta2 = sigma3 - theta3
                 theta4 = sigma1 + sigma2 - sigma3
                 cand[4*b1 + 2*b2 + b3] = (_wrap(theta1), _wrap(theta2), _wrap(theta3), _wrap(theta4), _wrap(theta5), _wrap(theta6), )
