@@ -19,10 +19,16 @@ def kernels(robot, backend: str = "numpy"):
     return _kernels(robot, backend)
 
 
+def refine(robot, pose, q0=None, **options):
+    """IK refinement with CasADi on the robot's actual model; see :mod:`derive.refinement`."""
+    from .refinement import refine as _refine
+    return _refine(robot, pose, q0, **options)
+
+
 __version__ = "0.1.0"
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
-    "Robot", "list_robots", "load_robot", "kernels",
+    "Robot", "list_robots", "load_robot", "kernels", "refine",
     "dualquat", "quaternion", "reference", "__version__",
 ]

@@ -12,7 +12,7 @@ import tempfile
 import time
 
 #: What `dq-derive bench` measures.
-BENCHES = ("derivation", "ik", "fk", "kernels", "chain")
+BENCHES = ("derivation", "ik", "fk", "kernels", "chain", "refine")
 
 _DERIVATION_RUN = r"""
 import json, sys, time
@@ -90,6 +90,34 @@ def bench_fk(robot: str = "ur5", n: int = 100_000, seed: int = 0) -> dict:
     return out
 
 
+def bench_refine(n: int = 300, seed: int = 0) -> dict:
+    """derive.refine on random reachable poses: the calibrated UR5 from its nominal closed-form
+    seeds, the general 6R from 16 random starts."""
+    import numpy as np
+    from . import reference
+    from .refinement import refine
+    rng = np.random.default_rng(seed)
+    out = {"machine": machine(), "date": time.strftime("%Y-%m-%d"), "robots": {}}
+    for name, kind, m in (("ur5-calibrated", "nominal closed form", n), ("general-6r", "16 random starts", n // 3)):
+        q = rng.uniform(-np.pi, np.pi, size=(m, 6))
+        poses = reference.fk(name, q)
+        refine(name, poses[0])                                # build the CasADi functions once
+        per_seed, iters, per_pose, conv, total = [], [], [], 0, 0
+        for p in poses:
+            t = time.perf_counter()
+            res = refine(name, p)
+            per_pose.append(time.perf_counter() - t)
+            per_seed += [r.time_s for r in res]
+            iters += [r.iterations for r in res if r.success]
+            conv += sum(r.success for r in res)
+            total += len(res)
+        out["robots"][name] = {
+            "poses": m, "seeds": total, "seed_kind": kind, "converged": conv,
+            "median_ms": float(np.median(per_seed) * 1e3), "p95_ms": float(np.percentile(per_seed, 95) * 1e3),
+            "median_iterations": float(np.median(iters)), "per_pose_median_ms": float(np.median(per_pose) * 1e3)}
+    return out
+
+
 def main(argv=None) -> int:
     import argparse
     p = argparse.ArgumentParser(prog="dq-derive bench")
@@ -103,6 +131,18 @@ def main(argv=None) -> int:
         from .bench_kernels import bench_kernels, report
         r = bench_kernels(args.robot or "ur5", repeats=args.repeats)
         print(report(r))
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump(r, fh, indent=1)
+        return 0
+    if args.what == "refine":
+        r = bench_refine()
+        print(f"derive.refine on {r['machine']}, {r['date']} (time per seed, first call excluded):")
+        for name, x in r["robots"].items():
+            print(f"  {name:<15} {x['poses']} poses, {x['seeds']} seeds ({x['seed_kind']}): "
+                  f"median {x['median_ms']:.3f} ms, p95 {x['p95_ms']:.3f} ms per seed; "
+                  f"converged seeds {x['converged']}; median iterations {x['median_iterations']:.0f}; "
+                  f"whole refine() per pose median {x['per_pose_median_ms']:.2f} ms")
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(r, fh, indent=1)

@@ -18,6 +18,8 @@ from .robot import list_robots, load_robot
 
 #: Robots ``dq-derive generate`` (and so ``make generate``) works on by default.
 DEFAULT_ROBOTS = ("ur3", "ur5")
+#: Robots whose CasADi functions ``dq-derive generate`` writes by default (every UR robot).
+CASADI_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
 
 
 def _fmt(values, width=10, prec=6) -> str:
@@ -95,6 +97,34 @@ def cmd_ik(args) -> int:
     return _report(write_ik(args.robot, args.out, progress=not args.quiet), t0)
 
 
+def cmd_refine(args) -> int:
+    """Refine IK solutions on the robot's model: the pose from --q (FK) or --pose (dual quaternion)."""
+    from .refinement import refine
+    robot = load_robot(args.robot)
+    if (args.q is None) == (args.pose is None):
+        raise DeriveError("refine: give exactly one of --q (joint values whose FK is the pose) "
+                          "or --pose (8 numbers, a unit dual quaternion)")
+    if args.q is not None:
+        q = np.array(args.q, dtype=float)
+        pose = reference.fk(robot, np.radians(q) if args.deg else q)
+    else:
+        pose = np.array(args.pose, dtype=float)
+    t0 = time.perf_counter()
+    res = refine(robot, pose, weights=(args.w_pos, args.w_rot), regularization=args.reg,
+                 tol=args.tol, max_iter=args.max_iter)
+    dt = time.perf_counter() - t0
+    print(f"{robot.name}: {len(res)} seed(s), {len(res.solutions)} distinct exact solution(s) "
+          f"in {dt * 1e3:.1f} ms")
+    print(f"{'seed':>4} {'ok':>3} {'iter':>4} {'|dp| (m)':>9} {'angle (rad)':>11}  solver          q (rad)")
+    for r in res:
+        print(f"{r.seed:4d} {'yes' if r.success else 'no':>3} {r.iterations:4d} {r.position_error:9.1e} "
+              f"{r.rotation_error:11.1e}  {r.solver:<15} {_fmt(r.q, 9, 5)}")
+    if not res.success:
+        print(f"no exact solution: best residual {res.best.position_error:.3e} m, "
+              f"{res.best.rotation_error:.3e} rad")
+    return 0 if res.success else 1
+
+
 def cmd_kernels(args) -> int:
     from .emit import write_kernels
     return _report(write_kernels(args.robot, args.out))
@@ -117,6 +147,13 @@ def cmd_generate(args) -> int:
         written += paths
         print(f"{name}: appendix B and C equations and the closed-form IK derived, verified and written in "
               f"{time.perf_counter() - t:.2f} s")
+    if not args.robots:
+        from .casadi_kin import write_casadi
+        t = time.perf_counter()
+        for name in CASADI_ROBOTS:
+            written += write_casadi(name, args.out)
+        print(f"CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, ik) of "
+              f"{', '.join(CASADI_ROBOTS)} written in {time.perf_counter() - t:.2f} s")
     cmd_robots(args)
     print()
     print("Forward kinematics at reference configurations (dual-quaternion product;"
@@ -163,6 +200,18 @@ def build_parser() -> argparse.ArgumentParser:
         return s
 
     emitter("appendix", "derive, verify and typeset the M_i = N_i equations", cmd_appendix)
+    s = sub.add_parser("refine", help="refine IK solutions numerically with CasADi (calibrated or "
+                                      "general arms), from the nominal closed form or random starts")
+    s.add_argument("robot")
+    s.add_argument("--q", nargs="+", type=float, default=None, help="joint values whose FK is the pose")
+    s.add_argument("--pose", nargs=8, type=float, default=None, help="the pose as a unit dual quaternion")
+    s.add_argument("--deg", action="store_true", help="--q revolute values in degrees")
+    s.add_argument("--w-pos", type=float, default=1.0, help="weight of the position error")
+    s.add_argument("--w-rot", type=float, default=1.0, help="weight of the rotation error")
+    s.add_argument("--reg", type=float, default=0.0, help="regularisation towards the seed")
+    s.add_argument("--tol", type=float, default=1e-10, help="success tolerance (m and rad)")
+    s.add_argument("--max-iter", type=int, default=50)
+    s.set_defaults(func=cmd_refine)
     s = emitter("ik", "extract and typeset the closed-form IK (UR family), or solve the pose of --pose q",
                 cmd_ik)
     s.add_argument("--pose", nargs=6, type=float, default=None, metavar="Q",

@@ -157,11 +157,14 @@ def _free_theta6(geo: URGeometry, wrist1, n: int) -> np.ndarray:
     return np.arctan2(gamma, beta) + np.arctan2(np.sqrt(disc), -alpha)
 
 
-def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None):
+def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,
+                keep_unreachable: bool = False):
     """All 8 candidate branches for n poses: (q (n,8,6), singular (n,8), reason (n,8) codes).
 
     reason codes: 0 ok, 1 theta1 unreachable, 2 theta3 unreachable. Candidates are not yet
-    checked by FK (see :func:`solve`).
+    checked by FK (see :func:`solve`). Unreachable branches are NaN unless
+    ``keep_unreachable`` (then their square roots are clipped to 0: the nearest the arm
+    comes, used as seeds by :mod:`derive.refinement`).
     """
     n = poses.shape[0]
     r, p = _chain_pose(geo, poses)
@@ -217,7 +220,8 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
                 out[:, k] = wrap_angle(np.stack([t1, t2, t3, t4, t5, t6], -1))
                 singular[:, k] = sing
                 code[:, k] = np.where(bad1, 1, np.where(bad3, 2, 0))
-    out[code > 0] = np.nan
+    if not keep_unreachable:
+        out[code > 0] = np.nan
     return out, singular, code
 
 

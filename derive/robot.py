@@ -157,6 +157,7 @@ class Robot:
     parameters: dict
     path: str
     notes: str = ""
+    nominal: str = ""              # library robot whose closed form seeds this one (calibrated arms)
 
     @property
     def dof(self) -> int:
@@ -286,7 +287,7 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
     where = Path(path).name if path != "<dict>" else path
     if not isinstance(data, dict):
         raise RobotFileError(f"{where}: the top level must be a mapping, got {type(data).__name__}")
-    allowed = {"name", "title", "source", "notes", "convention", "units", "parameters", "joints",
+    allowed = {"name", "title", "source", "notes", "nominal", "convention", "units", "parameters", "joints",
                "tool", "ends", "default_end"}
     unknown = set(data) - allowed
     if unknown:
@@ -369,7 +370,18 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
 
     return Robot(name=name, title=str(data.get("title", name)), source=str(data.get("source", "")),
                  convention=conv, joints=tuple(joints), ends=ends, default_end=default_end,
-                 parameters=params_si, path=path, notes=str(data.get("notes", "")))
+                 parameters=params_si, path=path, notes=str(data.get("notes", "")),
+                 nominal=_nominal(data.get("nominal"), where))
+
+
+def _nominal(value, where: str) -> str:
+    """The ``nominal`` key: a library robot name (checked to exist)."""
+    if value is None:
+        return ""
+    if not isinstance(value, str) or value not in list_robots():
+        raise RobotFileError(f"{where}: nominal {value!r} is not a robot of the library "
+                             f"({', '.join(list_robots())})")
+    return value
 
 
 class _Context:

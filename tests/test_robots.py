@@ -13,8 +13,8 @@ from derive import dualquat as DQ
 from derive.robot import robot_from_dict
 
 DATA = Path(__file__).with_name("data")
-LIBRARY = ["irb120", "irb1600", "kunze-2r", "seed-arm", "ur10", "ur10e", "ur16e",
-           "ur3", "ur3-thesis", "ur3e", "ur5", "ur5e"]
+LIBRARY = ["general-6r", "irb120", "irb1600", "kunze-2r", "seed-arm", "ur10", "ur10e", "ur16e",
+           "ur3", "ur3-thesis", "ur3e", "ur5", "ur5-calibrated", "ur5e"]
 UR_DH = {  # d1 a2 a3 d4 d5 d6 from the issue / Universal Robots
     "ur3": (.1519, -.24365, -.21325, .11235, .08535, .0819),
     "ur5": (.089159, -.425, -.39225, .10915, .09465, .0823),

@@ -1,0 +1,353 @@
+"""CasADi functions of a robot: FK, pose error and its Jacobian, closed-form IK branches.
+
+Every function is a ``casadi.Function`` over SX expressions:
+
+* ``fk(q) -> dq`` (8): the unit dual quaternion [real w x y z, dual w x y z] of the end frame;
+* ``fk_matrix(q) -> T`` (4x4);
+* ``pose_error(q, target) -> (e, dpos, drot)``: the 6-vector residual e = [t - t*; 2 s v] with
+  t, t* the translations and v the vector part of the rotation error r*^-1 r (s = +-1 picks
+  the sign of its scalar part, so e does not depend on the sign of either dual quaternion;
+  |2 s v| = 2 sin(angle / 2)), the position error |t - t*| (m) and the rotation angle
+  2 atan2(|v|, |w|) (rad): a proper metric, zero exactly when the poses are equal;
+* ``pose_error_jacobian(q, target) -> J`` (6 x dof): de/dq, by CasADi's algorithmic
+  differentiation of the same expressions;
+* ``ik(pose) -> (Q, valid)`` where a closed form exists (the UR family): Q (dof x 8) the 8
+  branches of the closed form, valid (1 x 8) 1 where the branch is reachable; the function
+  is total (no NaN: square roots of clipped arguments, atan2), unreachable branches are
+  flagged instead of dropped, and duplicates are not merged (the C kernels merge them).
+
+Where the expressions come from. ``fk`` of a library robot is the derived straight-line
+code of the other kernels (:func:`derive.codegen.fk_kernel`: the folded left sides of
+B.36-B.42 times G) converted node by node; ``ik`` is the IK program of
+:mod:`derive.ik_codegen` (the W.6, B.29-B.32, C.19/C.21, C.5/C.7 steps) with its branches
+unrolled and ``if_else`` at the singular selections. Robots outside the library (a
+calibrated arm, a general 6R) have no practical exact symbolic derivation: their DH angles
+such as pi/2 + 0.002 make the exact products grow without bound (the UR5 derivation takes
+seconds; a calibrated UR5 did not finish in minutes). For them ``fk`` is the product of the
+joint dual quaternions in the description's neutral form (Kunze eq. 1.8, 5.28; each rotation
+cos(t/2) + sin(t/2) n, each translation 1 + eps v/2), built directly in SX. The test suite
+checks that both constructions agree on the UR robots.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import casadi as ca
+import sympy as sp
+
+from .errors import DeriveError
+from .quaternion import hamilton
+from .robot import LIBRARY_DIR, load_robot
+
+#: The functions written to generated/<robot>/ (``ik`` only where a closed form exists).
+SAVED = ("fk", "fk_matrix", "pose_error", "pose_error_jacobian", "ik")
+
+
+# --------------------------------------------------------------------------- #
+# sympy -> SX
+# --------------------------------------------------------------------------- #
+class _ToSX:
+    """Converts sympy expressions to SX, with a symbol table and a node cache."""
+
+    def __init__(self, env: dict):
+        self.env = env
+        self.cache: dict = {}
+
+    def __call__(self, e):
+        e = sp.sympify(e)
+        hit = self.cache.get(e)
+        if hit is not None:
+            return hit
+        out = self._convert(e)
+        self.cache[e] = out
+        return out
+
+    def _convert(self, e):
+        if e.is_Symbol:
+            if e.name not in self.env:
+                raise DeriveError(f"CasADi conversion: no value for {e.name}")
+            return self.env[e.name]
+        if e is sp.pi:
+            return ca.SX(math.pi)
+        if e.is_Number:
+            return ca.SX(float(e))
+        if e in (sp.true, sp.false):
+            return ca.SX(1.0 if e is sp.true else 0.0)
+        args = [self(a) for a in e.args]
+        if isinstance(e, sp.Add):
+            out = args[0]
+            for a in args[1:]:
+                out = out + a
+            return out
+        if isinstance(e, sp.Mul):
+            out = args[0]
+            for a in args[1:]:
+                out = out * a
+            return out
+        if isinstance(e, sp.Pow):
+            b, x = e.args
+            if x == sp.Rational(1, 2):
+                return ca.sqrt(args[0])
+            if x == -1:
+                return 1 / args[0]
+            if x.is_Integer and x > 0:
+                out = args[0]
+                for _ in range(int(x) - 1):
+                    out = out * args[0]
+                return out
+            return args[0] ** args[1]
+        name = type(e).__name__
+        table = {
+            "sin": ca.sin, "cos": ca.cos, "atan2": ca.atan2, "Abs": ca.fabs,
+            "sgn": lambda x: ca.copysign(1.0, x), "pos": lambda x: ca.fmax(x, 0.0),
+            "acos": ca.acos, "asin": ca.asin, "atan": ca.atan,
+            "StrictLessThan": lambda a, b: a < b, "LessThan": lambda a, b: a <= b,
+            "StrictGreaterThan": lambda a, b: a > b, "GreaterThan": lambda a, b: a >= b,
+            "Not": ca.logic_not,
+        }
+        if name in table:
+            return table[name](*args)
+        if name in ("Max", "Min"):
+            f = ca.fmax if name == "Max" else ca.fmin
+            out = args[0]
+            for a in args[1:]:
+                out = f(out, a)
+            return out
+        if name in ("And", "Or"):
+            f = ca.logic_and if name == "And" else ca.logic_or
+            out = args[0]
+            for a in args[1:]:
+                out = f(out, a)
+            return out
+        raise DeriveError(f"CasADi conversion: no rule for {name} ({e})")
+
+
+# --------------------------------------------------------------------------- #
+# FK expressions
+# --------------------------------------------------------------------------- #
+def _dq_mul(a, b):
+    """Dual-quaternion product of two 8-lists (real a_r b_r, dual a_r b_d + a_d b_r)."""
+    real = hamilton(a[:4], b[:4])
+    d1, d2 = hamilton(a[:4], b[4:]), hamilton(a[4:], b[:4])
+    return list(real) + [x + y for x, y in zip(d1, d2)]
+
+
+def _rotation(axis, angle):
+    s, c = ca.sin(angle / 2), ca.cos(angle / 2)
+    return [c, s * float(axis[0]), s * float(axis[1]), s * float(axis[2]), 0, 0, 0, 0]
+
+
+def _translation(v):
+    return [1, 0, 0, 0, 0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]
+
+
+def _fk_product(robot, q):
+    """The end frame's dual quaternion as the product of the joint motions (neutral form)."""
+    def op_dq(op):
+        return _rotation(op.axis, op.angle) if op.kind == "R" else _translation([float(x) for x in op.vector])
+
+    frames = []
+    for j in robot.joints:
+        value = j.multiplier * q[j.variable] + j.mimic_offset + j.offset
+        m = _rotation(j.axis, value) if j.type == "revolute" else _translation([value * float(a) for a in j.axis])
+        for op in reversed(j.pre):
+            m = _dq_mul(op_dq(op), m)
+        for op in j.post:
+            m = _dq_mul(m, op_dq(op))
+        frames.append(m if j.parent < 0 else _dq_mul(frames[j.parent], m))
+    end = robot.ends[robot.default_end]
+    out = frames[end.parent]
+    for op in end.ops:
+        out = _dq_mul(out, op_dq(op))
+    return out
+
+
+def _fk_derived(robot, q):
+    """The derived straight-line FK of the other kernels (codegen.fk_kernel), in SX."""
+    from .codegen import fk_kernel
+    k = fk_kernel(robot.name)
+    env = {f"q{i}": q[i] for i in range(robot.dof)}
+    conv = _ToSX(env)
+    for s, c, a in k.trig:
+        if isinstance(a, tuple):
+            hs, hc = env[a[1]], env[a[2]]
+            env[s], env[c] = 2 * hs * hc, 1 - 2 * hs * hs
+        else:
+            x = conv(a)
+            env[s], env[c] = ca.sin(x), ca.cos(x)
+    for name, e in k.temps:
+        env[str(name)] = conv(e)
+    return [conv(e) for e in k.outputs]
+
+
+def is_library_robot(robot) -> bool:
+    return robot.path != "<dict>" and Path(robot.path).parent == LIBRARY_DIR
+
+
+def _quat_to_matrix(r):
+    w, x, y, z = r
+    return ca.vertcat(
+        ca.horzcat(1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+        ca.horzcat(2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+        ca.horzcat(2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)))
+
+
+def _translation_of(d):
+    """t = 2 dual real^* (vector part)."""
+    conj = [d[0], -d[1], -d[2], -d[3]]
+    return [2 * v for v in hamilton(d[4:], conj)[1:]]
+
+
+def _split(v, n):
+    return [v[i] for i in range(n)]
+
+
+# --------------------------------------------------------------------------- #
+# The functions
+# --------------------------------------------------------------------------- #
+_CACHE: dict = {}
+
+
+def cached(robot, key: str, build):
+    """build(robot) once per robot and key: library and file robots by (name, path), robots
+    built in memory by identity (the cache keeps them alive)."""
+    robot = load_robot(robot)
+    rk = (robot.name, robot.path) if robot.path != "<dict>" else ("<dict>", id(robot))
+    hit = _CACHE.get((rk, key))
+    if hit is None or hit[0] is not robot and rk[0] == "<dict>":
+        hit = (robot, build(robot))
+        _CACHE[(rk, key)] = hit
+    return hit[1]
+
+
+def functions(robot, source: str | None = None) -> dict:
+    """The CasADi functions of a robot (cached): fk, fk_matrix, pose_error,
+    pose_error_jacobian, residual (e and J in one call, for the refinement) and ik where the
+    robot has a closed form. ``source`` "derived" or "product" forces the FK construction
+    (default: derived for library robots, product otherwise)."""
+    return cached(robot, f"functions/{source}", lambda r: _functions(r, source))
+
+
+def _functions(robot, source: str | None = None) -> dict:
+    """The CasADi functions of a robot (cached): fk, fk_matrix, pose_error,
+    pose_error_jacobian, residual (e and J in one call, for the refinement) and ik where the
+    robot has a closed form. ``source`` "derived" or "product" forces the FK construction
+    (default: derived for library robots, product otherwise)."""
+    n = robot.dof
+    if source is None:
+        source = "derived" if is_library_robot(robot) and _has_derivation(robot) else "product"
+    q = ca.SX.sym("q", n)
+    qs = _split(q, n)
+    d = _fk_derived(robot, qs) if source == "derived" else _fk_product(robot, qs)
+    dq_expr = ca.vertcat(*d)
+    fns = {"fk": ca.Function("fk", [q], [dq_expr], ["q"], ["dq"])}
+    t = _translation_of(d)
+    mat = ca.vertcat(ca.horzcat(_quat_to_matrix(d[:4]), ca.vertcat(*t)), ca.DM([[0, 0, 0, 1]]))
+    fns["fk_matrix"] = ca.Function("fk_matrix", [q], [mat], ["q"], ["T"])
+
+    target = ca.SX.sym("target", 8)
+    tg = _split(target, 8)
+    t_star = _translation_of(tg)
+    err_q = hamilton([tg[0], -tg[1], -tg[2], -tg[3]], d[:4])       # r*^-1 r
+    sgn = ca.if_else(err_q[0] >= 0, 1.0, -1.0)
+    e = ca.vertcat(*[a - b for a, b in zip(t, t_star)], *[2 * sgn * v for v in err_q[1:]])
+    dpos = ca.norm_2(ca.vertcat(*[a - b for a, b in zip(t, t_star)]))
+    drot = 2 * ca.atan2(ca.norm_2(ca.vertcat(*err_q[1:])), ca.fabs(err_q[0]))
+    jac = ca.jacobian(e, q)
+    fns["pose_error"] = ca.Function("pose_error", [q, target], [e, dpos, drot],
+                                    ["q", "target"], ["e", "dpos", "drot"])
+    fns["pose_error_jacobian"] = ca.Function("pose_error_jacobian", [q, target], [jac],
+                                             ["q", "target"], ["J"])
+    fns["residual"] = ca.Function("residual", [q, target], [e, jac, dpos, drot],
+                                  ["q", "target"], ["e", "J", "dpos", "drot"])
+    if source == "derived":
+        ik = _ik_function(robot)
+        if ik is not None:
+            fns["ik"] = ik
+    return fns
+
+
+def _has_derivation(robot) -> bool:
+    """Whether the exact symbolic derivation is practical: every fixed angle of the
+    description (twists, offsets, fixed rotations) a rational multiple of pi, so the joint
+    dual quaternions have the exact cos/sin values the derivation folds."""
+    def nice(angle) -> bool:
+        a = sp.nsimplify(angle) / sp.pi if not isinstance(angle, sp.Basic) else angle / sp.pi
+        return sp.simplify(a).is_rational is True
+
+    for j in robot.joints:
+        ops = [op for op in (*j.pre, *j.post) if op.kind == "R"]
+        if not all(nice(op.sym[1]) for op in ops):
+            return False
+        if not nice(getattr(j.offset, "sym", j.offset)):
+            return False
+    return True
+
+
+def _ik_function(robot):
+    """The IK program's 8 branches in SX (None when the robot has no closed form)."""
+    from .ik import ur_geometry
+    from .ik_codegen import ik_program
+    try:
+        ur_geometry(robot)                  # the extraction is used on the UR family only
+        prog = ik_program(robot.name)
+    except DeriveError:
+        return None
+    pose = ca.SX.sym("pose", 8)
+    env = {f"p{i}": pose[i] for i in range(8)}
+    sols, valid = [], []
+    _run(prog.ops, 0, dict(env), ca.SX(1.0), sols, valid)
+    if len(sols) != prog.branches:
+        raise DeriveError(f"{robot.name}: IK program gave {len(sols)} branches, expected {prog.branches}")
+    two_pi = 2 * math.pi
+    cols = [ca.vertcat(*[a - two_pi * ca.floor((a + math.pi) / two_pi) for a in s]) for s in sols]
+    return ca.Function("ik", [pose], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose"], ["Q", "valid"])
+
+
+def _run(ops, start, env, ok, sols, valid):
+    """Interpret the program from ops[start]: a branch op runs the rest twice (+1, -1)."""
+    conv = _ToSX(env)
+    for i in range(start, len(ops)):
+        op = ops[i]
+        if op.kind == "let":
+            env[op.name] = conv(op.expr)
+        elif op.kind == "sincos":
+            x = conv(op.expr)
+            env[op.name], env[op.name2] = ca.sin(x), ca.cos(x)
+        elif op.kind == "double":
+            hs, hc = env[op.args[0]], env[op.args[1]]
+            env[op.name], env[op.name2] = 2 * hs * hc, 1 - 2 * hs * hs
+        elif op.kind == "require":
+            ok = ca.logic_and(ok, conv(op.expr))
+        elif op.kind == "flag":
+            env[op.name] = conv(op.expr)
+        elif op.kind == "select":
+            env[op.name] = ca.if_else(conv(op.cond), conv(op.expr), conv(op.other))
+        elif op.kind == "branch":
+            for sign in (1.0, -1.0):
+                sub = dict(env)
+                sub[op.name] = ca.SX(sign)
+                _run(ops, i + 1, sub, ok, sols, valid)
+            return
+        elif op.kind == "solution":
+            sols.append([conv(a) for a in op.args])
+            valid.append(ok)
+        else:
+            raise DeriveError(f"CasADi IK: unknown program line {op.kind}")
+
+
+def write_casadi(robot_name: str, out_dir) -> list[Path]:
+    """Save the functions with ``Function.save`` into out_dir/<robot>/<robot>_<name>.casadi."""
+    robot = load_robot(robot_name)
+    folder = Path(out_dir) / robot.name
+    folder.mkdir(parents=True, exist_ok=True)
+    fns = functions(robot.name)
+    paths = []
+    for name in SAVED:
+        if name in fns:
+            p = folder / f"{robot.name}_{name}.casadi"
+            fns[name].save(str(p))
+            paths.append(p)
+    return paths
