@@ -109,17 +109,11 @@ class _ToSX:
         }
         if name in table:
             return table[name](*args)
-        if name in ("Max", "Min"):
-            f = ca.fmax if name == "Max" else ca.fmin
+        folds = {"Max": ca.fmax, "Min": ca.fmin, "And": ca.logic_and, "Or": ca.logic_or}
+        if name in folds:                     # n-ary in sympy, binary in CasADi
             out = args[0]
             for a in args[1:]:
-                out = f(out, a)
-            return out
-        if name in ("And", "Or"):
-            f = ca.logic_and if name == "And" else ca.logic_or
-            out = args[0]
-            for a in args[1:]:
-                out = f(out, a)
+                out = folds[name](out, a)
             return out
         raise DeriveError(f"CasADi conversion: no rule for {name} ({e})")
 
