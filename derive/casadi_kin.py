@@ -137,25 +137,50 @@ def _translation(v):
     return [1, 0, 0, 0, 0, 0.5 * v[0], 0.5 * v[1], 0.5 * v[2]]
 
 
-def _fk_product(robot, q):
-    """The end frame's dual quaternion as the product of the joint motions (neutral form)."""
-    def op_dq(op):
-        return _rotation(op.axis, op.angle) if op.kind == "R" else _translation([float(x) for x in op.vector])
+def _fk_product(robot, q, nominal=None, s=None):
+    """The end frame's dual quaternion as the product of the joint motions (neutral form).
 
+    With ``nominal`` (a robot of the same structure) and a symbol ``s``, every number of the
+    description (offsets, translation vectors, rotation angles) is (1 - s) nominal + s robot:
+    the geometry homotopy of :func:`homotopy_function` (s = 0 nominal, s = 1 robot)."""
+    def mix(x, x0):
+        return x if nominal is None else (1 - s) * x0 + s * x
+
+    def op_dq(op, op0):
+        if op.kind == "R":
+            return _rotation(op.axis, mix(op.angle, op0.angle))
+        return _translation([mix(float(x), float(x0)) for x, x0 in zip(op.vector, op0.vector)])
+
+    joints0 = robot.joints if nominal is None else nominal.joints
     frames = []
-    for j in robot.joints:
-        value = j.multiplier * q[j.variable] + j.mimic_offset + j.offset
+    for j, j0 in zip(robot.joints, joints0):
+        value = j.multiplier * q[j.variable] + j.mimic_offset + mix(j.offset, j0.offset)
         m = _rotation(j.axis, value) if j.type == "revolute" else _translation([value * float(a) for a in j.axis])
-        for op in reversed(j.pre):
-            m = _dq_mul(op_dq(op), m)
-        for op in j.post:
-            m = _dq_mul(m, op_dq(op))
+        for op, op0 in zip(reversed(j.pre), reversed(j0.pre)):
+            m = _dq_mul(op_dq(op, op0), m)
+        for op, op0 in zip(j.post, j0.post):
+            m = _dq_mul(m, op_dq(op, op0))
         frames.append(m if j.parent < 0 else _dq_mul(frames[j.parent], m))
     end = robot.ends[robot.default_end]
+    end0 = end if nominal is None else nominal.ends[nominal.default_end]
     out = frames[end.parent]
-    for op in end.ops:
-        out = _dq_mul(out, op_dq(op))
+    for op, op0 in zip(end.ops, end0.ops):
+        out = _dq_mul(out, op_dq(op, op0))
     return out
+
+
+def same_structure(robot, nominal) -> bool:
+    """True when the two descriptions differ only in their numbers (joint types, axes,
+    parents, mimic relations and the kinds and axes of the fixed motions agree), so that
+    the geometry homotopy between them is defined."""
+    def shape(r):
+        return [(j.type, tuple(j.axis), j.parent, j.variable, j.multiplier, j.mimic_offset,
+                 [(o.kind, None if o.axis is None else tuple(o.axis)) for o in j.pre],
+                 [(o.kind, None if o.axis is None else tuple(o.axis)) for o in j.post])
+                for j in r.joints] + [
+            (e.parent, [(o.kind, None if o.axis is None else tuple(o.axis)) for o in e.ops])
+            for e in [r.ends[r.default_end]]]
+    return robot.dof == nominal.dof and shape(robot) == shape(nominal)
 
 
 def _fk_derived(robot, q):
@@ -198,6 +223,19 @@ def _split(v, n):
     return [v[i] for i in range(n)]
 
 
+def _error_terms(d, t, tg):
+    """e = [t - t*; 2 s v], |t - t*| and 2 atan2(|v|, |w|) for the FK d (translation t) and
+    the target tg (module docstring)."""
+    t_star = _translation_of(tg)
+    err_q = hamilton([tg[0], -tg[1], -tg[2], -tg[3]], d[:4])       # r*^-1 r
+    sgn = ca.if_else(err_q[0] >= 0, 1.0, -1.0)
+    dt = [a - b for a, b in zip(t, t_star)]
+    e = ca.vertcat(*dt, *[2 * sgn * v for v in err_q[1:]])
+    dpos = ca.norm_2(ca.vertcat(*dt))
+    drot = 2 * ca.atan2(ca.norm_2(ca.vertcat(*err_q[1:])), ca.fabs(err_q[0]))
+    return e, dpos, drot
+
+
 # --------------------------------------------------------------------------- #
 # The functions
 # --------------------------------------------------------------------------- #
@@ -225,10 +263,6 @@ def functions(robot, source: str | None = None) -> dict:
 
 
 def _functions(robot, source: str | None = None) -> dict:
-    """The CasADi functions of a robot (cached): fk, fk_matrix, pose_error,
-    pose_error_jacobian, residual (e and J in one call, for the refinement) and ik where the
-    robot has a closed form. ``source`` "derived" or "product" forces the FK construction
-    (default: derived for library robots, product otherwise)."""
     n = robot.dof
     if source is None:
         source = "derived" if is_library_robot(robot) and _has_derivation(robot) else "product"
@@ -242,13 +276,7 @@ def _functions(robot, source: str | None = None) -> dict:
     fns["fk_matrix"] = ca.Function("fk_matrix", [q], [mat], ["q"], ["T"])
 
     target = ca.SX.sym("target", 8)
-    tg = _split(target, 8)
-    t_star = _translation_of(tg)
-    err_q = hamilton([tg[0], -tg[1], -tg[2], -tg[3]], d[:4])       # r*^-1 r
-    sgn = ca.if_else(err_q[0] >= 0, 1.0, -1.0)
-    e = ca.vertcat(*[a - b for a, b in zip(t, t_star)], *[2 * sgn * v for v in err_q[1:]])
-    dpos = ca.norm_2(ca.vertcat(*[a - b for a, b in zip(t, t_star)]))
-    drot = 2 * ca.atan2(ca.norm_2(ca.vertcat(*err_q[1:])), ca.fabs(err_q[0]))
+    e, dpos, drot = _error_terms(d, t, _split(target, 8))
     jac = ca.jacobian(e, q)
     fns["pose_error"] = ca.Function("pose_error", [q, target], [e, dpos, drot],
                                     ["q", "target"], ["e", "dpos", "drot"])
@@ -261,6 +289,27 @@ def _functions(robot, source: str | None = None) -> dict:
         if ik is not None:
             fns["ik"] = ik
     return fns
+
+
+def homotopy_function(robot, nominal):
+    """``homotopy(q, s, target) -> (e, J)``: the pose error e (6) of the geometry
+    (1 - s) nominal + s robot (every number of the two descriptions blended, see
+    :func:`_fk_product`) and its Jacobian J = [de/dq, de/ds] (6 x (dof + 1)); the path
+    tracking of :mod:`derive.refinement` follows e = 0 from a nominal solution at s = 0 to the
+    robot at s = 1. Cached per (robot, nominal); DeriveError unless :func:`same_structure`."""
+    robot, nominal = load_robot(robot), load_robot(nominal)
+    if not same_structure(robot, nominal):
+        raise DeriveError(f"{robot.name}: no geometry homotopy to {nominal.name}: the "
+                          "descriptions differ in structure, not only in numbers")
+
+    def build(r):
+        n = r.dof
+        q, s, target = ca.SX.sym("q", n), ca.SX.sym("s"), ca.SX.sym("target", 8)
+        d = _fk_product(r, _split(q, n), nominal, s)
+        e = _error_terms(d, _translation_of(d), _split(target, 8))[0]
+        return ca.Function("homotopy", [q, s, target], [e, ca.jacobian(e, ca.vertcat(q, s))],
+                           ["q", "s", "target"], ["e", "J"])
+    return cached(robot, f"homotopy/{nominal.name}/{nominal.path}", build)
 
 
 def _has_derivation(robot) -> bool:

@@ -49,7 +49,9 @@ SAME_TOL = 1e-6
 class Refined:
     """One refinement: joint values ``q`` (dof,), ``position_error`` (m), ``rotation_error``
     (rad), ``iterations``, ``success``, ``seed`` (index into the seeds), ``q0`` (the seed),
-    ``solver`` ("lm", or "lm+ipopt" when the bounded NLP gave the result) and ``time_s``."""
+    ``solver`` ("lm"; "+ipopt" when the bounded NLP gave the result, "path+" when the seed was
+    first followed from the nominal geometry, "+retry" for a perturbed restart), ``time_s``
+    and ``note`` (why a closed-form seed has no solution, when that is known)."""
 
     q: np.ndarray
     position_error: float
@@ -60,6 +62,7 @@ class Refined:
     q0: np.ndarray
     solver: str
     time_s: float
+    note: str = ""
 
 
 class RefineResult(list):
@@ -156,6 +159,94 @@ def _build_nlp(robot, max_iter: int):
     return ca.nlpsol("refine_nlp", "ipopt", {"x": q, "p": p, "f": obj}, opts)
 
 
+@dataclass
+class Path:
+    """The end of one continuation: ``status`` "end" (reached s = 1: ``q`` solves the robot),
+    "back" (turned at a fold and came back to s = 0 at the nominal solution ``q``: the pair
+    of solutions vanished between the geometries) or "lost" (step size or step budget
+    exhausted: undecided); ``s`` where it stopped, ``steps`` accepted steps, ``turn`` the
+    largest s reached (where a "back" path met its fold)."""
+
+    status: str
+    q: np.ndarray
+    s: float
+    steps: int
+    turn: float
+
+
+def track(hom, q0, target, *, h0: float = 0.05, h_max: float = 0.1, h_min: float = 1e-9,
+          max_steps: int = 400, tol: float = 1e-12) -> Path:
+    """Follow the solution curve e(q, s) = 0 of the geometry homotopy (``hom`` from
+    :func:`derive.casadi_kin.homotopy_function`) from the nominal solution ``q0`` at s = 0.
+
+    Pseudo-arclength continuation in x = (q, s): the tangent is the null vector of
+    J = [de/dq, de/ds] (SVD, oriented along the previous one, first towards s > 0); each
+    predictor step x + h t is corrected by Gauss-Newton with the minimal-norm step
+    (lstsq of the 6 x 7 system) to |e| < tol. A step is refused (and h halved) when the
+    corrector does not contract, moves more than h / 4 from the prediction or turns the
+    tangent by more than 0.2 rad, so the path does not jump to a neighbouring branch; h
+    doubles after easy steps. The last step lands on s = 1 exactly (Newton in q). A fold
+    (de/dq singular) is passed like any other point: the path then runs back to s = 0."""
+    def ev(x):
+        e, jac = hom(x[:-1], x[-1], target)
+        return np.array(e).ravel(), np.array(jac)
+
+    def tangent(jac, prev):
+        t = np.linalg.svd(jac)[2][-1]
+        return t if (t[-1] if prev is None else t @ prev) > 0 else -t
+
+    def correct(x, fixed_s):
+        last = math.inf
+        for _ in range(10):
+            e, jac = ev(x)
+            if np.linalg.norm(e) < tol:
+                return x, jac
+            if fixed_s:
+                dx = np.append(np.linalg.lstsq(jac[:, :-1], -e, rcond=None)[0], 0.0)
+            else:
+                dx = np.linalg.lstsq(jac, -e, rcond=None)[0]
+            step = np.linalg.norm(dx)
+            if step > 0.5 * last:
+                return None, None
+            last, x = step, x + dx
+        e, jac = ev(x)
+        return (x, jac) if np.linalg.norm(e) < tol else (None, None)
+
+    x = np.append(np.asarray(q0, dtype=float), 0.0)
+    t = tangent(ev(x)[1], None)
+    h, steps, turn = h0, 0, 0.0
+    while steps < max_steps and h >= h_min:
+        if x[-1] + h * t[-1] >= 1.0 and t[-1] > 0:
+            xp = x + t * (1.0 - x[-1]) / t[-1]
+            xp[-1] = 1.0
+            xc, _ = correct(xp, True)
+            if xc is not None and np.linalg.norm(xc - xp) <= 0.25 * max(h, 1e-3):
+                return Path("end", xc[:-1], 1.0, steps + 1, 1.0)
+            h /= 2
+            continue
+        xp = x + h * t
+        xc, jac = correct(xp, False)
+        if xc is None or np.linalg.norm(xc - xp) > 0.25 * h:
+            h /= 2
+            continue
+        tn = tangent(jac, t)
+        if tn @ t < math.cos(0.2):
+            h /= 2
+            continue
+        x, t, steps = xc, tn, steps + 1
+        if x[-1] < 0:
+            # back at the nominal geometry: land on s = 0
+            xp = x - t * x[-1] / t[-1]
+            xp[-1] = 0.0
+            xc, _ = correct(xp, True)
+            if xc is None:
+                return Path("lost", x[:-1], float(x[-1]), steps, turn)
+            return Path("back", xc[:-1], 0.0, steps, turn)
+        turn = max(turn, float(x[-1]))
+        h = min(2 * h, h_max)
+    return Path("lost", x[:-1], float(x[-1]), steps, turn)
+
+
 # --------------------------------------------------------------------------- #
 # Seeds
 # --------------------------------------------------------------------------- #
@@ -187,7 +278,7 @@ def closed_form_seeds(robot, pose, with_reach: bool = False):
     for c, cd in zip(cand[0], code[0]):
         if cd == 0 or not np.all(np.isfinite(c)):
             continue
-        for delta in (0.0, -0.1, 0.1):
+        for delta in (0.0, -0.1, 0.1, -0.25, 0.25):
             v = c.copy()
             v[0 if cd == 1 else 2] += delta
             if not any(_same(v, o) for o in out):
@@ -251,7 +342,7 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
         raise InputError(f"weights: must be positive, got {tuple(w)}")
     if not (math.isfinite(regularization) and regularization >= 0):
         raise InputError(f"regularization: must be a finite number >= 0, got {regularization}")
-    n_retry = 0                  # closed-form seeds retried when they fail
+    n_retry = 0                  # leading seeds that are nominal solutions (repaired when they fail)
     if q0 is None:
         seeds, n_retry = closed_form_seeds(robot, target, with_reach=True)
         if len(seeds) == 0:
@@ -291,19 +382,62 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
                        time_s=time.perf_counter() - t0)
 
     out = RefineResult(solve_one(k, s) for k, s in enumerate(seeds))
-    # A closed-form seed that fails or lands on another seed's solution (near a singular set of the
-    # nominal arm the calibrated one's solutions move by more than the seeds' basins) is
-    # retried from a few perturbed starts; the first new exact solution replaces it.
+    _repair(robot, out, seeds[:n_retry], target, solve_one, retry_sigmas, seed)
+    return out
+
+
+def _homotopy(robot):
+    """The geometry homotopy from the robot's nominal description, or None."""
+    from .casadi_kin import homotopy_function
+    from .errors import DeriveError
+    if not robot.nominal or robot.nominal == robot.name:
+        return None
+    try:
+        return homotopy_function(robot, robot.nominal)
+    except DeriveError:
+        return None
+
+
+def _repair(robot, out, nominal, target, solve_one, retry_sigmas, seed):
+    """Closed-form seeds that fail or share their solution with another seed: near the
+    nominal singular sets the actual arm's solutions move farther than a seed's basin, or a
+    pair of them vanishes. Each such seed is followed from the nominal to the actual geometry
+    (:func:`track`) and refined from the path's end; a path that turns back to s = 0 at another
+    nominal solution proves the pair lost (note set, no retries); an undecided path falls back to a few perturbed
+    restarts (fixed seed). out[k] is replaced by the first new exact solution."""
+    hom = _homotopy(robot)
     rng = np.random.default_rng(seed)
-    for k, r in enumerate(out[:n_retry]):
-        others = [o.q for i, o in enumerate(out) if i != k and o.success]
-        if r.success and not any(_same(r.q, o) for o in others):
+    n = len(nominal)
+
+    def clash(k, q):
+        return [i for i, o in enumerate(out) if i != k and o.success and _same(q, o.q)]
+
+    pending = [k for k in range(n) if not out[k].success or clash(k, out[k].q)]
+    done: set = set()
+    while pending:
+        k = pending.pop(0)
+        done.add(k)
+        r = out[k]
+        path = track(hom, nominal[k], target) if hom is not None else None
+        if path is not None and path.status == "end":
+            r2 = solve_one(k, path.q)
+            if r2.success:
+                r2.solver, r2.time_s, r2.q0 = "path+" + r2.solver, r2.time_s + r.time_s, nominal[k]
+                out[k] = r2
+                # a seed whose solution this is jumped there: follow it too
+                pending += [i for i in clash(k, r2.q) if i < n and i not in done and i not in pending]
+                continue
+        if path is not None and path.status == "back" and any(
+                _same(path.q, nominal[i]) for i in range(n) if i != k):
+            out[k].note = (f"no solution on this branch: followed from the nominal geometry, "
+                           f"it meets a fold at s = {path.turn:.3f} and returns to the nominal "
+                           "arm (the pair of solutions vanishes)")
             continue
+        others = [o.q for i, o in enumerate(out) if i != k and o.success]
         for sigma in np.repeat(retry_sigmas, 2):
-            r2 = solve_one(k, seeds[k] + rng.normal(0.0, sigma, n))
+            r2 = solve_one(k, nominal[k] + rng.normal(0.0, sigma, len(nominal[k])))
             if r2.success and not any(_same(r2.q, o) for o in others):
                 r2.solver += "+retry"
                 r2.time_s += r.time_s
                 out[k] = r2
                 break
-    return out
