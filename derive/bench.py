@@ -102,19 +102,28 @@ def bench_refine(n: int = 300, seed: int = 0) -> dict:
         q = rng.uniform(-np.pi, np.pi, size=(m, 6))
         poses = reference.fk(name, q)
         refine(name, poses[0])                                # build the CasADi functions once
-        per_seed, iters, per_pose, conv, total = [], [], [], 0, 0
+        per_seed, per_conv, iters, per_pose, per_sol = [], [], [], [], []
+        conv = total = paths = 0
         for p in poses:
             t = time.perf_counter()
             res = refine(name, p)
             per_pose.append(time.perf_counter() - t)
+            if len(res.solutions):
+                per_sol.append(per_pose[-1] / len(res.solutions))
             per_seed += [r.time_s for r in res]
+            per_conv += [r.time_s for r in res if r.success]
             iters += [r.iterations for r in res if r.success]
             conv += sum(r.success for r in res)
+            paths += sum(r.solver.startswith("path") for r in res)
             total += len(res)
+        ms = lambda v, pct: float(np.percentile(v, pct) * 1e3)   # noqa: E731
         out["robots"][name] = {
-            "poses": m, "seeds": total, "seed_kind": kind, "converged": conv,
-            "median_ms": float(np.median(per_seed) * 1e3), "p95_ms": float(np.percentile(per_seed, 95) * 1e3),
-            "median_iterations": float(np.median(iters)), "per_pose_median_ms": float(np.median(per_pose) * 1e3)}
+            "poses": m, "seeds": total, "seed_kind": kind, "converged": conv, "paths": paths,
+            "median_ms": ms(per_seed, 50), "p95_ms": ms(per_seed, 95),
+            "converged_median_ms": ms(per_conv, 50), "converged_p95_ms": ms(per_conv, 95),
+            "median_iterations": float(np.median(iters)),
+            "per_pose_median_ms": ms(per_pose, 50), "per_pose_p95_ms": ms(per_pose, 95),
+            "per_solution_median_ms": ms(per_sol, 50)}
     return out
 
 
@@ -139,10 +148,13 @@ def main(argv=None) -> int:
         r = bench_refine()
         print(f"derive.refine on {r['machine']}, {r['date']} (time per seed, first call excluded):")
         for name, x in r["robots"].items():
-            print(f"  {name:<15} {x['poses']} poses, {x['seeds']} seeds ({x['seed_kind']}): "
-                  f"median {x['median_ms']:.3f} ms, p95 {x['p95_ms']:.3f} ms per seed; "
-                  f"converged seeds {x['converged']}; median iterations {x['median_iterations']:.0f}; "
-                  f"whole refine() per pose median {x['per_pose_median_ms']:.2f} ms")
+            print(f"  {name} ({x['poses']} poses, {x['seeds']} seeds: {x['seed_kind']}; "
+                  f"{x['converged']} converged, {x['paths']} after a continuation path; "
+                  f"median {x['median_iterations']:.0f} iterations):\n"
+                  f"    per seed            median {x['median_ms']:7.3f} ms   p95 {x['p95_ms']:7.3f} ms\n"
+                  f"    per converged seed  median {x['converged_median_ms']:7.3f} ms   p95 {x['converged_p95_ms']:7.3f} ms\n"
+                  f"    per pose            median {x['per_pose_median_ms']:7.3f} ms   p95 {x['per_pose_p95_ms']:7.3f} ms\n"
+                  f"    per solution        median {x['per_solution_median_ms']:7.3f} ms (pose time / solutions)")
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(r, fh, indent=1)

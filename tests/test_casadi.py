@@ -307,6 +307,17 @@ def test_refine_regularisation_and_input_errors():
         refine("ur5-calibrated", p * 2)
 
 
+def test_bench_refine_reports_consistent_counts():
+    from derive.bench import bench_refine
+    r = bench_refine(n=6)
+    cal, gen = r["robots"]["ur5-calibrated"], r["robots"]["general-6r"]
+    assert cal["poses"] == 6 and gen["poses"] == 2 and gen["seeds"] == 32
+    assert 6 <= cal["converged"] <= cal["seeds"] and 2 <= gen["converged"] <= 32
+    for x in (cal, gen):
+        assert 0 < x["converged_median_ms"] <= x["converged_p95_ms"]
+        assert 0 < x["per_pose_median_ms"] <= x["per_pose_p95_ms"]
+
+
 def test_cli_refine(capsys):
     assert main(["refine", "ur5-calibrated", "--q", "0.3", "-1.2", "1.4", "-0.5", "1.1", "0.7"]) == 0
     out = capsys.readouterr().out
