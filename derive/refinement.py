@@ -15,8 +15,12 @@ the error angle) on the robot's actual model, from one or several starting confi
   safeguard: steps that do not lower |e| are damped, so a seed near a singular set converges
   to the nearest solution instead of jumping to another basin. Revolute joints are then
   moved by multiples of 2 pi into their limits where possible (the same pose);
-* a closed-form seed that fails, or lands on another seed's solution, is retried from a few
-  perturbed copies (fixed seed); the first new exact solution replaces it;
+* a closed-form seed that fails, or lands on another seed's solution, is followed from the
+  nominal to the actual geometry (:func:`track`, pseudo-arclength continuation of the
+  geometry homotopy of :func:`derive.casadi_kin.homotopy_function`): a path that reaches the
+  actual arm gives its solution, one that turns at a fold back to another nominal solution
+  proves the pair lost (``note``); only an undecided path is retried from a few perturbed
+  copies (fixed seed), the first new exact solution replacing it;
 * when a joint ends outside its limits: ``nlpsol`` with IPOPT, minimising the same objective
   within the joint limits (the result is clipped to the limits, so a returned solution never
   violates them).
@@ -160,7 +164,7 @@ def _build_nlp(robot, max_iter: int):
 
 
 @dataclass
-class Path:
+class HomotopyPath:
     """The end of one continuation: ``status`` "end" (reached s = 1: ``q`` solves the robot),
     "back" (turned at a fold and came back to s = 0 at the nominal solution ``q``: the pair
     of solutions vanished between the geometries) or "lost" (step size or step budget
@@ -175,7 +179,7 @@ class Path:
 
 
 def track(hom, q0, target, *, h0: float = 0.05, h_max: float = 0.1, h_min: float = 1e-9,
-          max_steps: int = 400, tol: float = 1e-12) -> Path:
+          max_steps: int = 400, tol: float = 1e-12) -> HomotopyPath:
     """Follow the solution curve e(q, s) = 0 of the geometry homotopy (``hom`` from
     :func:`derive.casadi_kin.homotopy_function`) from the nominal solution ``q0`` at s = 0.
 
@@ -221,7 +225,7 @@ def track(hom, q0, target, *, h0: float = 0.05, h_max: float = 0.1, h_min: float
             xp[-1] = 1.0
             xc, _ = correct(xp, True)
             if xc is not None and np.linalg.norm(xc - xp) <= 0.25 * max(h, 1e-3):
-                return Path("end", xc[:-1], 1.0, steps + 1, 1.0)
+                return HomotopyPath("end", xc[:-1], 1.0, steps + 1, 1.0)
             h /= 2
             continue
         xp = x + h * t
@@ -240,11 +244,11 @@ def track(hom, q0, target, *, h0: float = 0.05, h_max: float = 0.1, h_min: float
             xp[-1] = 0.0
             xc, _ = correct(xp, True)
             if xc is None:
-                return Path("lost", x[:-1], float(x[-1]), steps, turn)
-            return Path("back", xc[:-1], 0.0, steps, turn)
+                return HomotopyPath("lost", x[:-1], float(x[-1]), steps, turn)
+            return HomotopyPath("back", xc[:-1], 0.0, steps, turn)
         turn = max(turn, float(x[-1]))
         h = min(2 * h, h_max)
-    return Path("lost", x[:-1], float(x[-1]), steps, turn)
+    return HomotopyPath("lost", x[:-1], float(x[-1]), steps, turn)
 
 
 # --------------------------------------------------------------------------- #
