@@ -119,6 +119,9 @@ def cmd_refine(args) -> int:
     for r in res:
         print(f"{r.seed:4d} {'yes' if r.success else 'no':>3} {r.iterations:4d} {r.position_error:9.1e} "
               f"{r.rotation_error:11.1e}  {r.solver:<15} {_fmt(r.q, 9, 5)}")
+    for r in res:
+        if r.note:
+            print(f"seed {r.seed}: {r.note}")
     if not res.success:
         print(f"no exact solution: best residual {res.best.position_error:.3e} m, "
               f"{res.best.rotation_error:.3e} rad")

@@ -431,11 +431,12 @@ def _repair(robot, out, nominal, target, solve_one, retry_sigmas, seed):
                 # a seed whose solution this is jumped there: follow it too
                 pending += [i for i in clash(k, r2.q) if i < n and i not in done and i not in pending]
                 continue
-        if path is not None and path.status == "back" and any(
-                _same(path.q, nominal[i]) for i in range(n) if i != k):
-            out[k].note = (f"no solution on this branch: followed from the nominal geometry, "
-                           f"it meets a fold at s = {path.turn:.3f} and returns to the nominal "
-                           "arm (the pair of solutions vanishes)")
+        partner = [i for i in range(n) if i != k and _same(path.q, nominal[i])] \
+            if path is not None and path.status == "back" else []
+        if partner:
+            out[k].note = (f"no solution on this branch: followed from the nominal geometry, it "
+                           f"meets a fold at s = {path.turn:.3f} and returns to the nominal "
+                           f"solution of seed {partner[0]} (the pair vanishes on this arm)")
             continue
         others = [o.q for i, o in enumerate(out) if i != k and o.success]
         for sigma in np.repeat(retry_sigmas, 2):

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import shutil
 import subprocess
 import sys
@@ -324,3 +325,12 @@ def test_cli_refine(capsys):
     assert "8 distinct exact solution(s)" in out
     assert main(["refine", "ur5", "--pose", "1", "0", "0", "0", "0", "3", "0", "0"]) == 1
     assert "no exact solution" in capsys.readouterr().out
+    # pose 970 of the calibrated test: the two theta1 roots of the nominal arm are 0.04 apart;
+    # three pairs of the calibrated arm's solutions vanish, each shown by its path
+    q = ["-2.726642", "-0.771252", "-2.151286", "1.277103", "2.600853", "-2.036887"]
+    assert main(["refine", "ur5-calibrated", "--q", *q]) == 0
+    out = capsys.readouterr().out
+    assert "2 distinct exact solution(s)" in out
+    pairs = {tuple(sorted((int(m[0]), int(m[1])))) for m in
+             re.findall(r"seed (\d): no solution .* solution of seed (\d)", out)}
+    assert pairs == {(0, 4), (2, 6), (3, 7)}
