@@ -147,14 +147,16 @@ def main(argv=None) -> int:
     if args.what == "refine":
         r = bench_refine()
         print(f"derive.refine on {r['machine']}, {r['date']} (time per seed, first call excluded):")
+        rows = (("per seed", ""), ("per converged seed", "converged_"), ("per pose", "per_pose_"))
         for name, x in r["robots"].items():
             print(f"  {name} ({x['poses']} poses, {x['seeds']} seeds: {x['seed_kind']}; "
                   f"{x['converged']} converged, {x['paths']} after a continuation path; "
-                  f"median {x['median_iterations']:.0f} iterations):\n"
-                  f"    per seed            median {x['median_ms']:7.3f} ms   p95 {x['p95_ms']:7.3f} ms\n"
-                  f"    per converged seed  median {x['converged_median_ms']:7.3f} ms   p95 {x['converged_p95_ms']:7.3f} ms\n"
-                  f"    per pose            median {x['per_pose_median_ms']:7.3f} ms   p95 {x['per_pose_p95_ms']:7.3f} ms\n"
-                  f"    per solution        median {x['per_solution_median_ms']:7.3f} ms (pose time / solutions)")
+                  f"median {x['median_iterations']:.0f} iterations):")
+            for label, key in rows:
+                print(f"    {label:<19} median {x[key + 'median_ms']:7.3f} ms   "
+                      f"p95 {x[key + 'p95_ms']:7.3f} ms")
+            print(f"    {'per solution':<19} median {x['per_solution_median_ms']:7.3f} ms "
+                  "(pose time / solutions)")
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(r, fh, indent=1)

@@ -368,17 +368,15 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
         q, iters = _lm(resid, np.array(s, dtype=float), target, w, regularization, ref, max_iter, tol)
         q = _into_limits(robot, q)
         solver = "lm"
-        _, dp, dr = err(q, target)
         if not _within(robot, q):
-            # a joint outside its limits even after moving it by 2 pi: IPOPT within the limits
+            # a joint outside its limits even after moving it by 2 pi: IPOPT within the limits,
+            # from the seed moved into them (the result replaces the out-of-limits one)
             nlp = _nlp(robot, max_iter)
-            start = np.clip(q if _within(robot, q) else _into_limits(robot, np.array(s, dtype=float)), lbx, ubx)
+            start = np.clip(_into_limits(robot, np.array(s, dtype=float)), lbx, ubx)
             sol = nlp(x0=start, p=np.concatenate([target, w, [regularization], ref]), lbx=lbx, ubx=ubx)
-            q2 = np.clip(np.array(sol["x"]).ravel(), lbx, ubx)
+            q = np.clip(np.array(sol["x"]).ravel(), lbx, ubx)
             iters += int(nlp.stats().get("iter_count", 0))
-            _, dp2, dr2 = err(q2, target)
-            if not _within(robot, q) or float(dp2) + float(dr2) < float(dp) + float(dr):
-                q, solver = q2, "lm+ipopt"
+            solver = "lm+ipopt"
         _, dp, dr = err(q, target)
         dp, dr = float(dp), float(dr)
         return Refined(q=q, position_error=dp, rotation_error=dr, iterations=iters,
@@ -407,8 +405,9 @@ def _repair(robot, out, nominal, target, solve_one, retry_sigmas, seed):
     nominal singular sets the actual arm's solutions move farther than a seed's basin, or a
     pair of them vanishes. Each such seed is followed from the nominal to the actual geometry
     (:func:`track`) and refined from the path's end; a path that turns back to s = 0 at another
-    nominal solution proves the pair lost (note set, no retries); an undecided path falls back to a few perturbed
-    restarts (fixed seed). out[k] is replaced by the first new exact solution."""
+    nominal solution proves the pair lost (note set, no retries); an undecided path falls back
+    to a few perturbed restarts (fixed seed). out[k] is replaced by the first new exact
+    solution."""
     hom = _homotopy(robot)
     rng = np.random.default_rng(seed)
     n = len(nominal)
