@@ -116,7 +116,10 @@ def bench_refine(n: int = 300, seed: int = 0) -> dict:
             conv += sum(r.success for r in res)
             paths += sum(r.solver.startswith("path") for r in res)
             total += len(res)
-        ms = lambda v, pct: float(np.percentile(v, pct) * 1e3)   # noqa: E731
+
+        def ms(v, pct):
+            return float(np.percentile(v, pct) * 1e3)
+
         out["robots"][name] = {
             "poses": m, "seeds": total, "seed_kind": kind, "converged": conv, "paths": paths,
             "median_ms": ms(per_seed, 50), "p95_ms": ms(per_seed, 95),

@@ -173,13 +173,13 @@ def same_structure(robot, nominal) -> bool:
     """True when the two descriptions differ only in their numbers (joint types, axes,
     parents, mimic relations and the kinds and axes of the fixed motions agree), so that
     the geometry homotopy between them is defined."""
+    def kinds(ops):
+        return [(o.kind, None if o.axis is None else tuple(o.axis)) for o in ops]
+
     def shape(r):
+        end = r.ends[r.default_end]
         return [(j.type, tuple(j.axis), j.parent, j.variable, j.multiplier, j.mimic_offset,
-                 [(o.kind, None if o.axis is None else tuple(o.axis)) for o in j.pre],
-                 [(o.kind, None if o.axis is None else tuple(o.axis)) for o in j.post])
-                for j in r.joints] + [
-            (e.parent, [(o.kind, None if o.axis is None else tuple(o.axis)) for o in e.ops])
-            for e in [r.ends[r.default_end]]]
+                 kinds(j.pre), kinds(j.post)) for j in r.joints] + [(end.parent, kinds(end.ops))]
     return robot.dof == nominal.dof and shape(robot) == shape(nominal)
 
 

@@ -346,9 +346,9 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
         raise InputError(f"weights: must be positive, got {tuple(w)}")
     if not (math.isfinite(regularization) and regularization >= 0):
         raise InputError(f"regularization: must be a finite number >= 0, got {regularization}")
-    n_retry = 0                  # leading seeds that are nominal solutions (repaired when they fail)
+    n_nominal = 0                # leading seeds that are nominal solutions (repaired when they fail)
     if q0 is None:
-        seeds, n_retry = closed_form_seeds(robot, target, with_reach=True)
+        seeds, n_nominal = closed_form_seeds(robot, target, with_reach=True)
         if len(seeds) == 0:
             seeds = _random_starts(robot, starts, seed)
     else:
@@ -384,7 +384,7 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
                        time_s=time.perf_counter() - t0)
 
     out = RefineResult(solve_one(k, s) for k, s in enumerate(seeds))
-    _repair(robot, out, seeds[:n_retry], target, solve_one, retry_sigmas, seed)
+    _repair(robot, out, seeds[:n_nominal], target, solve_one, retry_sigmas, seed)
     return out
 
 
@@ -430,13 +430,13 @@ def _repair(robot, out, nominal, target, solve_one, retry_sigmas, seed):
                 # a seed whose solution this is jumped there: follow it too
                 pending += [i for i in clash(k, r2.q) if i < n and i not in done and i not in pending]
                 continue
-        partner = [i for i in range(n) if i != k and _same(path.q, nominal[i])] \
-            if path is not None and path.status == "back" else []
-        if partner:
-            out[k].note = (f"no solution on this branch: followed from the nominal geometry, it "
-                           f"meets a fold at s = {path.turn:.3f} and returns to the nominal "
-                           f"solution of seed {partner[0]} (the pair vanishes on this arm)")
-            continue
+        if path is not None and path.status == "back":
+            partner = next((i for i in range(n) if i != k and _same(path.q, nominal[i])), None)
+            if partner is not None:
+                out[k].note = (f"no solution on this branch: followed from the nominal geometry, "
+                               f"it meets a fold at s = {path.turn:.3f} and returns to the nominal "
+                               f"solution of seed {partner} (the pair vanishes on this arm)")
+                continue
         others = [o.q for i, o in enumerate(out) if i != k and o.success]
         for sigma in np.repeat(retry_sigmas, 2):
             r2 = solve_one(k, nominal[k] + rng.normal(0.0, sigma, len(nominal[k])))
