@@ -6,7 +6,7 @@ Run: python benchmarks/bench_derivation.py [--robot ur3] [--repeats 5]
 
 import sys
 
-from derive.bench import main
+from derive.bench.runner import main
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

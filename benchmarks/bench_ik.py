@@ -2,7 +2,7 @@
 
 import sys
 
-from derive.bench import main
+from derive.bench.runner import main
 
 if __name__ == "__main__":
     sys.exit(main(["ik"] + sys.argv[1:]))

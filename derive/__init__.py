@@ -6,26 +6,21 @@ Quick start::
     robot = derive.load_robot("ur5")
     Q = derive.reference.fk(robot, [0, -1.57, 1.57, 0, 1.57, 0])   # unit dual quaternion (8,)
     T = derive.reference.fk_matrix(robot, [0, -1.57, 1.57, 0, 1.57, 0])  # 4x4 matrix
+    k = derive.kernels(robot, "c")                                  # generated C kernels
+    sols, count = k.ik(Q)
+
+The package is in layers whose imports point one way (see docs/architecture.md):
+algebra -> model -> kinematics -> symbolic -> ik -> codegen -> refinement -> reports ->
+bench -> cli.
 """
 
-from . import dualquat, quaternion, reference
-from .errors import DeriveError, InputError, RobotFileError, UnknownRobotError
-from .robot import Robot, list_robots, load_robot
-
-
-def kernels(robot, backend: str = "numpy"):
-    """Generated FK kernels of ``robot`` ("python", "numpy" or "c"); see :mod:`derive.loader`."""
-    from .loader import kernels as _kernels
-    return _kernels(robot, backend)
-
-
-def refine(robot, pose, q0=None, **options):
-    """IK refinement with CasADi on the robot's actual model; see :mod:`derive.refinement`."""
-    from .refinement import refine as _refine
-    return _refine(robot, pose, q0, **options)
-
-
-__version__ = "0.1.0"
+from derive import reference
+from derive._version import __version__
+from derive.algebra import dualquat, quaternion
+from derive.codegen.loader import kernels
+from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
+from derive.model.robot import Robot, list_robots, load_robot
+from derive.refinement.solver import refine
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",

@@ -9,17 +9,25 @@ import time
 
 import numpy as np
 
-from . import __version__
-from . import dualquat as dq
-from . import quaternion as quat
-from . import reference
-from .errors import DeriveError
-from .robot import list_robots, load_robot
+from derive import reference
+from derive._version import __version__
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.bench.runner import BENCHES
+from derive.bench.runner import main as bench_main
+from derive.codegen.emit import write_kernels
+from derive.errors import DeriveError
+from derive.model.robot import list_robots, load_robot
+from derive.refinement.functions import write_casadi
+from derive.refinement.solver import refine
+from derive.reports.appendix import write_appendix
+from derive.reports.ik_report import write_ik
 
 #: Robots ``dq-derive generate`` (and so ``make generate``) works on by default.
 DEFAULT_ROBOTS = ("ur3", "ur5")
-#: Robots whose CasADi functions ``dq-derive generate`` writes by default (every UR robot).
-CASADI_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
+#: Robots whose FK/IK kernels and CasADi functions ``dq-derive generate`` writes by default
+#: (every UR robot), so that they load without a derivation.
+UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
 
 
 def _fmt(values, width=10, prec=6) -> str:
@@ -75,13 +83,11 @@ def _report(paths, t0=None) -> int:
 
 
 def cmd_appendix(args) -> int:
-    from .appendix import write_appendix
     t0 = time.perf_counter()
     return _report(write_appendix(args.robot, args.out, progress=not args.quiet), t0)
 
 
 def cmd_ik(args) -> int:
-    from .ik_report import write_ik
     t0 = time.perf_counter()
     if args.pose is not None:
         q = np.array(args.pose, dtype=float)
@@ -99,7 +105,6 @@ def cmd_ik(args) -> int:
 
 def cmd_refine(args) -> int:
     """Refine IK solutions on the robot's model: the pose from --q (FK) or --pose (dual quaternion)."""
-    from .refinement import refine
     robot = load_robot(args.robot)
     if (args.q is None) == (args.pose is None):
         raise DeriveError("refine: give exactly one of --q (joint values whose FK is the pose) "
@@ -129,15 +134,11 @@ def cmd_refine(args) -> int:
 
 
 def cmd_kernels(args) -> int:
-    from .emit import write_kernels
     return _report(write_kernels(args.robot, args.out))
 
 
 def cmd_generate(args) -> int:
     """Regenerate the outputs of the default robots and print an FK table."""
-    from .appendix import write_appendix
-    from .emit import write_kernels
-    from .ik_report import write_ik
     t0 = time.perf_counter()
     robots = args.robots or list(DEFAULT_ROBOTS)
     print(f"dq-derive {__version__}: generate for {', '.join(robots)}")
@@ -151,12 +152,13 @@ def cmd_generate(args) -> int:
         print(f"{name}: appendix B and C equations and the closed-form IK derived, verified and written in "
               f"{time.perf_counter() - t:.2f} s")
     if not args.robots:
-        from .casadi_kin import write_casadi
         t = time.perf_counter()
-        for name in CASADI_ROBOTS:
+        for name in UR_ROBOTS:
+            if name not in robots:
+                written += write_kernels(name, args.out, command=f"dq-derive kernels {name}")
             written += write_casadi(name, args.out)
-        print(f"CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, ik) of "
-              f"{', '.join(CASADI_ROBOTS)} written in {time.perf_counter() - t:.2f} s")
+        print(f"FK/IK kernels and CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, "
+              f"residual, ik) of {', '.join(UR_ROBOTS)} written in {time.perf_counter() - t:.2f} s")
     cmd_robots(args)
     print()
     print("Forward kinematics at reference configurations (dual-quaternion product;"
@@ -228,7 +230,6 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_generate)
 
     s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
-    from .bench import BENCHES
     s.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
     s.add_argument("--robot", default=None)
     s.add_argument("--repeats", type=int, default=5)
@@ -239,7 +240,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_bench(args) -> int:
-    from .bench import main as bench_main
     argv = [args.what, "--repeats", str(args.repeats)] + (["--robot", args.robot] if args.robot else [])
     argv += (["--json", args.json] if args.json else []) + (["--plot", args.plot] if args.plot else [])
     return bench_main(argv)

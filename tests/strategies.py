@@ -11,11 +11,10 @@ vectors = st.lists(finite, min_size=3, max_size=3).map(np.array)
 
 @st.composite
 def unit_quaternions(draw):
-    q = draw(quaternions)
-    n = np.linalg.norm(q)
-    if n < 1e-3:
-        q, n = np.array([1.0, 0, 0, 0]), 1.0
-    return q / n
+    # a draw too close to zero to normalise is discarded (not replaced by the identity,
+    # which would silently over-sample one rotation)
+    q = draw(quaternions.filter(lambda v: np.linalg.norm(v) >= 1e-3))
+    return q / np.linalg.norm(q)
 
 
 @st.composite

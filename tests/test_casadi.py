@@ -1,4 +1,4 @@
-"""CasADi functions (derive.casadi_kin) and the refinement (derive.refinement)."""
+"""CasADi functions (derive.refinement.functions) and the refinement (derive.refinement.solver)."""
 
 import json
 import math
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from derive import dualquat, load_robot, reference
-from derive.casadi_kin import SAVED, functions
-from derive.cli import CASADI_ROBOTS, main
+from derive.cli import UR_ROBOTS, main
 from derive.errors import DeriveError, InputError
-from derive.refinement import closed_form_seeds, refine
-from derive.robot import robot_from_dict
+from derive.model.robot import robot_from_dict
+from derive.refinement.functions import SAVED, functions
+from derive.refinement.solver import closed_form_seeds, refine
 
 ROOT = Path(__file__).resolve().parents[1]
 GENERATED = ROOT / "generated"
@@ -45,7 +45,7 @@ def test_saved_functions_reproduce_the_reference_fk_in_a_fresh_process(tmp_path)
         "import sys; sys.modules['derive'] = None\n"
         "import json, numpy as np, casadi as ca\n"
         f"q = np.load({str(tmp_path / 'q.npy')!r}); out = {{}}\n"
-        f"for r in {list(CASADI_ROBOTS)!r}:\n"
+        f"for r in {list(UR_ROBOTS)!r}:\n"
         f"    d = {str(GENERATED)!r} + '/' + r + '/' + r\n"
         "    fk = ca.Function.load(d + '_fk.casadi'); fm = ca.Function.load(d + '_fk_matrix.casadi')\n"
         "    ik = ca.Function.load(d + '_ik.casadi')\n"
@@ -56,7 +56,7 @@ def test_saved_functions_reproduce_the_reference_fk_in_a_fresh_process(tmp_path)
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr[-2000:]
     out = json.loads(res.stdout)
-    for r in CASADI_ROBOTS:
+    for r in UR_ROBOTS:
         ref = reference.fk(r, q)
         got = np.array(out[r]["fk"])
         assert np.abs(_same_sign(got, ref) - ref).max() < 1e-12
@@ -65,12 +65,21 @@ def test_saved_functions_reproduce_the_reference_fk_in_a_fresh_process(tmp_path)
 
 
 def test_generated_casadi_files_are_a_fresh_regeneration(tmp_path):
-    from derive.casadi_kin import write_casadi
+    from derive.refinement.functions import write_casadi
     for r in ("ur3", "ur5"):
         for p in write_casadi(r, tmp_path):
             committed = GENERATED / r / p.name
+            if p.name == "manifest.json":
+                # the committed manifest also lists the kernels written beside the functions:
+                # the fresh one (functions only) must agree with it on everything it records
+                fresh, full = json.loads(p.read_text()), json.loads(committed.read_text())
+                assert {k: v for k, v in fresh.items() if k != "files"} == \
+                    {k: full.get(k) for k in fresh if k != "files"}, f"{committed} differs: run make generate"
+                assert fresh["files"] and fresh["files"].items() <= full["files"].items(), \
+                    f"{committed} differs: run make generate"
+                continue
             assert committed.read_bytes() == p.read_bytes(), f"{committed} differs: run make generate"
-    for r in CASADI_ROBOTS:
+    for r in UR_ROBOTS:
         for name in SAVED:
             assert (GENERATED / r / f"{r}_{name}.casadi").exists()
 
@@ -275,8 +284,8 @@ def test_seed_arm_unreachable_orientation_gives_the_weighted_optimum():
 def test_homotopy_joins_the_nominal_and_calibrated_geometries():
     """homotopy(q, s, target) is the nominal arm's pose error at s = 0 and the calibrated
     arm's at s = 1; track() follows a nominal solution to an exact calibrated one."""
-    from derive.casadi_kin import homotopy_function
-    from derive.refinement import track
+    from derive.refinement.functions import homotopy_function
+    from derive.refinement.solver import track
     hom = homotopy_function("ur5-calibrated", "ur5")
     q = np.array([0.3, -1.2, 1.4, -0.5, 1.1, 0.7])
     for name, s in (("ur5", 0.0), ("ur5-calibrated", 1.0)):
@@ -309,7 +318,7 @@ def test_refine_regularisation_and_input_errors():
 
 
 def test_bench_refine_reports_consistent_counts():
-    from derive.bench import bench_refine
+    from derive.bench.runner import bench_refine
     r = bench_refine(n=6)
     cal, gen = r["robots"]["ur5-calibrated"], r["robots"]["general-6r"]
     assert cal["poses"] == 6 and gen["poses"] == 2 and gen["seeds"] == 32

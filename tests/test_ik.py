@@ -9,9 +9,9 @@ import yaml
 
 from derive import DeriveError, InputError, reference
 from derive import dualquat as DQ
-from derive.angles import wrap_angle
-from derive.ik import solve, ur_geometry
-from derive.robot import load_robot, robot_from_dict
+from derive.algebra.angles import wrap_angle
+from derive.ik.closed_form import solve, ur_geometry
+from derive.model.robot import load_robot, robot_from_dict
 
 UR = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e"]
 

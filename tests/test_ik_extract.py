@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from derive import reference
 from derive import dualquat as DQ
-from derive.angles import wrap_angle
-from derive.equations import POSES
-from derive.ik_extract import R_SYMS, _rot, check_numerically, extract
+from derive import reference
+from derive.algebra.angles import wrap_angle
+from derive.ik.extract import R_SYMS, _rot, check_numerically, extract
+from derive.kinematics import fk as kin
+from derive.symbolic.equations import POSES
 
 
 @pytest.fixture(scope="module")
@@ -71,14 +72,14 @@ def _solve_with_forms(ext, pose):
 
 
 def test_extracted_forms_give_the_reference_solution_set(ext, rng):
-    from derive.ik import ur_geometry
+    from derive.ik.closed_form import ur_geometry
     geo = ur_geometry("ur3")
     for q in rng.uniform(-math.pi, math.pi, size=(4, 6)):
         if abs(math.sin(q[4])) < 0.1:
             continue
         pose = DQ.mul(reference.fk("ur3", q), DQ.conj_quaternion(geo.g))   # chain end frame
         # the quaternion equations need the product's sign
-        frames = reference._frames_dq(__import__("derive").load_robot("ur3-thesis"), q[None])
+        frames = kin._frames_dq(__import__("derive").load_robot("ur3-thesis"), q[None])
         if np.dot(frames[-1][0][:4], pose[:4]) < 0:
             pose = -pose
         ours = _solve_with_forms(ext, pose)

@@ -1,6 +1,7 @@
 """Reference kinematics: thesis section 4.5, DQ vs matrix on every robot, input errors."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -10,6 +11,7 @@ from hypothesis import strategies as st
 import derive
 from derive import InputError, reference
 from derive import dualquat as DQ
+from derive.kinematics.fk import _joint_dq   # one joint's dual quaternion (not in the facade)
 
 HOME = [0, -math.pi / 2, 0, -math.pi / 2, 0, 0]   # thesis section 4.5
 
@@ -36,7 +38,7 @@ def test_thesis_section_4_5_per_joint_pairs():
     expect_q = [(1, 0, 0, 0), (math.sqrt(.5), 0, math.sqrt(.5), 0), (1, 0, 0, 0),
                 (math.sqrt(.5), 0, math.sqrt(.5), 0), (1, 0, 0, 0), (1, 0, 0, 0)]
     for i, j in enumerate(r.joints):
-        Qi = reference._joint_dq(j, np.array([HOME[i]]))[0]
+        Qi = _joint_dq(j, np.array([HOME[i]]))[0]
         pair = DQ.to_pair(Qi)
         assert np.allclose(pair.q, expect_q[i], atol=1e-15), j.name
         assert np.allclose(pair.p, expect_p[i], atol=1e-15), j.name
@@ -116,6 +118,61 @@ def test_unknown_end():
         reference.fk("ur5", np.zeros(6), end="tcp")
 
 
-def test_every_error_is_a_derive_error():
-    for exc in (InputError, derive.RobotFileError, derive.UnknownRobotError):
-        assert issubclass(exc, derive.DeriveError)
+UR5_Q = np.array([0.3, -1.1, 1.4, -0.2, 0.9, 2.0])
+
+
+def _robot_file(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+_GOOD_JOINTS = "joints:\n  - {name: j1, s: 1, a: 1, alpha: 0}\n"
+
+# (call on tmp_path, exact exception class, standard base class or None, message pattern):
+# every bad input raises a DeriveError of the right kind whose message names the problem
+BAD_INPUTS = {
+    "q of rank 3": (lambda tmp: reference.fk("ur5", np.zeros((2, 2, 6))), InputError, ValueError,
+                    r"^q: expected shape \(6,\) or \(n, 6\), got \(2, 2, 6\)$"),
+    "q of 3 values": (lambda tmp: reference.fk_matrix("ur5", [0, 0, 0]), InputError, ValueError,
+                      r"^q: robot 'ur5' has 6 joint variables \(.*\), got 3$"),
+    "q with NaN": (lambda tmp: reference.joint_positions("ur5", [[0] * 6, [0, 0, 0, 0, math.nan, 0]]),
+                   InputError, ValueError, r"^q: contains NaN at index \(1, 4\)$"),
+    "q with -inf": (lambda tmp: reference.fk_pair("ur5", [0, -math.inf, 0, 0, 0, 0]), InputError,
+                    ValueError, r"^q: contains inf at index \(1,\)$"),
+    "pose 0.9 x unit": (lambda tmp: reference.ik("ur5", 0.9 * reference.fk("ur5", UR5_Q)), InputError,
+                        ValueError, r"^pose: not a unit dual quaternion \(\| \|real\| - 1 \| = 0\.1 > 1e-06\)$"),
+    "pose matrix scaled": (lambda tmp: reference.ik("ur5", np.diag([1.1, 1.1, 1.1, 1.0])), InputError,
+                           ValueError, r"^pose: the 3x3 block is not a rotation matrix \(max \|R\^T R - I\| = 0\.21\)$"),
+    "pose of 7 values": (lambda tmp: reference.ik("ur5", np.zeros(7)), InputError, ValueError,
+                         r"^pose: expected a dual quaternion .* got shape \(7,\)$"),
+    "unknown end": (lambda tmp: reference.fk("ur5", np.zeros(6), end="tcp"), InputError, ValueError,
+                    r"^end 'tcp' is not an end frame of 'ur5'; choose one of \['flange'\]$"),
+    "unknown robot": (lambda tmp: reference.fk("ur99", np.zeros(6)), derive.UnknownRobotError,
+                      LookupError, r"^unknown robot 'ur99'; the library has: .*\bur5\b"),
+    "robot of wrong type": (lambda tmp: derive.load_robot(42), derive.UnknownRobotError, LookupError,
+                            r"^robot must be a name or a path, got int$"),
+    "missing robot file": (lambda tmp: derive.load_robot(tmp / "nowhere.yaml"), derive.UnknownRobotError,
+                           LookupError, r"^robot file '.*nowhere\.yaml' does not exist$"),
+    "robot file, unknown key": (
+        lambda tmp: derive.load_robot(_robot_file(tmp, "extra.yaml", "name: x\nconvention: kunze\ncolour: red\n"
+                                                  + _GOOD_JOINTS)),
+        derive.RobotFileError, None, r"^extra\.yaml: unknown key\(s\) \['colour'\]; allowed: "),
+    "robot file, missing joints": (
+        lambda tmp: derive.load_robot(_robot_file(tmp, "nojoints.yaml", "name: x\nconvention: kunze\n")),
+        derive.RobotFileError, None, r"^nojoints\.yaml: missing required key 'joints'$"),
+    "robot file, bad YAML": (
+        lambda tmp: derive.load_robot(_robot_file(tmp, "broken.yaml", "name: [x\n")),
+        derive.RobotFileError, None, r"broken\.yaml: not valid YAML"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_INPUTS))
+def test_every_bad_input_raises_a_derive_error_that_names_the_problem(case, tmp_path):
+    call, kind, base, message = BAD_INPUTS[case]
+    with pytest.raises(derive.DeriveError) as info:       # one except clause catches them all
+        call(tmp_path)
+    assert type(info.value) is kind, f"{case}: raised {type(info.value).__name__}: {info.value}"
+    if base is not None:                                   # and the standard base class, as documented
+        assert isinstance(info.value, base)
+    assert re.search(message, str(info.value)), f"{case}: message {str(info.value)!r}"

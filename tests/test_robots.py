@@ -10,7 +10,7 @@ import yaml
 import derive
 from derive import RobotFileError, UnknownRobotError, load_robot, reference
 from derive import dualquat as DQ
-from derive.robot import robot_from_dict
+from derive.model.robot import robot_from_dict
 
 DATA = Path(__file__).with_name("data")
 LIBRARY = ["general-6r", "irb120", "irb1600", "kunze-2r", "seed-arm", "ur10", "ur10e", "ur16e",

@@ -7,7 +7,6 @@ import re
 from pathlib import Path
 
 import pytest
-
 from thesis_compare import check_formulas, compare_equations, load
 
 ERRATA = Path(__file__).resolve().parent.parent / "docs" / "errata.md"

@@ -14,9 +14,10 @@ import sympy as sp
 import yaml
 
 from derive import dualquat as DQ
-from derive import load_robot, reference
-from derive.equations import derive_equations
-from derive.trig import half_angle_normal_form
+from derive import load_robot
+from derive.kinematics import fk as kin
+from derive.symbolic.equations import derive_equations
+from derive.symbolic.trig import half_angle_normal_form
 
 DATA = Path(__file__).resolve().parent.parent / "derive" / "data" / "thesis_printed.yaml"
 THETAS = [sp.Symbol(f"theta{k}", real=True) for k in range(1, 7)]
@@ -74,13 +75,13 @@ def _configurations(rng, n):
 def _pose_values(q):
     """Pose variables of appendix B (product sign), frame-5 and shoulder-to-wrist-1 coordinates."""
     robot = load_robot("ur3-thesis")
-    frames = [f[0] for f in reference._frames_dq(robot, q[None, :])]   # exact products, no sign change
+    frames = [f[0] for f in kin._frames_dq(robot, q[None, :])]   # exact products, no sign change
     full = frames[5]
     vals = dict(zip("w a b c".split(), full[:4]))
     vals.update(zip("x y z".split(), DQ._translation(full)))
     vals.update(zip("x5 y5 z5".split(), DQ._translation(frames[3])))
     rel = DQ._mul(DQ.inv(frames[0]), frames[2])                       # Q2 Q3
-    q4 = reference._joint_dq(robot.joints[3], np.array([q[3]]))[0]
+    q4 = kin._joint_dq(robot.joints[3], np.array([q[3]]))[0]
     n2 = DQ._mul(rel, np.r_[q4[:4], 0, 0, 0, 0])                     # Q2 Q3 (rotation of Q4)
     vals.update(zip("w4 a4 b4 c4".split(), n2[:4]))
     vals.update(zip("x4 y4 z4".split(), DQ._translation(n2)))

@@ -1,0 +1,289 @@
+"""Emission of the numeric kernels (pure Python, numpy, C99) from :mod:`derive.codegen`.
+
+Every file is standalone (copy it into another project and it works) and starts with a
+header naming the robot, its parameters, the dq-derive version and the command that made it.
+"""
+
+from __future__ import annotations
+
+import itertools
+import re
+from pathlib import Path
+
+import sympy as sp
+from sympy.printing.c import C99CodePrinter
+from sympy.printing.numpy import NumPyPrinter
+from sympy.printing.pycode import PythonCodePrinter
+
+from derive._version import __version__
+from derive.cache import write_manifest
+from derive.codegen.fk import fk_kernel
+from derive.codegen.templates import template_environment
+from derive.errors import DeriveError
+from derive.ik.closed_form import MERGE_TOL
+from derive.ik.program import ik_program
+from derive.model.robot import load_robot
+
+
+def identifier(robot_name: str) -> str:
+    """The C / Python identifier stem of a robot name (``ur10e``, ``seed_arm``, ``r_3dof``)."""
+    stem = robot_name.replace("-", "_").replace(".", "_")
+    return stem if stem[:1].isalpha() else "r_" + stem
+
+
+def _is_half(e) -> bool:
+    return e == sp.S.Half or (e.is_Float and float(e) == 0.5)
+
+
+class _Shared:
+    """Rules all three printers share: floats and pi as plain literals, x**2 as x*x, x**0.5 as
+    a square root, and the program's functions sgn(x) and pos(x) = max(x, 0). Each printer names
+    its spellings in SQRT, SGN and POS (format strings of the argument)."""
+
+    SQRT = SGN = POS = ""
+
+    def _print_Pow(self, expr, *args, **kwargs):
+        if expr.exp == 2:
+            b = self._print(expr.base)
+            return f"{b}*{b}" if expr.base.is_Symbol else f"({b})*({b})"
+        if _is_half(expr.exp):
+            return self.SQRT.format(self._print(expr.base))
+        return super()._print_Pow(expr, *args, **kwargs)
+
+    def _print_Float(self, expr):
+        return repr(float(expr))
+
+    def _print_Pi(self, expr):
+        return repr(float(sp.pi))
+
+    def _print_Function(self, expr):
+        spelling = {"sgn": self.SGN, "pos": self.POS}.get(expr.func.__name__)
+        if spelling:
+            return spelling.format(self._print(expr.args[0]))
+        return super()._print_Function(expr)
+
+
+class _Py(_Shared, PythonCodePrinter):
+    """Pure Python with ``math`` imported as names (sqrt, atan2, copysign)."""
+
+    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "max({}, 0.0)"
+
+    def _print_atan2(self, expr):
+        return f"atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+    def _print_Abs(self, expr):
+        return f"abs({self._print(expr.args[0])})"
+
+    def _print_Max(self, expr):
+        return f"max({', '.join(self._print(a) for a in expr.args)})"
+
+
+class _Np(_Shared, NumPyPrinter):
+    """numpy with ``import numpy as np``; elementwise over a batch."""
+
+    SQRT, SGN, POS = "np.sqrt({})", "np.copysign(1.0, {})", "np.maximum({}, 0.0)"
+
+    def __init__(self):
+        super().__init__({"fully_qualified_modules": False})
+
+    def _module_format(self, fqn, register=True):
+        return "np." + fqn.split(".")[-1] if fqn.startswith("numpy.") else fqn
+
+    def _print_Max(self, expr):
+        a, b = expr.args
+        return f"np.maximum({self._print(a)}, {self._print(b)})"
+
+
+class _C(_Shared, C99CodePrinter):
+    # compares, not fmax (a library call without -ffast-math)
+    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "(({0}) > 0.0 ? ({0}) : 0.0)"
+
+    def _print_Max(self, expr):
+        a, b = (self._print(e) for e in expr.args)
+        return f"(({a}) > ({b}) ? ({a}) : ({b}))"
+
+    def _print_And(self, expr):         # flags are 0/1 ints: no short circuit, so loops vectorise
+        return " & ".join(f"({self._print(a)})" for a in expr.args)
+
+    def _print_Not(self, expr):
+        return f"!({self._print(expr.args[0])})"
+
+    def _print_atan2(self, expr):
+        return f"dq_atan2({self._print(expr.args[0])}, {self._print(expr.args[1])})"
+
+
+def _arg(printer, a, column):
+    """An expression as code, the joint variables q0, q1, ... replaced by column(k)."""
+    qs = [s for s in a.free_symbols if re.fullmatch(r"q\d+", s.name)]
+    return printer.doprint(a.xreplace({s: sp.Symbol(column(int(s.name[1:]))) for s in qs}))
+
+
+def _context(robot, command: str) -> dict:
+    k = fk_kernel(robot)
+    py, c = _Py(), _C()
+    trig = []
+    for s, co, a in k.trig:
+        if isinstance(a, tuple):
+            trig.append({"s": s, "c": co, "double": True, "hs": a[1], "hc": a[2]})
+        else:
+            trig.append({"s": s, "c": co, "double": False, "k": sum(not t["double"] for t in trig),
+                         "py": _arg(py, a, lambda i: f"q[{i}]"),
+                         "np": _arg(py, a, lambda i: f"Q[:, {i}]"),
+                         "cc": _arg(c, a, lambda i: f"q[{i}]")})
+    columns = {"py": lambda i: f"q[{i}]", "np": lambda i: f"Q[:, {i}]", "cc": lambda i: f"q[{i}]"}
+    printer = {"py": py, "np": py, "cc": c}
+
+    def code(e):
+        """An expression in each language, joint variables (prismatic joints enter linearly)
+        written as the input's elements."""
+        return {lang: _arg(printer[lang], e, col) for lang, col in columns.items()}
+
+    temps = [{"name": str(n), **code(e)} for n, e in k.temps]
+    outs = [code(e) for e in k.outputs]
+    return {
+        "version": __version__, "command": command, "robot": robot, "id": identifier(robot.name),
+        "dof": robot.dof, "parameters": [(str(p), v) for p, v in k.parameters.items()],
+        "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
+        "n_sincos_padded": -(-k.n_sincos // 4) * 4,
+        **_ik_context(robot),
+    }
+
+
+def _ik_context(robot) -> dict:
+    """The IK program's lines printed for each language ("ik" is None when the robot has none)."""
+
+    try:
+        prog = ik_program(robot)
+    except DeriveError as exc:
+        return {"ik": None, "ik_missing": str(exc)}
+    printers = {"py": _Py(), "np": _Np(), "cc": _C()}
+
+    def numeric(e):
+        e = sp.sympify(e)
+        if isinstance(e, (sp.Rel, sp.And, sp.Or, sp.Not)):
+            return e.func(*[numeric(a) for a in e.args])
+        return e if e.is_Symbol else sp.N(e, 17)
+
+    def pr(e):
+        e = numeric(e)
+        return {lang: p.doprint(e) for lang, p in printers.items()}
+
+    ops = []
+    branch_index = []
+    for op in prog.ops:
+        d = {"kind": op.kind, "name": op.name, "name2": op.name2, "depth": op.depth}
+        if op.kind in ("let", "sincos", "require", "flag"):
+            d["e"] = pr(op.expr)
+        if op.kind == "select":
+            d["e"], d["cond"], d["other"] = pr(op.expr), pr(op.cond), pr(op.other)
+        if op.kind == "double":
+            d["hs"], d["hc"] = op.args
+        if op.kind == "solution":
+            d["q"] = [pr(e) for e in op.args]
+        if op.kind == "branch":
+            d["index"] = "b" + op.name[2:]
+            branch_index.append(d["index"])
+        ops.append(d)
+    k = len(branch_index)
+    leaf = " + ".join(f"{2 ** (k - 1 - i)}*{b}" if k - 1 - i else b for i, b in enumerate(branch_index))
+    flat = _flat_ops(prog, printers["cc"], numeric)
+    step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
+    return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
+                   "free_joint": prog.free_joint, "free_rule": prog.free_rule,
+                   "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
+            "ik_missing": ""}
+
+
+def _flat_ops(prog, printer, numeric) -> list:
+    """The IK program with every branch unrolled (C, for the vectorised batch loop).
+
+    A name defined at depth d gets the suffix of the first d branch bits of the path it
+    belongs to (theta1_0, theta1_1, ...); branch signs become constants; "require" lines
+    become validity flags ok_<path>; each leaf writes its candidate and its flag."""
+
+    depth_of: dict = {}
+    for op in prog.ops:
+        if op.kind in ("let", "flag", "select", "branch"):
+            depth_of[op.name] = op.depth
+        if op.kind in ("sincos", "double"):
+            depth_of[op.name] = depth_of[op.name2] = op.depth
+
+    def name(n, path):
+        d = depth_of[n]
+        return n if d == 0 else f"{n}_{''.join(map(str, path[:d]))}"
+
+    def rename(e, path):
+        e = sp.sympify(e)
+        return e.xreplace({s_: sp.Symbol(name(s_.name, path), real=True)
+                           for s_ in e.free_symbols if s_.name in depth_of})
+
+    def pr(e, path):
+        return printer.doprint(numeric(rename(e, path)))
+
+    def ok(path):
+        return "ok_" + "".join(map(str, path)) if path else "ok"
+
+    out = [{"kind": "ok_init", "name": "ok"}]
+    for op in prog.ops:
+        for path in itertools.product((0, 1), repeat=op.depth):
+            d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
+            if op.kind == "branch":
+                d = {"kind": "let", "name": name(op.name, path), "e": "-1.0" if path[-1] else "1.0"}
+                out.append({"kind": "ok_copy", "name": ok(path), "e": ok(path[:-1])})
+            elif op.kind in ("let", "flag"):
+                d["e"] = pr(op.expr, path)
+            elif op.kind == "select":
+                d["e"], d["cond"], d["other"] = pr(op.expr, path), pr(op.cond, path), pr(op.other, path)
+            elif op.kind == "sincos":
+                d["e"], d["name2"] = pr(op.expr, path), name(op.name2, path)
+            elif op.kind == "double":
+                d["name2"] = name(op.name2, path)
+                d["hs"], d["hc"] = (name(a, path) for a in op.args)
+            elif op.kind == "require":
+                d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
+            elif op.kind == "solution":
+                leaf = int("".join(map(str, path)) or "0", 2)
+                d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args]}
+            out.append(d)
+    return out
+
+
+FILES = {
+    "python": ("kinematics.py.j2", "{id}_kinematics.py"),
+    "numpy": ("kinematics_numpy.py.j2", "{id}_kinematics_numpy.py"),
+    "c_header": ("kinematics.h.j2", "{id}_kinematics.h"),
+    "c_source": ("kinematics.c.j2", "{id}_kinematics.c"),
+}
+
+
+def render_kernels(robot, command: str | None = None) -> dict:
+    """{role: (file name, text)} of every kernel file of one robot (roles as in :data:`FILES`)."""
+    robot = load_robot(robot)
+    command = command or f"dq-derive kernels {robot.name}"
+    ctx = _context(robot, command)
+    env = template_environment()
+    return {role: (name.format(id=ctx["id"]), env.get_template(tpl).render(ctx))
+            for role, (tpl, name) in FILES.items()}
+
+
+def kernel_manifest(robot) -> dict:
+    """What a kernel folder's manifest records besides its files: the robot's identity and
+    name, the identifier stem of its functions and whether the kernels include the IK."""
+    robot = load_robot(robot)
+    return {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),
+            "dof": robot.dof, "dq_derive": __version__}
+
+
+def write_kernels(robot, out_dir, command: str | None = None) -> list:
+    """Write the kernel files into out_dir/<robot name>/ and record them in its manifest."""
+    robot = load_robot(robot)
+    out = Path(out_dir) / robot.name
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    files = render_kernels(robot, command)
+    for name, text in files.values():
+        (out / name).write_text(text, encoding="utf-8")
+        written.append(out / name)
+    written.append(write_manifest(out, {**kernel_manifest(robot),
+                                        "files": {role: name for role, (name, _) in files.items()}}))
+    return written

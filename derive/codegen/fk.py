@@ -1,0 +1,196 @@
+"""Flat expressions for the generated kernels, from the derived chain products.
+
+The forward kinematics of a robot is M_1 G (:mod:`derive.chain`): the product of the
+joint dual quaternions in thesis form times the constant end transform. Its 8
+components are built symbolically, the robot's numbers substituted, and written as a
+sequence of assignments:
+
+1. the sines and cosines the expressions need: one sin/cos pair per distinct angle
+   argument (a half angle such as (q2+q3+q4)/2, or a full angle); a full angle whose
+   half is also needed comes from the half by the double-angle formulas, which costs
+   two multiplications instead of a sin/cos call;
+2. common subexpressions (sympy's ``cse``) over the 8 outputs.
+
+The joint variables are ``q[0] .. q[n-1]``; the outputs are the unit dual quaternion
+[real w x y z, dual w x y z] (dual = 1/2 t real) in the sign the product gives.
+
+A robot that is not exact (a fixed angle that is not a rational multiple of pi: decimal DH
+twists, calibrated arms, see :func:`derive.model.robot.is_exact`) has no exact equations
+to fold. Its kernel is the product of the joint dual quaternions of the description's
+neutral form (Kunze eq. 1.8, 5.28: each rotation cos(t/2) + sin(t/2) n, each translation
+1 + eps v/2), with the fixed motions as numeric constants; the same steps 1 and 2 follow.
+It takes no simplification, so it is made in about a second whatever the numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy as sp
+
+from derive.algebra import dualquat as dq
+from derive.algebra.quaternion import hamilton
+from derive.cache import memo, step
+from derive.ik.extract import _rot
+from derive.model.geometry import path_to_end
+from derive.model.robot import load_robot
+from derive.symbolic.equations import derive_equations
+
+
+@dataclass
+class Kernel:
+    """Straight-line code: inputs q[0..n-1], temporaries, outputs."""
+
+    robot: str
+    dof: int
+    trig: list = field(default_factory=list)      # (name_s, name_c, arg expr in q, or ("double", half_s, half_c))
+    temps: list = field(default_factory=list)     # (name, expr)
+    outputs: list = field(default_factory=list)   # expr per output
+    parameters: dict = field(default_factory=dict)
+    n_sincos: int = 0
+
+
+def _fk_symbolic(robot):
+    """The 8 components of M_1 G from the folded left sides of M_1 = N_1 (set B)."""
+
+    chain, sets = derive_equations(robot, symbolic=False)
+    bset = sets[0]
+    m1 = [e.lhs for e in bset.equations if e.i == 1]           # terms 1..7 of M_1
+    q, p = m1[:4], m1[4:]
+    gq, gt = (tuple(sp.sympify(v) for v in part) for part in chain.end_transform)
+    if any(v != 0 for v in gt):
+        rq = _rot(q)
+        p = [p[i] + sum(rq[i, k] * gt[k] for k in range(3)) for i in range(3)]
+    real = hamilton(q, gq)
+    dual = tuple(e / 2 for e in hamilton((0, *p), real))
+    return chain, tuple(real) + dual
+
+
+def fk_kernel(robot) -> Kernel:
+    """The FK kernel's straight-line code (cached per robot identity)."""
+    robot = load_robot(robot)
+    return memo("fk-kernel", robot.id, lambda: _fk_kernel(robot))
+
+
+def _dq_mul(a, b):
+    """Dual-quaternion product of two 8-tuples (real a_r b_r, dual a_r b_d + a_d b_r)."""
+    real = hamilton(a[:4], b[:4])
+    d1, d2 = hamilton(a[:4], b[4:]), hamilton(a[4:], b[:4])
+    return tuple(real) + tuple(x + y for x, y in zip(d1, d2))
+
+
+def _number(x) -> sp.Expr:
+    x = float(x)
+    return sp.Integer(int(x)) if x.is_integer() else sp.Float(x, 17)
+
+
+def _constant(ops) -> np.ndarray:
+    """The unit dual quaternion of a run of fixed motions, multiplied out numerically."""
+    out = dq.IDENTITY.copy()
+    for op in ops:
+        m = dq._rotation(op.axis, op.angle) if op.kind == "R" else dq._translation_dq(op.vector)
+        out = dq._mul(out, m)
+    return np.asarray(out, dtype=float).reshape(8)
+
+
+def _fk_numeric(robot, qs) -> Kernel:
+    """The kernel of a robot that is not exact: the product of the joint dual quaternions along
+    the path to the default end (module docstring), one joint per group of temporaries, each
+    joint's fixed motions before and after its motion multiplied out to one constant."""
+    k = Kernel(robot=robot.name, dof=robot.dof,
+               parameters={sp.Symbol(n, real=True): v for n, v in robot.parameters.items()})
+    path = path_to_end(robot)
+    cur = None
+    n_tmp = 0
+
+    def fold(v):
+        nonlocal n_tmp
+        out = []
+        for e in v:
+            e = sp.sympify(e)
+            if e.is_Number or e.is_Symbol:
+                out.append(e)
+                continue
+            sym = sp.Symbol(f"t{n_tmp}")
+            n_tmp += 1
+            k.temps.append((sym, e))
+            out.append(sym)
+        return tuple(out)
+
+    def const(c):
+        return tuple(_number(x) if abs(x) > 0 else sp.Integer(0) for x in c)
+
+    for idx in path:
+        j = robot.joints[idx]
+        value = _number(j.multiplier) * qs[j.variable] + _number(j.mimic_offset + j.offset)
+        if j.type == "revolute":
+            s, c = sp.Symbol(f"s{len(k.trig)}"), sp.Symbol(f"c{len(k.trig)}")
+            k.trig.append((str(s), str(c), value / 2))
+            m = (c, *(s * _number(a) for a in j.axis), 0, 0, 0, 0)
+        else:
+            m = (1, 0, 0, 0, 0, *(value * _number(a / 2) for a in j.axis))
+        pre = const(_constant(j.pre))
+        m = _dq_mul(pre, m) if j.pre else m
+        m = _dq_mul(m, const(_constant(j.post))) if j.post else m
+        cur = fold(m) if cur is None else fold(_dq_mul(cur, fold(m)))
+    end = robot.ends[robot.default_end].ops
+    if cur is None:
+        cur = const(_constant(end))
+    elif end:
+        cur = fold(_dq_mul(cur, const(_constant(end))))
+    k.n_sincos = len(k.trig)
+    k.outputs = list(cur)
+    return k
+
+
+def _fk_kernel(robot) -> Kernel:
+    qs = sp.symbols(f"q0:{robot.dof}", real=True)
+    if robot.exact:
+        chain, outs = _fk_symbolic(robot)
+        values = {k: sp.Float(v, 17) if not float(v).is_integer() else sp.Integer(int(v))
+                  for k, v in chain.parameters.items()}
+        outs = [e.subs(values) for e in outs]
+        # map joints of the chain to variables of the robot (chain path joints are the variables)
+        var_index = {j.name: j.variable for j in robot.joints}
+        subs_q = {j.theta: qs[var_index[j.name]] for j in chain.joints}
+        outs = [e.xreplace(subs_q) for e in outs]
+        parameters = dict(chain.parameters)
+    else:
+        step("FK from the numeric product of the joint dual quaternions (not exact: no folding)")
+        return _fk_numeric(robot, qs)
+
+    # trig atoms -> symbols
+    atoms = set()
+    for e in outs:
+        atoms |= e.atoms(sp.sin, sp.cos)
+    args = sorted({a.args[0] for a in atoms}, key=sp.default_sort_key)
+    k = Kernel(robot=robot.name, dof=robot.dof, parameters=parameters)
+    rep = {}
+    half_of = {sp.expand(2 * a): a for a in args}
+    sym_of = {}
+    n = 0
+    for a in args:                       # plain sin/cos calls for arguments without a half
+        if a in half_of and half_of[a] in args:
+            continue
+        s, c = sp.Symbol(f"s{n}"), sp.Symbol(f"c{n}")
+        n += 1
+        sym_of[a] = (s, c)
+        k.trig.append((str(s), str(c), a))
+    k.n_sincos = n
+    for a in args:                       # double angles from their halves
+        if a in sym_of:
+            continue
+        hs, hc = sym_of[half_of[a]]
+        s, c = sp.Symbol(f"s{n}"), sp.Symbol(f"c{n}")
+        n += 1
+        sym_of[a] = (s, c)
+        k.trig.append((str(s), str(c), ("double", str(hs), str(hc))))
+    for a, (s, c) in sym_of.items():
+        rep[sp.sin(a)] = s
+        rep[sp.cos(a)] = c
+    outs = [sp.N(e.xreplace(rep), 17) for e in outs]   # exact constants (sqrt(2)/2) as floats
+    temps, reduced = sp.cse(outs, symbols=sp.numbered_symbols("t"), optimizations="basic")
+    k.temps = temps
+    k.outputs = reduced
+    return k

@@ -1,0 +1,361 @@
+"""Closed-form inverse kinematics of the UR family (numeric reference).
+
+The chain in thesis form (:mod:`derive.chain`): axes z, -y, -y, -y, -z, -y and links
+(0, 0, d1), (a2, 0, 0), (a3, -d4, 0), (0, 0, -d5), (0, -d6, 0), 0. The solving order is
+the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik_extract`):
+
+1. theta1 from W.6 (= 4.9): y5 cos t1 - x5 sin t1 = -d4, with the frame-5 point
+   p5 = p + d6 R e_y; two roots (4.11);
+2. theta5: cos t5 from B.13 (= 4.12) and |sin t5| from the rotation, t5 = atan2(+-s5, c5)
+   (the thesis's 4.13 uses acos, which loses accuracy near 0 and pi);
+3. theta6 from the pair B.29-B.32 (= 4.14-4.17): with A = Rz(t1)^T R, row 2 of A is
+   (-s5 c6, c5, s5 s6), so t6 = atan2(s5 A23, -s5 A21) (equivalent to 4.28 without its
+   divisions by cos(t5/2), sin(t5/2) and cos((t2+t3+t4)/2));
+   at the wrist singularity (sin t5 = 0) t6 is free: it is taken from a reference
+   configuration when one is given, else chosen for reach (:func:`_free_theta6`), and the
+   solution is marked singular;
+4. t2 + t3 + t4 from A R_-y(t6)^-1 R_-z(t5)^-1 = R_-y(t2+t3+t4) (exact also when t6 was
+   chosen freely);
+5. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
+6. theta2 from C.12, C.14 (4.39-4.41); theta4 = (t2+t3+t4) - t2 - t3 (C.1, C.3, 4.44).
+
+Every candidate is checked by the reference forward kinematics; candidates that do not
+reproduce the pose are dropped, near-duplicates (closer than :data:`MERGE_TOL` in every
+joint, modulo 2 pi) are merged. All angles are wrapped to (-pi, pi].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import memo
+from derive.errors import DeriveError, InputError, as_finite_array
+from derive.kinematics.fk import _pose_error, fk
+from derive.kinematics.pose import as_pose_batch
+from derive.model.geometry import numeric_chain
+from derive.model.robot import load_robot
+
+#: |sin theta5| below this is the wrist singularity (theta6 free)
+WRIST_SINGULAR = 1e-11
+#: Candidates whose FK misses the pose by more than this (m or rad) are dropped.
+ACCEPT_TOL = 1e-8
+#: Solutions closer than this in every joint (mod 2 pi) are one solution: such pairs only arise
+#: within about 1e-7 of a singular set, where a double root splits by rounding (sqrt of noise).
+MERGE_TOL = 1e-6
+#: Slack on |cos| <= 1 and on the discriminant before a branch counts as unreachable.
+REACH_TOL = 1e-10
+
+REASON_OK = ""
+REASON_WRIST_NEAR_AXIS = ("unreachable: the wrist centre is closer to the base axis than the "
+                          "shoulder offset d4 allows")
+REASON_ARM_REACH = ("unreachable: the distance from shoulder to wrist is outside the range the "
+                    "upper arm and forearm can span (| |a2| - |a3| | .. |a2| + |a3|)")
+REASON_NO_CANDIDATE = "unreachable: no candidate reproduces the pose"
+
+
+@dataclass(frozen=True)
+class URGeometry:
+    """Numbers of a UR-type chain and the constant end transform G (robot end = chain end * G)."""
+
+    d1: float
+    a2: float
+    a3: float
+    d4: float
+    d5: float
+    d6: float
+    g: np.ndarray          # unit dual quaternion (8,)
+
+
+def ur_geometry(robot) -> URGeometry:
+    """Extract the UR structure from a robot, or raise DeriveError when it does not have it.
+
+    The test runs on the numeric axis-angle chain (:func:`derive.model.geometry.numeric_chain`),
+    so it needs no symbolic work; cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("ur-geometry", robot.id, lambda: _ur_geometry(robot))
+
+
+#: Axes of the UR chain in thesis form.
+UR_AXES = ((0, 0, 1), (0, -1, 0), (0, -1, 0), (0, -1, 0), (0, 0, -1), (0, -1, 0))
+
+
+def _ur_geometry(robot) -> URGeometry:
+    chain = numeric_chain(robot)
+    axes, links = chain.axes, chain.links
+    ok = (chain.n == 6 and all(t == "revolute" for t in chain.types)
+          and np.allclose(chain.start, 0.0, atol=1e-12)
+          and all(np.allclose(a, w, atol=1e-12) for a, w in zip(axes, UR_AXES)))
+    if ok:
+        d1, a2, (a3, md4), md5, md6 = links[0][2], links[1][0], links[2][:2], links[3][2], links[4][1]
+        shape = [(0, 0, d1), (a2, 0, 0), (a3, md4, 0), (0, 0, md5), (0, md6, 0), (0, 0, 0)]
+        ok = all(np.allclose(l, s, atol=1e-12) for l, s in zip(links, shape))
+    if not ok:
+        raise DeriveError(f"{robot.name}: closed-form IK is implemented for the UR family "
+                          "(axes z, -y, -y, -y, -z, -y in thesis form); this chain differs")
+    g = dq.from_rt(quat.from_matrix(chain.end_rotation), chain.end_translation)
+    return URGeometry(d1=float(d1), a2=float(a2), a3=float(a3), d4=float(-md4), d5=float(-md5),
+                      d6=float(-md6), g=g)
+
+
+# --------------------------------------------------------------------------- #
+# Batch solver
+# --------------------------------------------------------------------------- #
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _rmy(t):
+    """Rotation by t about -y."""
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, z, -s], -1), np.stack([z, o, z], -1), np.stack([s, z, c], -1)], -2)
+
+
+def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
+    """Rotation matrices (n,3,3) and translations (n,3) of the chain end frame (pose * G^-1)."""
+    chain = dq._mul(poses, dq.conj_quaternion(geo.g))
+    r = quat._to_matrix(chain[:, :4])
+    p = dq._translation(chain)
+    return r, p
+
+
+def _free_theta6(geo: URGeometry, wrist1, n: int) -> np.ndarray:
+    """theta6 at the wrist singularity, chosen for reach.
+
+    With sin t5 = 0 any theta6 gives a solution; it moves the wrist-1 point on a circle of
+    radius |d5| in the arm plane, so cos t3 = (x4^2 + z4^2 - a2^2 - a3^2) / (2 a2 a3) (C.19,
+    C.21) is alpha + beta cos t6 + gamma sin t6. The chosen theta6 solves cos t3 = 0 (elbow
+    at a right angle, the middle of the reach) when it can, and otherwise puts the wrist-1
+    point as close to that as the circle allows: atan2(gamma, beta) + acos(clip(-alpha / R)),
+    R = hypot(beta, gamma). So the singular branch is returned whenever some theta6 reaches.
+    The coefficients are sampled at theta6 = 0, pi/2, pi (exact: the form is linear).
+    """
+    def cos3(t):
+        _, x4, z4 = wrist1(np.full(n, t))
+        return (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
+
+    v0, v90, v180 = cos3(0.0), cos3(np.pi / 2), cos3(np.pi)
+    alpha = 0.5 * (v0 + v180)
+    beta = 0.5 * (v0 - v180)
+    gamma = v90 - alpha
+    disc = np.clip(beta * beta + gamma * gamma - alpha * alpha, 0.0, None)
+    return np.arctan2(gamma, beta) + np.arctan2(np.sqrt(disc), -alpha)
+
+
+def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,
+                keep_unreachable: bool = False):
+    """All 8 candidate branches for n poses: (q (n,8,6), singular (n,8), reason (n,8) codes).
+
+    reason codes: 0 ok, 1 theta1 unreachable, 2 theta3 unreachable. Candidates are not yet
+    checked by FK (see :func:`solve`). Unreachable branches are NaN unless
+    ``keep_unreachable`` (then their square roots are clipped to 0: the nearest the arm
+    comes, used as seeds by :mod:`derive.refinement`).
+    """
+    n = poses.shape[0]
+    r, p = _chain_pose(geo, poses)
+    out = np.full((n, 8, 6), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    code = np.zeros((n, 8), dtype=np.int8)
+
+    # theta1 (W.6): y5 cos t1 - x5 sin t1 = -d4
+    p5 = p + geo.d6 * r[:, :, 1]
+    x5, y5 = p5[:, 0], p5[:, 1]
+    rr = x5 * x5 + y5 * y5
+    disc = rr - geo.d4 * geo.d4
+    bad1 = disc < -REACH_TOL * max(1.0, geo.d4 * geo.d4)
+    root = np.sqrt(np.clip(disc, 0.0, None))
+    phi = np.arctan2(-x5, y5)
+
+    def wrist1(t1, a, t5, t6):
+        """t2+t3+t4 and the wrist-1 point (x4, z4) in the arm plane (C.19, C.21)."""
+        # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
+        m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(_rz(-t5), -1, -2)
+        t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
+        p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", _rz(t1),
+                                     np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
+        v = np.einsum("nji,nj->ni", _rz(t1), p3 - np.array([0.0, 0.0, geo.d1]))
+        return t234, v[:, 0], v[:, 2]
+
+    for i1, sgn1 in enumerate((1.0, -1.0)):
+        t1 = phi + sgn1 * np.arctan2(root, -geo.d4)
+        a = np.einsum("nji,njk->nik", _rz(t1), r)          # A = Rz(t1)^T R
+        c5 = a[:, 1, 1]
+        s5abs = np.hypot(a[:, 0, 1], a[:, 2, 1])
+        sing = s5abs < WRIST_SINGULAR
+        for i5, sgn5 in enumerate((1.0, -1.0)):
+            s5 = np.where(sing, 0.0, sgn5 * s5abs)
+            t5 = np.arctan2(s5, np.where(sing, np.sign(c5) + (c5 == 0), c5))
+            t6 = np.arctan2(sgn5 * a[:, 1, 2], -sgn5 * a[:, 1, 0])
+            if np.any(sing):
+                free = _free_theta6(geo, lambda t: wrist1(t1, a, t5, t), n) if q6_ref is None else q6_ref
+                t6 = np.where(sing, free, t6)
+            t234, x4, z4 = wrist1(t1, a, t5, t6)
+            c3 = (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
+            bad3 = np.abs(c3) > 1 + REACH_TOL
+            c3 = np.clip(c3, -1.0, 1.0)
+            s3abs = np.sqrt(1.0 - c3 * c3)
+            for i3, sgn3 in enumerate((1.0, -1.0)):
+                s3 = sgn3 * s3abs
+                t3 = np.arctan2(s3, c3)
+                k1 = geo.a2 + geo.a3 * c3
+                k2 = geo.a3 * s3
+                t2 = np.arctan2(z4 * k1 - x4 * k2, x4 * k1 + z4 * k2)     # 4.41
+                t4 = t234 - t2 - t3
+                k = 4 * i1 + 2 * i5 + i3
+                out[:, k] = wrap_angle(np.stack([t1, t2, t3, t4, t5, t6], -1))
+                singular[:, k] = sing
+                code[:, k] = np.where(bad1, 1, np.where(bad3, 2, 0))
+    if not keep_unreachable:
+        out[code > 0] = np.nan
+    return out, singular, code
+
+
+def _residuals(robot, poses_rep, cand):
+    return _pose_error(fk(robot, cand), poses_rep)
+
+
+def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,
+          chunk: int = 20000):
+    """Checked, merged solutions: (q (n,8,6) NaN-padded, counts (n,), singular (n,8), reasons list)."""
+    n = poses.shape[0]
+    q_all = np.full((n, 8, 6), np.nan)
+    sing_all = np.zeros((n, 8), dtype=bool)
+    counts = np.zeros(n, dtype=np.int64)
+    reasons = [REASON_OK] * n
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        cand, sing, code = solve_batch(geo, poses[s:e], None if q6_ref is None else q6_ref[s:e])
+        m = e - s
+        flat = cand.reshape(-1, 6)
+        valid = ~np.isnan(flat[:, 0])
+        ok = np.zeros(m * 8, dtype=bool)
+        if np.any(valid):
+            rep = np.repeat(poses[s:e], 8, axis=0)[valid]
+            dpos, drot = _residuals(robot, rep, flat[valid])
+            ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
+        ok = ok.reshape(m, 8)
+        cand = np.where(ok[..., None], cand, np.nan)
+        # merge near-duplicates: keep the first of every group
+        diff = np.abs(wrap_angle(cand[:, :, None, :] - cand[:, None, :, :]))
+        close = np.all(diff < MERGE_TOL, axis=-1)
+        earlier = np.tril(np.ones((8, 8), dtype=bool), -1)
+        dup = np.any(close & earlier[None], axis=-1)
+        keep = ok & ~dup
+        order = np.argsort(~keep, axis=1, kind="stable")
+        cand = np.take_along_axis(cand, order[..., None], axis=1)
+        keep_sorted = np.take_along_axis(keep, order, axis=1)
+        sing = np.take_along_axis(sing, order, axis=1)
+        cand[~keep_sorted] = np.nan
+        q_all[s:e] = cand
+        sing_all[s:e] = sing & keep_sorted
+        counts[s:e] = keep_sorted.sum(axis=1)
+        for k in np.nonzero(counts[s:e] == 0)[0]:
+            codes = code[k]
+            reasons[s + k] = (REASON_WRIST_NEAR_AXIS if np.all(codes == 1) else
+                              REASON_ARM_REACH if np.all(codes > 0) else REASON_NO_CANDIDATE)
+    return q_all, counts, sing_all, reasons
+
+
+# --------------------------------------------------------------------------- #
+# Inverse kinematics (closed form, UR family)
+# --------------------------------------------------------------------------- #
+class IKSolutions(np.ndarray):
+    """Solutions (k, dof) of one pose, an ndarray with two attributes:
+
+    ``singular`` (k,) bool: the solution lies on the wrist singularity (theta6 free: from the
+    reference configuration if given, else chosen for reach); ``reason``: why there is no
+    solution ("" otherwise).
+    """
+
+    def __new__(cls, q, singular, reason=""):
+        obj = np.asarray(q, dtype=float).view(cls)
+        obj.singular = np.asarray(singular, dtype=bool)
+        obj.reason = reason
+        return obj
+
+    def __array_finalize__(self, obj):
+        if obj is not None:
+            self.singular = getattr(obj, "singular", None)
+            self.reason = getattr(obj, "reason", "")
+
+
+def ik_batch(robot, poses, q_ref=None):
+    """Closed-form IK of n poses: (solutions (n, 8, 6) NaN-padded, counts (n,)).
+
+    ``poses``: unit dual quaternions (n, 8) or matrices (n, 4, 4) of the robot's end frame.
+    ``q_ref`` (n, 6) or (6,): reference configuration(s) whose theta6 is used at the wrist
+    singularity (default: theta6 chosen for reach, see :func:`_free_theta6`). Solutions are wrapped to (-pi, pi] and checked by FK.
+    """
+    robot = load_robot(robot)
+    geo = ur_geometry(robot)
+    poses, _ = as_pose_batch(poses)
+    q6 = None
+    if q_ref is not None:
+        qr = as_finite_array(q_ref, "q_ref", ndim_min=1)
+        q6 = np.broadcast_to(qr[..., 5], (poses.shape[0],)).astype(float)
+    q, counts, _, _ = solve(robot, geo, poses, q6)
+    return q, counts
+
+
+def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IKSolutions:
+    """Every closed-form IK solution of one pose (thesis section 4.3, UR family).
+
+    pose: a unit dual quaternion (8,) or a 4x4 matrix of the robot's end frame; a pose
+    within 1e-6 of unit is normalised, one farther off raises InputError.
+    q_ref: reference configuration; its theta6 is used where theta6 is free (wrist
+    singularity, marked in ``.singular``); without it theta6 is chosen for reach (the
+    elbow nearest to a right angle).
+    within_limits: keep only solutions inside the robot's joint limits, adding the
+    +-2 pi alternatives of joints whose range allows them.
+    sort_by: a configuration; solutions are sorted by their distance to it.
+    An unreachable pose gives an empty (0, 6) result whose ``.reason`` says why.
+    """
+    robot = load_robot(robot)
+    geo = ur_geometry(robot)
+    poses, single = as_pose_batch(pose)
+    if not single:
+        raise InputError("pose: ik() takes one pose; use ik_batch() for several")
+    q6 = None
+    if q_ref is not None:
+        q_ref = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
+        q6 = np.array([q_ref[5]])
+    q, counts, singular, reasons = solve(robot, geo, poses, q6)
+    k = int(counts[0])
+    sols, sing = q[0, :k], singular[0, :k]
+    reason = reasons[0]
+    if within_limits:
+        sols, sing = _expand_within_limits(robot.limits, sols, sing)
+        if len(sols) == 0 and not reason:
+            reason = f"no solution inside the joint limits ({k} outside)"
+    if sort_by is not None and len(sols):
+        ref = as_finite_array(sort_by, "sort_by", last_dim=robot.dof)
+        order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
+        sols, sing = sols[order], sing[order]
+    return IKSolutions(sols.reshape(-1, robot.dof), sing, reason)
+
+
+def _expand_within_limits(limits, sols, sing):
+    """Every representation q + 2 pi k of each solution that lies inside the limits."""
+    out, out_sing = [], []
+    for q, s in zip(sols, sing):
+        options = []
+        for j, (lo, hi) in enumerate(limits):
+            ks = np.arange(-2, 3)
+            vals = q[j] + 2 * np.pi * ks
+            options.append(vals[(vals >= lo - 1e-12) & (vals <= hi + 1e-12)])
+        if any(len(o) == 0 for o in options):
+            continue
+        grids = np.meshgrid(*options, indexing="ij")
+        combos = np.stack([g.ravel() for g in grids], axis=-1)
+        out.extend(combos)
+        out_sing.extend([s] * len(combos))
+    if not out:
+        return np.zeros((0, len(limits))), np.zeros(0, dtype=bool)
+    return np.array(out), np.array(out_sing)

@@ -1,0 +1,390 @@
+"""Straight-line IK programs for the generated kernels, from the extracted closed forms.
+
+:mod:`derive.ik_extract` finds, for a 6R chain, a solving order and the equations of each
+step (patterns S1, S2, S3, span). This module turns those steps into a program of
+assignments, branch points and reachability checks that the emitters print as pure
+Python, numpy and C. The expressions are the derived ones (coefficients A, B, C of the
+S1 equation, the 2x2 systems of the S2 pairs, the sum of squares of the S3 pair, the
+span combinations), with the robot's numbers substituted. Three rewrites make the
+program total and accurate (the extraction's forms divide by quantities that vanish at
+the singular sets):
+
+* **S2 without division.** A pair a1 cos u + b1 sin u + c1 = 0, a2 cos u + b2 sin u + c2 = 0
+  gives cos u = n_c / d, sin u = n_s / d after cancelling common factors; the program
+  computes u = atan2(sgn(d) n_s, sgn(d) n_c), so d may be anywhere near zero, and
+  hypot(n_c, n_s) = |d|.
+* **Half angles from the S2 magnitudes.** An S1 step solved by acos (cos u = v, e.g. theta5
+  from B.13) loses accuracy near u = 0 and pi. When later S2 steps have the divisors
+  k sin(u/2) and k' cos(u/2) (B.30/B.32 and B.29/B.31 for theta5), the program takes
+  |sin(u/2)| and |cos(u/2)| from their magnitudes and u = +-2 atan2(|sin|, |cos|): exact
+  to rounding at u = 0 and u = pi.
+* **Singular steps.** Where sin u = 0 (the wrist singularity) one of those S2 steps is
+  undetermined; the span step that relates the two compounds (theta6 = sigma2 - sigma1)
+  then takes its joint (free there) at the value that puts the later S3 step mid-reach
+  (:func:`_free_for_reach`), and the undetermined compound follows.
+
+Reachability: an S1 step with A^2 + B^2 < C^2, or an acos argument beyond +-1, by more than
+:data:`derive.ik.REACH_TOL` (relative), drops the branch; within it the root is clipped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import sympy as sp
+
+from derive.algebra.quaternion import hamilton
+from derive.cache import memo
+from derive.errors import DeriveError
+from derive.ik.closed_form import REACH_TOL, WRIST_SINGULAR
+from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
+from derive.model.robot import load_robot
+from derive.symbolic.equations import POSES, derive_equations
+
+#: Functions the printers map to each language.
+sgn = sp.Function("sgn")        # copysign(1, x)
+pos = sp.Function("pos")        # max(x, 0)
+
+
+@dataclass
+class Op:
+    """One line of an IK program.
+
+    kind: "let" (name = expr), "sincos" (name, name2 = sin, cos of expr), "double"
+    (name, name2 = sin, cos of twice the angle whose sin, cos are args), "branch" (name = +1,
+    then -1, for everything after), "require" (drop the branch unless expr, a relational,
+    holds), "select" (name = expr if cond else other), "solution" (exprs, one per joint).
+    """
+
+    kind: str
+    name: str = ""
+    expr: object = None
+    name2: str = ""
+    cond: object = None
+    other: object = None
+    args: tuple = ()
+    depth: int = 0
+
+
+@dataclass
+class IKProgram:
+    robot: str
+    dof: int
+    ops: list = field(default_factory=list)
+    branches: int = 1
+    free_joint: int | None = None           # joint that is free at the singular set
+    free_rule: str = "set to 0"             # how the program chooses it there
+    steps: list = field(default_factory=list)   # (unknown, pattern, equations) for the header
+    parameters: dict = field(default_factory=dict)
+
+
+class _Builder:
+    def __init__(self, values: dict):
+        self.ops: list = []
+        self.depth = 0
+        self.values = values
+        self.known: set = set()           # symbols with a value in the program
+        self.trig: dict = {}              # angle argument -> (sin symbol, cos symbol)
+        self.n_trig = 0
+        self.n_tmp = 0
+
+    def _num(self, e):
+        """The robot's numbers substituted for the parameters."""
+        return sp.sympify(e).xreplace(self.values)
+
+    def let(self, name, expr) -> sp.Symbol:
+        expr = self._trig(self._num(expr))
+        sym = name if isinstance(name, sp.Symbol) else sp.Symbol(name, real=True)
+        self.ops.append(Op("let", str(sym), expr, depth=self.depth))
+        self.known.add(sym)
+        return sym
+
+    def tmp(self, expr, stem="k") -> sp.Symbol:
+        self.n_tmp += 1
+        return self.let(f"{stem}{self.n_tmp}", expr)
+
+    def branch(self, name) -> sp.Symbol:
+        self.depth += 1
+        sym = sp.Symbol(name, real=True)
+        self.ops.append(Op("branch", name, depth=self.depth))
+        self.known.add(sym)
+        return sym
+
+    def require(self, cond):
+        self.ops.append(Op("require", expr=self._trig(self._num(cond)), depth=self.depth))
+
+    def flag(self, name, cond) -> sp.Symbol:
+        sym = sp.Symbol(name)
+        self.ops.append(Op("flag", name, self._trig(self._num(cond)), depth=self.depth))
+        self.known.add(sym)
+        return sym
+
+    def select(self, name, cond, a, b) -> sp.Symbol:
+        sym = sp.Symbol(name, real=True)
+        self.ops.append(Op("select", name, self._trig(self._num(a)), cond=self._trig(self._num(cond)),
+                           other=self._trig(self._num(b)), depth=self.depth))
+        self.known.add(sym)
+        return sym
+
+    def set_trig(self, arg, s, c):
+        self.trig[sp.expand(arg)] = (s, c)
+
+    def _trig(self, expr):
+        """Replace sin/cos of known angles by symbols, emitting sincos (or double-angle) lines."""
+        expr = sp.sympify(expr)
+        atoms = expr.atoms(sp.sin, sp.cos)
+        if not atoms:
+            return expr
+        args = sorted({sp.expand(a.args[0]) for a in atoms}, key=lambda a: (sp.count_ops(a), sp.default_sort_key(a)))
+        for arg in args:
+            if arg in self.trig:
+                continue
+            if not arg.free_symbols <= self.known:
+                raise DeriveError(f"IK program: sin/cos of {arg} needed before its angle is known")
+            half = sp.expand(arg / 2)
+            if half in self.trig:
+                hs, hc = self.trig[half]
+                s, c = self._trig_names()
+                self.ops.append(Op("double", str(s), name2=str(c), args=(str(hs), str(hc)), depth=self.depth))
+            else:
+                s, c = self._trig_names()
+                self.ops.append(Op("sincos", str(s), arg, name2=str(c), depth=self.depth))
+            self.trig[arg] = (s, c)
+        rep = {}
+        for a in atoms:
+            s, c = self.trig[sp.expand(a.args[0])]
+            rep[a] = s if isinstance(a, sp.sin) else c
+        return expr.xreplace(rep)
+
+    def _trig_names(self):
+        self.n_trig += 1
+        return sp.Symbol(f"s{self.n_trig}", real=True), sp.Symbol(f"c{self.n_trig}", real=True)
+
+
+def _chain_pose(builder: _Builder, g):
+    """Lines for the chain pose (pose * G^-1) from the input p0..p7: w a b c, r_ij, x y z."""
+    p = sp.symbols("p0:8", real=True)
+    builder.known.update(p)
+    gq, gt = g
+    gconj = (gq[0], -gq[1], -gq[2], -gq[3])
+    quat = hamilton(p[:4], gconj)
+    w, a, b, c, x, y, z = POSES["B"]
+    for sym, e in zip((w, a, b, c), quat):
+        builder.let(sym, sp.expand(e))
+    # robot translation t = 2 dual real^* (vector part); chain translation t - R_chain g_t
+    preal_conj = (p[0], -p[1], -p[2], -p[3])
+    t = [2 * e for e in hamilton(p[4:], preal_conj)[1:]]
+    r = _rot((w, a, b, c))
+    for i in range(3):
+        for j in range(3):
+            builder.let(R_SYMS[i, j], r[i, j])
+    for i, sym in enumerate((x, y, z)):
+        builder.let(sym, sp.expand(t[i] - sum(R_SYMS[i, k] * gt[k] for k in range(3))))
+
+
+def _s2_data(step, eqs, form, thetas):
+    """(n_s, n_c, d) of an S2 step: cos u = n_c / d, sin u = n_s / d, common factors cancelled."""
+    u = sp.Symbol("u", real=True)
+    (a1, b1, c1), (a2, b2, c2) = (_as_linear_in(eqs[i].lhs - eqs[i].rhs, form, thetas, u)
+                                  for i in step.equations)
+    det = sp.expand(a1 * b2 - a2 * b1)
+    nc = sp.expand(-c1 * b2 + c2 * b1)
+    ns = sp.expand(-a1 * c2 + a2 * c1)
+    g = sp.gcd(sp.gcd(nc, ns), det)
+    return sp.cancel(ns / g), sp.cancel(nc / g), sp.cancel(det / g)
+
+
+def _half_factor(d, u):
+    """k if d = k sin(u/2) or k cos(u/2) (k a constant), with "sin"/"cos"; else None."""
+    for f in (sp.sin, sp.cos):
+        k = sp.simplify(d / f(u / 2))
+        if not k.free_symbols:
+            return f.__name__, k
+    return None
+
+
+def ik_program(robot) -> IKProgram:
+    """The IK program of a robot (raises DeriveError for chains whose extraction it cannot use);
+    cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("ik-program", robot.id, lambda: _ik_program(robot))
+
+
+def _ik_program(robot) -> IKProgram:
+    if not robot.exact:
+        raise DeriveError(f"{robot.name}: no closed-form IK kernel: the description's fixed angles "
+                          "are not all rational multiples of pi, so there are no exact equations to "
+                          "solve; use derive.refine for the IK")
+    ext = extract(robot)
+    chain = ext.chain
+    _, sets = derive_equations(robot, symbolic=False)
+    eqs = {e.id: e for s in sets for e in s.equations}
+    thetas = [j.theta for j in chain.joints]
+    loc = {str(t): t for t in thetas}
+    values = {k: (sp.Integer(int(v)) if float(v).is_integer() else sp.Float(v, 17))
+              for k, v in chain.parameters.items()}
+    bld = _Builder(values)
+    _chain_pose(bld, chain.end_transform)
+    defs = {k: v for k, v in ext.definitions.items()}
+    emitted_defs: set = set()
+
+    def with_defs(expr):
+        """Emit the intermediate coordinates an expression needs (once their angles are known)."""
+        expr = sp.sympify(expr)
+        for s in sorted(expr.free_symbols & set(defs), key=str):
+            if s not in emitted_defs:
+                bld.let(s, defs[s])
+                emitted_defs.add(s)
+        return expr
+
+    forms = {st.symbol: _linear_form(sp.sympify(st.unknown, locals=loc), thetas) for st in ext.steps}
+    s2 = {st.symbol: _s2_data(st, eqs, forms[st.symbol], thetas) for st in ext.steps if st.pattern == "S2"}
+    prog = IKProgram(robot.name, robot.dof, parameters=dict(chain.parameters))
+    value: dict = {}                      # unknown symbol -> program symbol holding its value
+    handled: set = set()
+    sing = None
+    n_branch = 0
+    for st in ext.steps:
+        prog.steps.append((st.unknown, st.pattern, list(st.equations)))
+        if st.symbol in handled:
+            continue
+        u = st.symbol
+        if st.pattern == "S1" and not _is_acos(st):
+            a, b, c = _as_linear_in(eqs[st.equations[0]].lhs - eqs[st.equations[0]].rhs,
+                                    forms[u], thetas, sp.Symbol("u", real=True))
+            a, b, c = (with_defs(e) for e in (a, b, c))
+            ka, kb, kc = bld.tmp(a), bld.tmp(b), bld.tmp(c)
+            disc = bld.tmp(ka * ka + kb * kb - kc * kc)
+            phi = bld.tmp(sp.atan2(kb, ka))
+            psi = bld.tmp(sp.atan2(sp.sqrt(pos(disc)), -kc))
+            bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
+            n_branch += 1
+            sg = bld.branch(f"sg{n_branch}")
+            value[u] = bld.let(str(u), phi + sg * psi)
+        elif st.pattern == "S1":
+            # acos step: cos u = v. Look for later S2 steps divided by k sin(u/2), k' cos(u/2).
+            halves = {}
+            for sym, (ns, nc, d) in s2.items():
+                hf = _half_factor(d, u)
+                if hf:
+                    halves[hf[0]] = (sym, ns, nc, hf[1])
+            if set(halves) != {"sin", "cos"}:
+                raise DeriveError(f"{robot.name}: the acos step for {u} has no accurate half-angle "
+                                  "form (no S2 pair divided by sin and cos of its half)")
+            mags = {}
+            for kind, (sym, ns, nc, k) in halves.items():
+                ns, nc = with_defs(ns), with_defs(nc)
+                mags[kind] = bld.tmp(sp.sqrt(ns * ns + nc * nc) / abs(k), "h")
+            hs, hc = mags["sin"], mags["cos"]
+            half = bld.tmp(sp.atan2(hs, hc), "h")
+            sing_val = bld.tmp(2 * hs * hc / (hs * hs + hc * hc), "h")
+            span = next((s for s in ext.steps if s.pattern == "span"
+                         and {halves["sin"][0], halves["cos"][0]} <= s.forms[0].free_symbols), None)
+            if span is None:
+                raise DeriveError(f"{robot.name}: no span step relates the compounds of {u}")
+            # the two S2 compounds: with u = +-2 half (|u| <= pi), cos(u/2) >= 0 and sin(u/2) has
+            # the branch's sign, so sgn(d) is known and both atan2 are taken before the branch
+            base = {}
+            for kind in ("cos", "sin"):
+                sym, ns, nc, k = halves[kind]
+                sk = 1 if k > 0 else -1
+                base[kind] = bld.tmp(sp.atan2(sk * ns, sk * nc), "h")
+            free = span.symbol
+            prog.free_joint = thetas.index(free)
+            free_val = _free_for_reach(bld, ext, free, defs, with_defs)
+            if free_val != 0:
+                prog.free_rule = "chosen for reach (the cosine of the next acos step nearest to 0)"
+            sing = bld.flag("singular", sing_val < WRIST_SINGULAR)
+            cos_small = bld.flag("cos_small", hc < hs)
+            n_branch += 1
+            sg = bld.branch(f"sg{n_branch}")
+            # at the singular set u is exactly 0 (sin small) or pi (cos small)
+            at_sing = bld.select(f"{u}_singular", cos_small, sp.pi, 0)
+            value[u] = bld.select(str(u), sing, at_sing, 2 * sg * half)
+            raw = {"cos": base["cos"], "sin": bld.tmp(base["sin"] + sp.pi * (1 - sg) / 2, "h")}
+            lhs = span.forms[0]
+            s_sin, s_cos = halves["sin"][0], halves["cos"][0]
+            # sin(u/2) = 0: the "sin" compound follows from the other and the free joint
+            sol_sin = sp.solve(sp.Eq(free, lhs), s_sin)[0].xreplace({s_cos: raw["cos"], free: free_val})
+            sol_cos = sp.solve(sp.Eq(free, lhs), s_cos)[0].xreplace({s_sin: raw["sin"], free: free_val})
+            value[s_sin] = bld.select(str(s_sin), sp.And(sing, sp.Not(cos_small)), sol_sin, raw["sin"])
+            value[s_cos] = bld.select(str(s_cos), sp.And(sing, cos_small), sol_cos, raw["cos"])
+            handled.update({s_sin, s_cos})
+        elif st.pattern == "S2":
+            ns, nc, d = s2[u]
+            ns, nc, d = (with_defs(e) for e in (ns, nc, d))
+            sd = bld.tmp(sgn(d))
+            value[u] = bld.let(str(u), sp.atan2(sd * ns, sd * nc))
+        elif st.pattern == "S3":
+            f = st.forms[0]
+            if not isinstance(f, sp.acos):
+                raise DeriveError(f"{robot.name}: S3 step for {u} is not an acos form")
+            v = bld.tmp(with_defs(f.args[0]))
+            bld.require(sp.Abs(v) <= 1 + REACH_TOL)
+            sq = bld.tmp(sp.sqrt(pos(1 - v * v)))
+            ang = bld.tmp(sp.atan2(sq, v))
+            n_branch += 1
+            sg = bld.branch(f"sg{n_branch}")
+            value[u] = bld.let(str(u), sg * ang)
+            bld.set_trig(u, sg * sq, v)                  # sin u, cos u known exactly
+        elif st.pattern == "span":
+            value[u] = bld.let(str(u), st.forms[0])
+        else:
+            raise DeriveError(f"{robot.name}: IK step pattern {st.pattern} has no kernel form")
+    missing = [t for t in thetas if t not in value]
+    if missing:
+        raise DeriveError(f"{robot.name}: IK program has no value for {missing}")
+    # joint variables of the robot in its order
+    var_index = {j.name: j.variable for j in robot.joints}
+    order = [None] * robot.dof
+    for t, j in zip(thetas, chain.joints):
+        order[var_index[j.name]] = value[t]
+    bld.ops.append(Op("solution", args=tuple(order), depth=bld.depth))
+    prog.ops = bld.ops
+    prog.branches = 2 ** n_branch
+    return prog
+
+
+def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):
+    """Lines for the free joint's value at the singular set, chosen for reach.
+
+    The later S3 step (theta3 from C.19, C.21) has cos u = v, where v depends on the free
+    joint f through coordinates (x4, z4) linear in sin f, cos f. Written out, v = alpha +
+    beta cos f + gamma sin f plus terms of second order whose sum is constant on the
+    singular set (the wrist-1 point moves on a circle). The value solves v = 0 (the middle
+    of the reach) when possible and otherwise takes f nearest to it:
+    f = atan2(gamma, beta) + atan2(sqrt(max(R^2 - alpha^2, 0)), -alpha), R^2 = beta^2 + gamma^2.
+    Without such an S3 step the free joint is 0.
+    """
+    s3 = next((st for st in ext.steps if st.pattern == "S3" and isinstance(st.forms[0], sp.acos)), None)
+    if s3 is None:
+        return sp.Integer(0)
+    v = sp.sympify(s3.forms[0].args[0])
+    dep = sorted((d for d in v.free_symbols & set(defs) if free in defs[d].free_symbols), key=str)
+    if not dep:
+        return sp.Integer(0)
+    S, C = sp.symbols("S_free C_free", real=True)
+    rep = {}
+    for d in dep:
+        e = sp.expand(sp.expand_trig(defs[d]).xreplace({sp.sin(free): S, sp.cos(free): C}))
+        if free in e.free_symbols:
+            return sp.Integer(0)
+        poly = sp.Poly(e, S, C)
+        if poly.total_degree() > 1:
+            return sp.Integer(0)
+        k0, ks, kc = (poly.coeff_monomial(m) for m in (1, S, C))
+        k0, ks, kc = (bld.tmp(with_defs(k), "f") for k in (k0, ks, kc))
+        rep[d] = k0 + ks * S + kc * C
+    poly = sp.Poly(sp.expand(with_defs(v.xreplace(rep))), S, C)
+    if poly.total_degree() > 2:
+        return sp.Integer(0)
+    co = {m: poly.coeff_monomial(m) for m in (1, S, C, S * S, C * C)}
+    alpha = bld.tmp(co[1] + (co[S * S] + co[C * C]) / 2, "f")
+    beta, gamma = bld.tmp(co[C], "f"), bld.tmp(co[S], "f")
+    disc = bld.tmp(beta * beta + gamma * gamma - alpha * alpha, "f")
+    return bld.tmp(sp.atan2(gamma, beta) + sp.atan2(sp.sqrt(pos(disc)), -alpha), "f")
+
+
+def _is_acos(step) -> bool:
+    return all(isinstance(f, sp.acos) or (isinstance(f, sp.Mul) and f.args[0] == -1
+                                           and isinstance(f.args[1], sp.acos)) for f in step.forms)

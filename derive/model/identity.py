@@ -1,0 +1,58 @@
+"""The identity of a robot: a hash of its normalised description.
+
+Two descriptions have the same identity exactly when they describe the same kinematics:
+the same joints (type, parent, driving variable, mimic relation, motion axis, fixed motions
+before and after, offset, limits) and the same end frames, every number in SI units after
+the file's units are applied, and the same exactness (whether every fixed angle is a rational
+multiple of pi, which decides how the equations are derived). The robot's name, title,
+source, joint names and file path do not enter: a copy of ``ur5.yaml`` under another name is
+the UR5, and a copy with one number changed is another robot.
+
+Every cache and artifact of dq-derive is keyed by this identity (:mod:`derive.cache`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+#: Hex digits of the SHA-256 digest kept as the identity.
+ID_LENGTH = 16
+
+
+def _num(x) -> str:
+    """A float as its shortest round-trip text (-0.0 as 0.0): equal floats, equal text."""
+    return repr(float(x) + 0.0)
+
+
+def _vec(v) -> list:
+    return [_num(x) for x in v]
+
+
+def _ops(ops) -> list:
+    return [["R", _vec(o.axis), _num(o.angle)] if o.kind == "R" else ["T", _vec(o.vector)] for o in ops]
+
+
+def normalised(joints, ends: dict, default_end: str, exact: bool) -> dict:
+    """The description reduced to what the kinematics depend on (see the module docstring):
+    the joints and end frames of a description in the neutral form of
+    :mod:`derive.model.robot`."""
+    out = []
+    for j in joints:
+        out.append({
+            "type": j.type, "parent": j.parent, "variable": j.variable,
+            "multiplier": _num(j.multiplier), "mimic_offset": _num(j.mimic_offset),
+            "axis": _vec(j.axis), "pre": _ops(j.pre), "post": _ops(j.post),
+            "offset": _num(j.offset), "limits": None if j.limits is None else _vec(j.limits),
+        })
+    ends_out = [{"parent": e.parent, "ops": _ops(e.ops), "default": name == default_end}
+                for name, e in ends.items()]
+    return {"joints": out, "ends": ends_out, "exact": bool(exact)}
+
+
+def digest(joints, ends: dict, default_end: str, exact: bool) -> str:
+    """The identity (16 hex digits) of a description's normalised form; a loaded robot
+    carries it as ``Robot.id``."""
+    text = json.dumps(normalised(joints, ends, default_end, exact), sort_keys=True,
+                      separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:ID_LENGTH]

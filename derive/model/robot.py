@@ -1,0 +1,659 @@
+"""Robot descriptions: the YAML file format, its validation, and the robot library.
+
+A description names a kinematic convention and lists the joints; the format is
+documented in ``docs/robot-format.md``. Whatever the convention, each joint is
+reduced here to one neutral form that both reference implementations (dual
+quaternions and 4x4 matrices) evaluate on their own:
+
+    T_joint(q) = pre_1 ... pre_k  Motion(axis, q + offset)  post_1 ... post_m
+
+where every ``pre``/``post`` is an elementary operation ("R", axis, angle) or
+("T", vector) and Motion is a rotation (revolute) or translation (prismatic)
+along a unit axis of the parent frame.
+
+Conventions (theta_i, d_i, a_i, alpha_i the joint's DH numbers):
+
+* ``standard_dh``:  T = Rz(theta) Tz(d) Tx(a) Rx(alpha)  (Kunze eq. 5.3-5.4)
+* ``kunze``:        the same product written with s for d: QDH(theta, s, a, alpha) (Kunze eq. 5.7)
+* ``modified_dh``:  T = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i) Tz(d_i)  (Craig); the file gives
+  each joint the alpha and a of the link before it
+* ``axis_angle``:   each joint's axis and link vector in the base frame at the reference
+  configuration, where every joint value is zero (thesis section 4.2.1, seed 001 eq. 10-11):
+  T = Rot(axis, theta) Trans(link). The joint axis passes through the parent frame's origin.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+import operator
+import re
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sympy as sp
+import yaml
+
+from derive.errors import RobotFileError, UnknownRobotError
+from derive.model.identity import digest
+
+LIBRARY_DIR = Path(__file__).resolve().parent.parent / "robots"
+
+CONVENTIONS = ("standard_dh", "modified_dh", "kunze", "axis_angle")
+JOINT_TYPES = ("revolute", "prismatic")
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+_EXACT_FACTOR = {"m": sp.Integer(1), "cm": sp.Rational(1, 100), "mm": sp.Rational(1, 1000),
+                 "rad": sp.Integer(1), "deg": sp.pi / 180}
+
+#: A length above this many metres in a file declared in metres is taken for a unit mistake.
+MAX_LENGTH_M = 20.0
+#: A fixed angle (alpha, theta, offset) above this many radians is taken for degrees.
+MAX_ANGLE_RAD = 2.0 * math.pi + 1e-9
+#: Joint limits beyond this many radians are taken for degrees.
+MAX_LIMIT_RAD = 8.0 * math.pi
+#: A fixed angle given as a decimal number within this many radians of a multiple of pi/12
+#: is that multiple (1.5707963267948966 is pi/2): the rounding of a printed constant, not a
+#: deviation. Farther off, the number is kept as it is and the robot is not exact.
+SNAP_TOL = 1e-12
+#: Robot names: also the folder name of its outputs (``--out DIR`` writes DIR/<name>/).
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*")
+
+_DH_KEYS = {
+    "standard_dh": ("theta", "d", "a", "alpha"),
+    "modified_dh": ("alpha", "a", "theta", "d"),
+    "kunze": ("theta", "s", "a", "alpha"),
+}
+_ANGLE_FIELDS = {"theta", "alpha"}
+_COMMON_JOINT_KEYS = {"name", "type", "offset", "limits", "parent", "mimic", "description"}
+
+EX, EY, EZ = np.eye(3)
+
+
+# --------------------------------------------------------------------------- #
+# Data model
+# --------------------------------------------------------------------------- #
+class Num(float):
+    """A float read from a description file that also carries its exact value
+    ``sym``: a sympy expression in SI units over the file's named parameters
+    (``d1``, ``a2``, ...), with exact rationals and pi. The symbolic derivation
+    uses ``sym``; the numeric code sees a plain float."""
+
+    sym: sp.Expr
+
+    def __new__(cls, value, sym):
+        obj = super().__new__(cls, value)
+        obj.sym = sym
+        return obj
+
+
+def _exact(values) -> tuple:
+    """Exact sympy tuple of a vector of :class:`Num` (plain numbers made rational)."""
+    return tuple(v.sym if isinstance(v, Num) else sp.nsimplify(float(v), rational=True) for v in values)
+
+
+@dataclass(frozen=True)
+class Op:
+    """Elementary rigid motion: ``kind`` "R" (rotation by ``angle`` about unit
+    ``axis``) or "T" (translation by ``vector``). ``sym`` holds the exact form:
+    (axis, angle) for "R", the vector for "T"."""
+
+    kind: str
+    axis: np.ndarray | None = None
+    angle: float = 0.0
+    vector: np.ndarray | None = None
+    sym: tuple = ()
+
+    @staticmethod
+    def rot(axis, angle) -> "Op":
+        exact_angle = angle.sym if isinstance(angle, Num) else sp.nsimplify(float(angle), rational=True)
+        return Op("R", axis=np.asarray(axis, dtype=float), angle=float(angle),
+                  sym=(_exact(axis), exact_angle))
+
+    @staticmethod
+    def trans(vector) -> "Op":
+        return Op("T", vector=np.asarray(vector, dtype=float), sym=_exact(vector))
+
+
+@dataclass(frozen=True)
+class Joint:
+    """One joint of the tree, in the neutral form described in the module docstring."""
+
+    name: str
+    type: str                      # "revolute" or "prismatic"
+    parent: int                    # index of the parent joint, -1 for the base
+    axis: np.ndarray               # unit motion axis in the parent frame (after ``pre``)
+                                   # (its exact form: derive.robot.exact_axis)
+    pre: tuple[Op, ...]
+    post: tuple[Op, ...]
+    offset: float                  # added to the joint value (rad or m); a Num (exact in .sym)
+    limits: tuple[float, float] | None
+    variable: int                  # index into q of the variable that drives this joint
+    multiplier: float = 1.0        # joint value = multiplier * q[variable] + mimic_offset
+    mimic_offset: float = 0.0
+    params: dict = field(default_factory=dict)   # the file's fields, as written
+    exact_axis: tuple = ()         # the motion axis as exact sympy numbers
+
+    @property
+    def is_mimic(self) -> bool:
+        return self.params.get("mimic") is not None
+
+
+@dataclass(frozen=True)
+class End:
+    """A named end frame: a fixed transform (translation then rotation) after ``parent``."""
+
+    name: str
+    parent: int
+    ops: tuple[Op, ...]
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A loaded, validated robot description (lengths in metres, angles in radians)."""
+
+    name: str
+    title: str
+    source: str
+    convention: str
+    joints: tuple[Joint, ...]
+    ends: dict
+    default_end: str
+    parameters: dict
+    path: str
+    notes: str = ""
+    nominal: str = ""              # library robot whose closed form seeds this one (calibrated arms)
+    exact: bool = True             # every fixed angle a rational multiple of pi (see is_exact)
+    id: str = ""                   # identity: hash of the normalised description (model.identity)
+
+    @property
+    def dof(self) -> int:
+        """Number of independent joint variables (mimic joints excluded)."""
+        return sum(1 for j in self.joints if not j.is_mimic)
+
+    @property
+    def variable_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints if not j.is_mimic)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """Frames reported by :func:`derive.reference.joint_positions`: base, joints, ends."""
+        return ("base",) + tuple(j.name for j in self.joints) + tuple(self.ends)
+
+    @property
+    def limits(self) -> np.ndarray:
+        """(dof, 2) array of joint limits; +-inf where the file gives none."""
+        out = []
+        for j in self.joints:
+            if not j.is_mimic:
+                out.append(j.limits if j.limits is not None else (-math.inf, math.inf))
+        return np.array(out, dtype=float).reshape(-1, 2)
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, {self.convention}, dof={self.dof}, ends={list(self.ends)})"
+
+
+# --------------------------------------------------------------------------- #
+# Safe arithmetic for fields such as "pi/2" or "-d4"
+# --------------------------------------------------------------------------- #
+_BINOPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
+           ast.Div: operator.truediv, ast.Pow: operator.pow}
+_UNOPS = {ast.USub: operator.neg, ast.UAdd: operator.pos}
+
+
+class _Expr:
+    """Evaluate a numeric field: a number, or an expression over pi and parameters."""
+
+    def __init__(self, where: str, parameters: dict, degrees: bool):
+        self.where = where
+        self.parameters = parameters
+        self.degrees = degrees
+        self.used: set[str] = set()
+
+    def __call__(self, value, what: str) -> float:
+        if isinstance(value, bool) or value is None:
+            raise RobotFileError(f"{self.where}: {what} must be a number, got {value!r}")
+        if isinstance(value, (int, float)):
+            return float(value)
+        if not isinstance(value, str):
+            raise RobotFileError(f"{self.where}: {what} must be a number or expression, got {value!r}")
+        try:
+            tree = ast.parse(value.strip(), mode="eval")
+        except SyntaxError:
+            raise RobotFileError(f"{self.where}: {what} = {value!r} is not a valid expression") from None
+        result = float(self._eval(tree.body, value, what))
+        if not math.isfinite(result):
+            raise RobotFileError(f"{self.where}: {what} = {value!r} is not finite")
+        return result
+
+    def _eval(self, node, text, what):
+        if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
+                and not isinstance(node.value, bool):
+            return node.value
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            try:
+                return _BINOPS[type(node.op)](self._eval(node.left, text, what),
+                                              self._eval(node.right, text, what))
+            except ZeroDivisionError:
+                raise RobotFileError(f"{self.where}: {what} = {text!r} divides by zero") from None
+        if isinstance(node, ast.UnaryOp) and type(node.op) in _UNOPS:
+            return _UNOPS[type(node.op)](self._eval(node.operand, text, what))
+        if isinstance(node, ast.Name):
+            if node.id == "pi":
+                if self.degrees:
+                    raise RobotFileError(
+                        f"{self.where}: {what} = {text!r} uses pi but the file's angle unit is "
+                        "deg; write degrees or set units.angle: rad")
+                return math.pi
+            if node.id in self.parameters:
+                self.used.add(node.id)
+                return self.parameters[node.id]
+            raise RobotFileError(f"{self.where}: {what} = {text!r} uses unknown name {node.id!r} "
+                                 f"(known: pi, {', '.join(sorted(self.parameters)) or 'no parameters'})")
+        raise RobotFileError(f"{self.where}: {what} = {text!r}: only numbers, pi, parameters "
+                             "and + - * / ** are allowed")
+
+
+# --------------------------------------------------------------------------- #
+# Loading
+# --------------------------------------------------------------------------- #
+def list_robots() -> list[str]:
+    """Names of the robots shipped in the library, sorted."""
+    return sorted(p.stem for p in LIBRARY_DIR.glob("*.yaml"))
+
+
+def load_robot(name_or_path) -> Robot:
+    """Load a robot by library name (``"ur5"``) or from a description file path."""
+    if isinstance(name_or_path, Robot):
+        return name_or_path
+    if not isinstance(name_or_path, (str, Path)):
+        raise UnknownRobotError(f"robot must be a name or a path, got {type(name_or_path).__name__}")
+    text = str(name_or_path)
+    path = Path(text)
+    if path.suffix in (".yaml", ".yml") or path.is_file() or "/" in text:
+        if not path.is_file():
+            raise UnknownRobotError(f"robot file {text!r} does not exist")
+        return _load_file(str(path.resolve()))
+    if text in list_robots():
+        return _load_file(str(LIBRARY_DIR / f"{text}.yaml"))
+    raise UnknownRobotError(f"unknown robot {text!r}; the library has: {', '.join(list_robots())}")
+
+
+def _load_file(path: str) -> Robot:
+    """Read a description file; parsed once per (path, content), so an edited file is read anew."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+    except OSError as exc:
+        raise RobotFileError(f"{path}: cannot be read ({exc.strerror})") from None
+    return _parse(path, text)
+
+
+@lru_cache(maxsize=64)
+def _parse(path: str, text: str) -> Robot:
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise RobotFileError(f"{path}: not valid YAML ({exc})") from None
+    return robot_from_dict(data, path)
+
+
+def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
+    """Validate a parsed description and build a :class:`Robot`."""
+    where = Path(path).name if path != "<dict>" else path
+    if not isinstance(data, dict):
+        raise RobotFileError(f"{where}: the top level must be a mapping, got {type(data).__name__}")
+    allowed = {"name", "title", "source", "notes", "nominal", "convention", "units", "parameters", "joints",
+               "tool", "ends", "default_end"}
+    unknown = set(data) - allowed
+    if unknown:
+        raise RobotFileError(f"{where}: unknown key(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    for key in ("name", "convention", "joints"):
+        if key not in data:
+            raise RobotFileError(f"{where}: missing required key {key!r}")
+    name = data["name"]
+    if not isinstance(name, str) or not NAME_PATTERN.fullmatch(name):
+        raise RobotFileError(f"{where}: name {name!r} must be letters, digits, '_', '.' or '-', "
+                             "starting with a letter or digit (it names the output folder)")
+    conv = data["convention"]
+    if conv not in CONVENTIONS:
+        raise RobotFileError(f"{where}: convention {conv!r} is not one of {CONVENTIONS}")
+
+    units = data.get("units") or {}
+    if not isinstance(units, dict) or set(units) - {"length", "angle"}:
+        raise RobotFileError(f"{where}: 'units' must be a mapping with keys length and angle")
+    lu, au = units.get("length", "m"), units.get("angle", "rad")
+    if lu not in LENGTH_UNITS:
+        raise RobotFileError(f"{where}: unknown length unit {lu!r}; use one of {sorted(LENGTH_UNITS)}")
+    if au not in ANGLE_UNITS:
+        raise RobotFileError(f"{where}: unknown angle unit {au!r}; use one of {sorted(ANGLE_UNITS)}")
+
+    params_raw = data.get("parameters") or {}
+    if not isinstance(params_raw, dict):
+        raise RobotFileError(f"{where}: 'parameters' must be a mapping of names to numbers")
+    params: dict[str, float] = {}
+    for k, v in params_raw.items():
+        if not isinstance(k, str) or not k.isidentifier() or k == "pi":
+            raise RobotFileError(f"{where}: parameter name {k!r} is not a valid identifier")
+        params[k] = _Expr(f"{where}: parameters", {}, au == "deg")(v, k)
+
+    joints_raw = data["joints"]
+    if not isinstance(joints_raw, list) or not joints_raw:
+        raise RobotFileError(f"{where}: 'joints' must be a non-empty list")
+
+    ctx = _Context(where, conv, params, lu, au)
+    joints: list[Joint] = []
+    names: dict[str, int] = {}
+    nvar = 0
+    for i, jr in enumerate(joints_raw):
+        j = ctx.joint(i, jr, names, joints, nvar)
+        if j.name in names:
+            raise RobotFileError(f"{where}: joint name {j.name!r} is used twice")
+        names[j.name] = i
+        joints.append(j)
+        if not j.is_mimic:
+            nvar += 1
+    # Resolve mimic joints now that every joint has its variable index.
+    joints = [ctx.resolve_mimic(j, names, joints) for j in joints]
+
+    ends: dict[str, End] = {}
+    last = len(joints) - 1
+    tool = data.get("tool")
+    ends_raw = data.get("ends") or {}
+    if not isinstance(ends_raw, dict):
+        raise RobotFileError(f"{where}: 'ends' must be a mapping of end names to transforms")
+    if tool is not None:
+        ends["tool"] = End("tool", last, ctx.fixed(tool, "tool"))
+    for en, er in ends_raw.items():
+        if en in ends or en in names or en == "base":
+            raise RobotFileError(f"{where}: end name {en!r} clashes with another frame")
+        if not isinstance(er, dict):
+            raise RobotFileError(f"{where}: ends.{en} must be a mapping")
+        parent = er.get("parent", joints[last].name)
+        if parent not in names:
+            raise RobotFileError(f"{where}: ends.{en}.parent {parent!r} is not a joint name")
+        ends[str(en)] = End(str(en), names[parent],
+                            ctx.fixed({k: v for k, v in er.items() if k != "parent"}, f"ends.{en}"))
+    if not ends:
+        ends["flange"] = End("flange", last, ())
+    default_end = data.get("default_end", next(iter(ends)))
+    if default_end not in ends:
+        raise RobotFileError(f"{where}: default_end {default_end!r} is not one of {list(ends)}")
+
+    unused = set(params) - ctx.used
+    if unused:
+        raise RobotFileError(f"{where}: parameter(s) {sorted(unused)} are defined but never used")
+    params_si = {k: params[k] * ctx.param_factor(k) for k in params}
+
+    joints = tuple(joints)
+    exact = is_exact(joints, ends)
+    return Robot(name=name, title=str(data.get("title", name)), source=str(data.get("source", "")),
+                 convention=conv, joints=joints, ends=ends, default_end=default_end,
+                 parameters=params_si, path=path, notes=str(data.get("notes", "")),
+                 nominal=_nominal(data.get("nominal"), where), exact=exact,
+                 id=digest(joints, ends, default_end, exact))
+
+
+def _rational_multiple_of_pi(angle) -> bool:
+    return angle == 0 or (sp.sympify(angle) / sp.pi).is_rational is True
+
+
+def is_exact(joints, ends) -> bool:
+    """Whether every fixed angle of a description (twists, offsets, fixed rotations of the
+    joints and end frames) is a rational multiple of pi, so that the joint dual quaternions
+    have the exact cos/sin values the symbolic derivation folds. A robot that is not exact
+    (decimal or calibrated angles) gets its kernels from the numeric product instead
+    (:mod:`derive.codegen.fk`)."""
+    ops = [op for j in joints for op in (*j.pre, *j.post)] + [op for e in ends.values() for op in e.ops]
+    angles = [op.sym[1] for op in ops if op.kind == "R"]
+    angles += [j.offset.sym for j in joints if j.type == "revolute"]
+    return all(_rational_multiple_of_pi(a) for a in angles)
+
+
+def _snap_angle(value: float):
+    """k pi / 12 when ``value`` (rad) is within SNAP_TOL of it, else None."""
+    k = round(value / (math.pi / 12))
+    if abs(value - k * math.pi / 12) <= SNAP_TOL:
+        return sp.Rational(k, 12) * sp.pi
+    return None
+
+
+def _nominal(value, where: str) -> str:
+    """The ``nominal`` key: a library robot name (checked to exist)."""
+    if value is None:
+        return ""
+    if not isinstance(value, str) or value not in list_robots():
+        raise RobotFileError(f"{where}: nominal {value!r} is not a robot of the library "
+                             f"({', '.join(list_robots())})")
+    return value
+
+
+class _Context:
+    """Per-file state while joints are read: units, parameters, parameter kinds."""
+
+    def __init__(self, where, conv, params, lu, au):
+        self.where, self.conv, self.params = where, conv, params
+        self.lf, self.af, self.degrees = LENGTH_UNITS[lu], ANGLE_UNITS[au], au == "deg"
+        self.exact = {"length": _EXACT_FACTOR[lu], "angle": _EXACT_FACTOR[au], "unitless": sp.Integer(1)}
+        self.symbols = {p: sp.Symbol(p, real=True) for p in params}
+        self.used: set[str] = set()
+        self.kind_of: dict[str, str] = {}
+
+    def param_factor(self, name):
+        return self.af if self.kind_of.get(name) == "angle" else self.lf
+
+    # -- scalar fields -------------------------------------------------------
+    def _value(self, where, raw, what, kind):
+        ev = _Expr(where, self.params, self.degrees)
+        v = ev(raw, what)
+        for p in ev.used:
+            if self.kind_of.setdefault(p, kind) != kind:
+                raise RobotFileError(f"{where}: parameter {p!r} is used both as a length and an angle")
+        self.used |= ev.used
+        return Num(v, self._exact_value(raw, kind))
+
+    def _exact_value(self, raw, kind):
+        """The field as an exact SI expression; parameters stand for their SI values. A decimal
+        angle within SNAP_TOL of a multiple of pi/12 is that multiple; other decimal angles
+        stay floats (the robot is then not exact, see :func:`is_exact`)."""
+        if isinstance(raw, (int, float)):
+            e = sp.nsimplify(raw, rational=True)
+        else:
+            e = sp.sympify(raw, locals={**self.symbols, "pi": sp.pi})
+        f = self.exact[kind]
+        subs = {s: s / self.exact[self.kind_of.get(p, kind)] for p, s in self.symbols.items()}
+        e = sp.nsimplify(f * e.subs(subs)) if f != 1 else e
+        if kind == "angle" and not e.free_symbols and not _rational_multiple_of_pi(e):
+            snapped = _snap_angle(float(e))
+            e = snapped if snapped is not None else sp.Float(float(e), 17)
+        return e
+
+    def _scaled(self, where, raw, what, kind, limit, unit, hint):
+        v = self._value(where, raw, what, kind)
+        v = Num(v * (self.lf if kind == "length" else self.af), v.sym)
+        if abs(v) > limit:
+            raise RobotFileError(f"{where}: {what} = {v:g} {unit} is out of range; {hint}")
+        return v
+
+    def length(self, where, raw, what):
+        return self._scaled(where, raw, what, "length", MAX_LENGTH_M, "m",
+                            "is the file in millimetres? set units.length: mm")
+
+    def angle(self, where, raw, what, limit=MAX_ANGLE_RAD):
+        return self._scaled(where, raw, what, "angle", limit, "rad",
+                            "is it in degrees? set units.angle: deg")
+
+    def vector(self, where, raw, what, kind="length"):
+        if not isinstance(raw, (list, tuple)) or len(raw) != 3:
+            raise RobotFileError(f"{where}: {what} must be a list of 3 numbers, got {raw!r}")
+        if kind == "length":
+            return [self.length(where, x, f"{what}[{k}]") for k, x in enumerate(raw)]
+        return [self._value(where, x, f"{what}[{k}]", "unitless") for k, x in enumerate(raw)]
+
+    def axis(self, where, raw, what="axis"):
+        v = self.vector(where, raw, what, kind="unitless")
+        n = float(np.linalg.norm(np.array(v, dtype=float)))
+        if n < 1e-9:
+            raise RobotFileError(f"{where}: {what} is the zero vector; a joint axis needs a direction")
+        if abs(n - 1.0) > 1e-6:
+            raise RobotFileError(f"{where}: {what} = {raw!r} has length {n:.6g}; give a unit vector")
+        exact_norm = sp.sqrt(sum(x.sym**2 for x in v))
+        return [Num(float(x) / n, sp.nsimplify(x.sym / exact_norm)) for x in v]
+
+    # -- joints --------------------------------------------------------------
+    def joint(self, i, jr, names, joints, nvar) -> Joint:
+        where = f"{self.where}: joints[{i}]"
+        if not isinstance(jr, dict):
+            raise RobotFileError(f"{where}: each joint must be a mapping, got {type(jr).__name__}")
+        jname = jr.get("name")
+        if not isinstance(jname, str) or not jname:
+            raise RobotFileError(f"{where}: missing or empty 'name'")
+        where = f"{self.where}: joint {jname!r}"
+        jtype = jr.get("type", "revolute")
+        if jtype not in JOINT_TYPES:
+            raise RobotFileError(f"{where}: type {jtype!r} is not one of {JOINT_TYPES}")
+
+        geom = set(_DH_KEYS.get(self.conv, ("axis", "link")))
+        unknown = set(jr) - geom - _COMMON_JOINT_KEYS
+        if unknown:
+            raise RobotFileError(f"{where}: unknown key(s) {sorted(unknown)} for convention "
+                                 f"{self.conv}; allowed: {sorted(geom | _COMMON_JOINT_KEYS)}")
+        parent_name = jr.get("parent")
+        if parent_name is None:
+            parent = i - 1
+        elif parent_name == "base":
+            parent = -1
+        elif parent_name in names:
+            parent = names[parent_name]
+        else:
+            raise RobotFileError(f"{where}: parent {parent_name!r} is not an earlier joint")
+
+        if self.conv == "axis_angle":
+            for key in ("axis", "link"):
+                if key not in jr:
+                    raise RobotFileError(f"{where}: missing key {key!r} (convention axis_angle)")
+            axis = self.axis(where, jr["axis"])
+            link = self.vector(where, jr["link"], "link")
+            pre, post = (), (Op.trans(link),)
+            axis = Op.rot(axis, 0.0)  # carries the exact axis
+            offset_raw = jr.get("offset", 0)
+        else:
+            pre, axis, post, offset_raw = self._dh(where, jr, jtype)
+
+        offset = (self.angle(where, offset_raw, "offset") if jtype == "revolute"
+                  else self.length(where, offset_raw, "offset"))
+        limits = self._limits(where, jr.get("limits"), jtype)
+        mimic = jr.get("mimic")
+        if isinstance(axis, Op):
+            exact_axis, axis = axis.sym[0], axis.axis
+        else:
+            exact_axis, axis = _exact(axis), np.asarray(axis, dtype=float)
+        return Joint(name=jname, type=jtype, parent=parent, axis=axis, pre=pre, post=post,
+                     offset=offset, limits=limits, variable=-1 if mimic else nvar,
+                     params={k: v for k, v in jr.items() if k != "name"}, exact_axis=exact_axis)
+
+    def _dh(self, where, jr, jtype):
+        keys = _DH_KEYS[self.conv]
+        dkey = "s" if self.conv == "kunze" else "d"
+        for key in keys:
+            variable = (key == "theta" and jtype == "revolute") or (key == dkey and jtype == "prismatic")
+            if key not in jr and not variable:
+                raise RobotFileError(f"{where}: missing key {key!r} (convention {self.conv})")
+        var_key = "theta" if jtype == "revolute" else dkey
+        if var_key in jr and "offset" in jr:
+            raise RobotFileError(f"{where}: give the constant part of the joint variable as either "
+                                 f"{var_key!r} or 'offset', not both")
+        theta = self.angle(where, jr.get("theta", 0), "theta")
+        d = self.length(where, jr.get(dkey, 0), dkey)
+        a = self.length(where, jr["a"], "a")
+        alpha = self.angle(where, jr["alpha"], "alpha")
+        offset_raw = jr.get("offset", jr.get(var_key, 0))
+        if jtype == "revolute":
+            motion_pre, motion_post = (), (Op.trans([0, 0, d]),)
+        else:
+            motion_pre, motion_post = ((Op.rot(EZ, theta),) if theta else ()), ()
+        link = (Op.trans([a, 0, 0]), Op.rot(EX, alpha))
+        if self.conv == "modified_dh":
+            pre = link + motion_pre
+            post = motion_post
+        else:
+            pre = motion_pre
+            post = motion_post + link
+        return pre, (0, 0, 1), post, offset_raw
+
+    def _limits(self, where, raw, jtype):
+        if raw is None:
+            return None
+        if not isinstance(raw, (list, tuple)) or len(raw) != 2:
+            raise RobotFileError(f"{where}: limits must be [lower, upper], got {raw!r}")
+        if jtype == "revolute":
+            lo, hi = (self.angle(where, x, "limits", limit=MAX_LIMIT_RAD) for x in raw)
+        else:
+            lo, hi = (self.length(where, x, "limits") for x in raw)
+        if not lo < hi:
+            raise RobotFileError(f"{where}: limits lower {lo:g} must be below upper {hi:g}")
+        return (lo, hi)
+
+    def resolve_mimic(self, j: Joint, names, joints) -> Joint:
+        m = j.params.get("mimic")
+        if m is None:
+            return j
+        where = f"{self.where}: joint {j.name!r}"
+        if not isinstance(m, dict) or "joint" not in m or set(m) - {"joint", "multiplier", "offset"}:
+            raise RobotFileError(f"{where}: mimic must be a mapping {{joint, multiplier, offset}}")
+        src = m["joint"]
+        if src not in names or joints[names[src]].is_mimic:
+            raise RobotFileError(f"{where}: mimic.joint {src!r} is not an independent joint")
+        mult = _Expr(where, {}, False)(m.get("multiplier", 1), "mimic.multiplier")
+        moff = (self.angle(where, m.get("offset", 0), "mimic.offset") if j.type == "revolute"
+                else self.length(where, m.get("offset", 0), "mimic.offset"))
+        return Joint(**{**j.__dict__, "variable": joints[names[src]].variable,
+                        "multiplier": mult, "mimic_offset": moff})
+
+    # -- fixed transforms (tool, ends) ----------------------------------------
+    def fixed(self, raw, what) -> tuple[Op, ...]:
+        where = f"{self.where}: {what}"
+        if not isinstance(raw, dict) or set(raw) - {"translation", "rotation"}:
+            raise RobotFileError(f"{where}: must be a mapping with 'translation' and/or 'rotation'")
+        ops: list[Op] = []
+        if "translation" in raw:
+            ops.append(Op.trans(self.vector(where, raw["translation"], "translation")))
+        rot = raw.get("rotation")
+        if rot is not None:
+            ops.extend(self._rotation(where, rot))
+        return tuple(ops)
+
+    def _rotation(self, where, rot) -> list[Op]:
+        if not isinstance(rot, dict) or len(set(rot) & {"quaternion", "rpy", "axis"}) != 1:
+            raise RobotFileError(f"{where}: rotation must give exactly one of "
+                                 "quaternion [w,x,y,z], rpy [roll,pitch,yaw], or axis + angle")
+        if "quaternion" in rot:
+            q = rot["quaternion"]
+            if not isinstance(q, (list, tuple)) or len(q) != 4:
+                raise RobotFileError(f"{where}: rotation.quaternion must be [w, x, y, z]")
+            q = np.array([_Expr(where, {}, False)(x, "quaternion") for x in q])
+            n = float(np.linalg.norm(q))
+            if abs(n - 1.0) > 1e-4:
+                raise RobotFileError(f"{where}: rotation.quaternion has norm {n:.6g}; give a unit quaternion")
+            q = q / n
+            if q[0] < 0:
+                q = -q
+            vn = float(np.linalg.norm(q[1:]))
+            if vn == 0.0:
+                return []
+            angle = 2.0 * math.atan2(vn, q[0])
+            return [Op.rot(q[1:] / vn, Num(angle, sp.nsimplify(angle, [sp.pi], tolerance=1e-12)))]
+        if "rpy" in rot:
+            r = rot["rpy"]
+            if not isinstance(r, (list, tuple)) or len(r) != 3:
+                raise RobotFileError(f"{where}: rotation.rpy must be [roll, pitch, yaw]")
+            roll, pitch, yaw = (self.angle(where, x, "rpy") for x in r)
+            # R = Rz(yaw) Ry(pitch) Rx(roll) (URDF / ROS convention)
+            return [Op.rot(EZ, yaw), Op.rot(EY, pitch), Op.rot(EX, roll)]
+        axis = self.axis(where, rot["axis"], "rotation.axis")
+        if "angle" not in rot:
+            raise RobotFileError(f"{where}: rotation.axis needs rotation.angle")
+        return [Op.rot(axis, self.angle(where, rot["angle"], "rotation.angle"))]

@@ -1,0 +1,233 @@
+"""Robot identity by content, the artifact load path, decimal angles and output folders
+(issue: "Robot identity by content, artifacts loaded in milliseconds, and the package in layers")."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import derive
+from derive import DeriveError, reference
+from derive.cache import clear_memory, user_folder
+from derive.cli import main
+
+LIBRARY = Path(derive.__file__).resolve().parent / "robots"
+GENERATED = Path(derive.__file__).resolve().parent.parent / "generated"
+
+
+def _ur5(**changes) -> dict:
+    data = yaml.safe_load((LIBRARY / "ur5.yaml").read_text())
+    data["parameters"].update(changes.pop("parameters", {}))
+    data.update(changes)
+    return data
+
+
+def _write(path: Path, data: dict) -> Path:
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def _decimal_alphas(data: dict, value: float) -> dict:
+    for j in data["joints"]:
+        if str(j["alpha"]) in ("pi/2", "-pi/2"):
+            j["alpha"] = -value if str(j["alpha"]).startswith("-") else value
+    return data
+
+
+def _same_pose(a, b):
+    """Largest difference of two batches of unit dual quaternions, sign of each row aligned."""
+    s = np.where(np.sum(a[:, :4] * b[:, :4], axis=1) < 0, -1.0, 1.0)[:, None]
+    return float(np.max(np.abs(a * s - b)))
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    """An empty user cache for this test; in-memory results forgotten before and after."""
+    folder = tmp_path / "cache"
+    monkeypatch.setenv("DQ_DERIVE_CACHE", str(folder))
+    loaded = ("kernels", "casadi-functions", "code-digest")
+    clear_memory(loaded)
+    yield folder
+    clear_memory(loaded)
+
+
+# --------------------------------------------------------------------------- #
+# Identity
+# --------------------------------------------------------------------------- #
+def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
+    ur5 = derive.load_robot("ur5")
+    copy = derive.load_robot(_write(tmp_path / "arm.yaml", _ur5(name="my-arm", title="Mine")))
+    assert copy.name == "my-arm" and copy.id == ur5.id
+    moved = derive.load_robot(_write(tmp_path / "d1.yaml", _ur5(parameters={"d1": 0.5})))
+    assert moved.name == "ur5" and moved.id != ur5.id
+    limits = _ur5()
+    limits["joints"][0]["limits"] = ["-pi", "pi"]
+    assert derive.load_robot(_write(tmp_path / "lim.yaml", limits)).id != ur5.id
+    # the same arm in millimetres and degrees: the numbers after units are the same
+    mm = _ur5(name="ur5-mm", units={"length": "mm", "angle": "deg"},
+              parameters={k: v * 1000 for k, v in _ur5()["parameters"].items()})
+    for j in mm["joints"]:
+        j["alpha"] = {"pi/2": 90, "-pi/2": -90, 0: 0}[j["alpha"]]
+        j["limits"] = [-360, 360]
+    assert derive.load_robot(_write(tmp_path / "mm.yaml", mm)).id == ur5.id
+    # every library robot has its own identity
+    ids = {derive.load_robot(n).id for n in derive.list_robots()}
+    assert len(ids) == len(derive.list_robots())
+
+
+def test_an_edited_file_is_read_again(tmp_path):
+    path = _write(tmp_path / "arm.yaml", _ur5(name="arm"))
+    first = derive.load_robot(path)
+    _write(path, _ur5(name="arm", parameters={"d1": 0.3}))
+    second = derive.load_robot(path)
+    assert first.id != second.id
+    assert second.parameters["d1"] == pytest.approx(0.3)
+
+
+def test_decimal_angles_snap_to_multiples_of_pi_only_within_rounding(tmp_path):
+    exact = derive.load_robot(_write(tmp_path / "a.yaml",
+                                     _decimal_alphas(_ur5(name="dec"), 1.5707963267948966)))
+    assert exact.exact and exact.id == derive.load_robot("ur5").id
+    approx = derive.load_robot(_write(tmp_path / "b.yaml", _decimal_alphas(_ur5(name="approx"), 1.5708)))
+    assert not approx.exact and approx.id != exact.id
+    assert not derive.load_robot("general-6r").exact and not derive.load_robot("ur5-calibrated").exact
+
+
+# --------------------------------------------------------------------------- #
+# Kernels of any robot file
+# --------------------------------------------------------------------------- #
+@pytest.mark.parametrize("backend", ["python", "numpy", "c"])
+def test_file_named_ur5_with_another_d1_gets_its_own_kernels(tmp_path, cache, backend, rng):
+    path = _write(tmp_path / "ur5.yaml", _ur5(parameters={"d1": 0.5}))
+    q = rng.uniform(-np.pi, np.pi, (200, 6))
+    k = derive.kernels(str(path), backend)
+    mine = reference.fk(path, q)
+    assert _same_pose(k.fk(q), mine) < 1e-12
+    library = reference.fk("ur5", q)
+    assert np.allclose(np.abs(derive.dualquat.to_rt(mine)[1] - derive.dualquat.to_rt(library)[1])[:, 2],
+                       0.5 - 0.089159, atol=1e-12)
+    sols, counts = k.ik(mine[:50])
+    assert np.all(counts >= 1)
+    for i in range(50):
+        got = reference.fk(path, sols[i, :counts[i]])
+        err = reference.pose_error(got, np.repeat(mine[i:i + 1], counts[i], axis=0))
+        assert max(err[0].max(), err[1].max()) < 1e-10
+
+
+def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache, rng):
+    path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="decimal-ur5"), 1.5707963267948966))
+    q = rng.uniform(-np.pi, np.pi, (300, 6))
+    poses = reference.fk(path, q)
+    for backend in ("python", "numpy", "c"):
+        k = derive.kernels(path, backend)
+        assert _same_pose(k.fk(q), poses) < 1e-12
+        sols, counts = k.ik(poses)
+        found = 0
+        for i in range(len(q)):
+            s = sols[i, :counts[i]]
+            dp, dr = reference.pose_error(reference.fk(path, s), np.repeat(poses[i:i + 1], counts[i], axis=0))
+            assert dp.max() < 1e-10 and dr.max() < 1e-10
+            d = np.abs(np.mod(s - q[i] + np.pi, 2 * np.pi) - np.pi)
+            found += bool(np.any(np.all(d < 1e-8, axis=1)))
+        assert found == len(q)
+
+
+def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
+    path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="approx-ur5"), 1.5708))
+    k = derive.kernels(path, "c")
+    err = capfd.readouterr().err
+    assert "[approx-ur5]" in err and "deriving" in err and "numeric product" in err
+    q = rng.uniform(-np.pi, np.pi, (200, 6))
+    assert _same_pose(k.fk(q), reference.fk(path, q)) < 1e-12
+    assert not k.has_ik
+    with pytest.raises(DeriveError, match="derive.refine"):
+        k.ik(reference.fk(path, q[0]))
+    assert (user_folder(derive.load_robot(path).id) / "manifest.json").is_file()
+
+
+def test_derivation_stops_at_its_time_budget(tmp_path, cache, monkeypatch):
+    path = _write(tmp_path / "arm.yaml", _ur5(name="budget-arm", parameters={"d4": 0.2}))
+    monkeypatch.setenv("DQ_DERIVE_BUDGET", "0.001")
+    with pytest.raises(DeriveError, match="time budget of 0.001 s"):
+        derive.kernels(path, "numpy")
+    monkeypatch.setenv("DQ_DERIVE_BUDGET", "soon")
+    with pytest.raises(DeriveError, match="DQ_DERIVE_BUDGET"):
+        derive.kernels(path, "numpy")
+
+
+def test_library_kernels_come_from_the_shipped_folder(cache):
+    k = derive.kernels("ur5", "numpy")
+    assert k.folder == GENERATED / "ur5"
+    manifest = json.loads((GENERATED / "ur5" / "manifest.json").read_text())
+    assert manifest["id"] == derive.load_robot("ur5").id
+    assert not cache.exists() or not any(cache.rglob("manifest.json"))
+
+
+_NO_SYMBOLIC_WORK = r"""
+import sys, os
+calls = []
+watched = ("derive/symbolic/", "derive/ik/extract.py", "derive/ik/program.py",
+           "derive/codegen/emit.py", "derive/codegen/fk.py", "derive/reports/")
+def hook(frame, event, arg):
+    if event == "call":
+        f = frame.f_code.co_filename.replace(os.sep, "/")
+        if any(w in f for w in watched):
+            calls.append(f"{f}:{frame.f_code.co_name}")
+import derive
+sys.setprofile(hook)
+k = derive.kernels("ur5", "c")
+q = [0.3, -1.1, 1.2, -0.4, 0.8, 0.2]
+pose = derive.reference.fk("ur5", q)
+sols, n = k.ik(pose)
+res = derive.refine("ur5", pose)
+sys.setprofile(None)
+print(n, len(res.solutions), len(calls))
+print("\n".join(sorted(set(calls))[:20]))
+"""
+
+
+def test_warm_cache_loads_kernels_and_refine_without_symbolic_work(tmp_path):
+    env = {**os.environ, "DQ_DERIVE_CACHE": str(tmp_path / "cache")}
+    warm = subprocess.run([sys.executable, "-c", "import derive; derive.kernels('ur5', 'c')"],
+                          env=env, capture_output=True, text=True, timeout=300)
+    assert warm.returncode == 0, warm.stderr
+    run = subprocess.run([sys.executable, "-c", _NO_SYMBOLIC_WORK], env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    first, *called = run.stdout.strip().splitlines()
+    n, n_refined, n_calls = map(int, first.split())
+    assert n == 8 and n_refined == 8
+    assert n_calls == 0, "symbolic work on the load path:\n" + "\n".join(called)
+    assert run.stderr == ""          # nothing derived, so no progress lines
+
+
+# --------------------------------------------------------------------------- #
+# Output folders
+# --------------------------------------------------------------------------- #
+def test_out_folder_is_the_robot_name_for_any_robot_argument(tmp_path, cache, monkeypatch, capsys):
+    data = _decimal_alphas(_ur5(name="my-arm"), 1.5708)
+    path = _write(tmp_path / "arm.yaml", data)
+    out = tmp_path / "out"
+    assert main(["kernels", str(path.resolve()), "--out", str(out)]) == 0
+    assert sorted(p.name for p in (out / "my-arm").iterdir()) == [
+        "manifest.json", "my_arm_kinematics.c", "my_arm_kinematics.h", "my_arm_kinematics.py",
+        "my_arm_kinematics_numpy.py"]
+    monkeypatch.chdir(tmp_path)
+    assert main(["kernels", "arm.yaml", "--out", "rel"]) == 0
+    assert (tmp_path / "rel" / "my-arm" / "my_arm_kinematics.c").is_file()
+    assert not (tmp_path / "rel" / "arm.yaml").exists()
+    capsys.readouterr()
+
+
+def test_bad_robot_name_is_refused_before_any_work(tmp_path, capsys):
+    path = _write(tmp_path / "arm.yaml", _ur5(name="../escape"))
+    with pytest.raises(derive.RobotFileError, match="name '../escape'"):
+        derive.load_robot(path)
+    assert main(["kernels", str(path), "--out", str(tmp_path / "out")]) != 0
+    assert "name '../escape'" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
