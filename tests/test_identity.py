@@ -96,6 +96,27 @@ def test_decimal_angles_snap_to_multiples_of_pi_only_within_rounding(tmp_path):
     approx = derive.load_robot(_write(tmp_path / "b.yaml", _decimal_alphas(_ur5(name="approx"), 1.5708)))
     assert not approx.exact and approx.id != exact.id
     assert not derive.load_robot("general-6r").exact and not derive.load_robot("ur5-calibrated").exact
+    # within the snap tolerance the float is the multiple too: the same robot
+    near = derive.load_robot(_write(tmp_path / "c.yaml",
+                                    _decimal_alphas(_ur5(name="near"), 1.5707963267948966 + 1e-13)))
+    assert near.exact and near.id == exact.id
+    assert float(near.joints[0].post[-1].angle) == float(exact.joints[0].post[-1].angle)
+
+
+def test_exact_means_multiples_of_pi_over_12_in_any_unit_and_through_parameters(tmp_path):
+    ur5 = derive.load_robot("ur5")
+    deg = _ur5(name="deg", units={"length": "m", "angle": "deg"})
+    for j in deg["joints"]:
+        j["alpha"] = {"pi/2": 90, "-pi/2": -90, 0: 0}[j["alpha"]]
+        j["limits"] = [-360, 360]
+    assert derive.load_robot(_write(tmp_path / "deg.yaml", deg)).id == ur5.id
+    deg["joints"][0]["alpha"] = 90.2            # a rational number of degrees, not a multiple of 15
+    assert not derive.load_robot(_write(tmp_path / "deg2.yaml", deg)).exact
+    par = _ur5(name="par", parameters={"tw": "pi/2"})
+    for j in par["joints"]:
+        j["alpha"] = {"pi/2": "tw", "-pi/2": "-tw", 0: 0}[j["alpha"]]
+    robot = derive.load_robot(_write(tmp_path / "par.yaml", par))
+    assert robot.exact and robot.id == ur5.id
 
 
 # --------------------------------------------------------------------------- #

@@ -11,7 +11,9 @@ from hypothesis import strategies as st
 import derive
 from derive import InputError, reference
 from derive import dualquat as DQ
-from derive.kinematics.fk import _joint_dq   # one joint's dual quaternion (not in the facade)
+from derive.kinematics.fk import (
+    _joint_dq,  # one joint's dual quaternion (not in the facade)
+)
 
 HOME = [0, -math.pi / 2, 0, -math.pi / 2, 0, 0]   # thesis section 4.5
 

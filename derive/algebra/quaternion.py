@@ -57,6 +57,15 @@ def hamilton(a, b) -> tuple:
     )
 
 
+def dual_hamilton(a, b) -> tuple:
+    """Product of two dual quaternions given as 8-sequences [real w x y z, dual w x y z] of
+    scalars (real a_r b_r, dual a_r b_d + a_d b_r; Kunze eq. 1.8), for symbolic and CasADi
+    components alike."""
+    real = hamilton(a[:4], b[:4])
+    d1, d2 = hamilton(a[:4], b[4:]), hamilton(a[4:], b[:4])
+    return tuple(real) + tuple(x + y for x, y in zip(d1, d2))
+
+
 def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a b on arrays (..., 4)."""
     return np.stack(hamilton(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)), axis=-1)

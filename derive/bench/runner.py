@@ -128,16 +128,10 @@ def main(argv=None) -> int:
     p.add_argument("--json", default=None, help="also write the results as JSON to this file")
     p.add_argument("--plot", default=None, help="chain: write the figure to this file (PNG)")
     args = p.parse_args(argv)
-    if args.what == "kernels":
-        r = bench_kernels(args.robot or "ur5", repeats=args.repeats)
-        print(report(r))
-        if args.json:
-            with open(args.json, "w") as fh:
-                json.dump(r, fh, indent=1)
-        return 0
-    if args.what == "load":
-        r = bench_load(repeats=args.repeats)
-        print(load_report(r))
+    if args.what in ("kernels", "load"):
+        r = (bench_kernels(args.robot or "ur5", repeats=args.repeats) if args.what == "kernels"
+             else bench_load(repeats=args.repeats))
+        print(report(r) if args.what == "kernels" else load_report(r))
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump(r, fh, indent=1)

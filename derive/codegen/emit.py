@@ -1,4 +1,4 @@
-"""Emission of the numeric kernels (pure Python, numpy, C99) from :mod:`derive.codegen`.
+"""Emission of the numeric kernels (pure Python, numpy, C99) from :mod:`derive.codegen.fk`.
 
 Every file is standalone (copy it into another project and it works) and starts with a
 header naming the robot, its parameters, the dq-derive version and the command that made it.

@@ -1,6 +1,6 @@
 """Flat expressions for the generated kernels, from the derived chain products.
 
-The forward kinematics of a robot is M_1 G (:mod:`derive.chain`): the product of the
+The forward kinematics of a robot is M_1 G (:mod:`derive.symbolic.chain`): the product of the
 joint dual quaternions in thesis form times the constant end transform. Its 8
 components are built symbolically, the robot's numbers substituted, and written as a
 sequence of assignments:
@@ -14,7 +14,7 @@ sequence of assignments:
 The joint variables are ``q[0] .. q[n-1]``; the outputs are the unit dual quaternion
 [real w x y z, dual w x y z] (dual = 1/2 t real) in the sign the product gives.
 
-A robot that is not exact (a fixed angle that is not a rational multiple of pi: decimal DH
+A robot that is not exact (a fixed angle that is not a multiple of pi/12: decimal DH
 twists, calibrated arms, see :func:`derive.model.robot.is_exact`) has no exact equations
 to fold. Its kernel is the product of the joint dual quaternions of the description's
 neutral form (Kunze eq. 1.8, 5.28: each rotation cos(t/2) + sin(t/2) n, each translation
@@ -30,7 +30,7 @@ import numpy as np
 import sympy as sp
 
 from derive.algebra import dualquat as dq
-from derive.algebra.quaternion import hamilton
+from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo, step
 from derive.ik.extract import _rot
 from derive.model.geometry import path_to_end
@@ -71,13 +71,6 @@ def fk_kernel(robot) -> Kernel:
     """The FK kernel's straight-line code (cached per robot identity)."""
     robot = load_robot(robot)
     return memo("fk-kernel", robot.id, lambda: _fk_kernel(robot))
-
-
-def _dq_mul(a, b):
-    """Dual-quaternion product of two 8-tuples (real a_r b_r, dual a_r b_d + a_d b_r)."""
-    real = hamilton(a[:4], b[:4])
-    d1, d2 = hamilton(a[:4], b[4:]), hamilton(a[4:], b[:4])
-    return tuple(real) + tuple(x + y for x, y in zip(d1, d2))
 
 
 def _number(x) -> sp.Expr:
@@ -131,14 +124,14 @@ def _fk_numeric(robot, qs) -> Kernel:
         else:
             m = (1, 0, 0, 0, 0, *(value * _number(a / 2) for a in j.axis))
         pre = const(_constant(j.pre))
-        m = _dq_mul(pre, m) if j.pre else m
-        m = _dq_mul(m, const(_constant(j.post))) if j.post else m
-        cur = fold(m) if cur is None else fold(_dq_mul(cur, fold(m)))
+        m = dual_hamilton(pre, m) if j.pre else m
+        m = dual_hamilton(m, const(_constant(j.post))) if j.post else m
+        cur = fold(m) if cur is None else fold(dual_hamilton(cur, fold(m)))
     end = robot.ends[robot.default_end].ops
     if cur is None:
         cur = const(_constant(end))
     elif end:
-        cur = fold(_dq_mul(cur, const(_constant(end))))
+        cur = fold(dual_hamilton(cur, const(_constant(end))))
     k.n_sincos = len(k.trig)
     k.outputs = list(cur)
     return k

@@ -181,8 +181,11 @@ class Kernels:
         joint is chosen for reach (see the generated file's header)."""
 
         if not self.has_ik:
-            raise DeriveError(f"{self.robot.name}: no closed-form IK kernel (the extraction found "
-                              "no program for this chain); use derive.refine")
+            why = ("its fixed angles are not all multiples of pi/12, so there are no exact equations "
+                   "to solve" if not self.robot.exact else
+                   "the extraction found no closed form for this chain")
+            raise DeriveError(f"{self.robot.name}: no closed-form IK kernel ({why}); "
+                              "use derive.refine")
         poses, single = as_pose_batch(P)
         poses = np.ascontiguousarray(poses, dtype=np.float64)
         n = poses.shape[0]

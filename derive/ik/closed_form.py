@@ -1,8 +1,8 @@
 """Closed-form inverse kinematics of the UR family (numeric reference).
 
-The chain in thesis form (:mod:`derive.chain`): axes z, -y, -y, -y, -z, -y and links
+The chain in thesis form (:mod:`derive.symbolic.chain`): axes z, -y, -y, -y, -z, -y and links
 (0, 0, d1), (a2, 0, 0), (a3, -d4, 0), (0, 0, -d5), (0, -d6, 0), 0. The solving order is
-the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik_extract`):
+the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik.extract`):
 
 1. theta1 from W.6 (= 4.9): y5 cos t1 - x5 sin t1 = -d4, with the frame-5 point
    p5 = p + d6 R e_y; two roots (4.11);

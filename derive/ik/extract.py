@@ -1,7 +1,7 @@
 """Extraction of closed-form IK from the derived equations M_i = N_i.
 
 The pipeline knows nothing about the UR: it takes the equation sets of
-:mod:`derive.equations` and repeatedly looks for an equation (or a pair) that
+:mod:`derive.symbolic.equations` and repeatedly looks for an equation (or a pair) that
 can be solved for one unknown, given the angles already found. Patterns:
 
 * ``S1`` one equation with one unknown angle u (or one compound such as

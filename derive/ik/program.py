@@ -1,6 +1,6 @@
 """Straight-line IK programs for the generated kernels, from the extracted closed forms.
 
-:mod:`derive.ik_extract` finds, for a 6R chain, a solving order and the equations of each
+:mod:`derive.ik.extract` finds, for a 6R chain, a solving order and the equations of each
 step (patterns S1, S2, S3, span). This module turns those steps into a program of
 assignments, branch points and reachability checks that the emitters print as pure
 Python, numpy and C. The expressions are the derived ones (coefficients A, B, C of the
@@ -24,7 +24,7 @@ the singular sets):
   (:func:`_free_for_reach`), and the undetermined compound follows.
 
 Reachability: an S1 step with A^2 + B^2 < C^2, or an acos argument beyond +-1, by more than
-:data:`derive.ik.REACH_TOL` (relative), drops the branch; within it the root is clipped.
+:data:`derive.ik.closed_form.REACH_TOL` (relative), drops the branch; within it the root is clipped.
 """
 
 from __future__ import annotations
@@ -213,7 +213,7 @@ def ik_program(robot) -> IKProgram:
 def _ik_program(robot) -> IKProgram:
     if not robot.exact:
         raise DeriveError(f"{robot.name}: no closed-form IK kernel: the description's fixed angles "
-                          "are not all rational multiples of pi, so there are no exact equations to "
+                          "are not all multiples of pi/12, so there are no exact equations to "
                           "solve; use derive.refine for the IK")
     ext = extract(robot)
     chain = ext.chain

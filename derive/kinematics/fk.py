@@ -7,7 +7,7 @@
   Rodrigues' formula (Kunze eq. 5.1-5.4 for the DH case); it shares no code
   with the quaternion modules.
 
-Both evaluate the neutral joint form of :mod:`derive.robot`; the test suite
+Both evaluate the neutral joint form of :mod:`derive.model.robot`; the test suite
 requires them to agree to 1e-12 on every robot of the library.
 
 Joint values ``q`` have shape (dof,) for one configuration or (n, dof) for a

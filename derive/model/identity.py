@@ -3,8 +3,8 @@
 Two descriptions have the same identity exactly when they describe the same kinematics:
 the same joints (type, parent, driving variable, mimic relation, motion axis, fixed motions
 before and after, offset, limits) and the same end frames, every number in SI units after
-the file's units are applied, and the same exactness (whether every fixed angle is a rational
-multiple of pi, which decides how the equations are derived). The robot's name, title,
+the file's units are applied, and the same exactness (whether every fixed angle is a multiple
+of pi/12, which decides how the equations are derived). The robot's name, title,
 source, joint names and file path do not enter: a copy of ``ur5.yaml`` under another name is
 the UR5, and a copy with one number changed is another robot.
 

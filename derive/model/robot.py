@@ -126,7 +126,7 @@ class Joint:
     type: str                      # "revolute" or "prismatic"
     parent: int                    # index of the parent joint, -1 for the base
     axis: np.ndarray               # unit motion axis in the parent frame (after ``pre``)
-                                   # (its exact form: derive.robot.exact_axis)
+                                   # (its exact form: derive.model.robot.exact_axis)
     pre: tuple[Op, ...]
     post: tuple[Op, ...]
     offset: float                  # added to the joint value (rad or m); a Num (exact in .sym)
@@ -166,7 +166,7 @@ class Robot:
     path: str
     notes: str = ""
     nominal: str = ""              # library robot whose closed form seeds this one (calibrated arms)
-    exact: bool = True             # every fixed angle a rational multiple of pi (see is_exact)
+    exact: bool = True             # every fixed angle a multiple of pi/12 (see is_exact)
     id: str = ""                   # identity: hash of the normalised description (model.identity)
 
     @property
@@ -344,7 +344,7 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
     if not isinstance(joints_raw, list) or not joints_raw:
         raise RobotFileError(f"{where}: 'joints' must be a non-empty list")
 
-    ctx = _Context(where, conv, params, lu, au)
+    ctx = _Context(where, conv, params, lu, au, params_raw)
     joints: list[Joint] = []
     names: dict[str, int] = {}
     nvar = 0
@@ -397,20 +397,21 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
                  id=digest(joints, ends, default_end, exact))
 
 
-def _rational_multiple_of_pi(angle) -> bool:
-    return angle == 0 or (sp.sympify(angle) / sp.pi).is_rational is True
+def _multiple_of_pi_12(angle) -> bool:
+    """Whether ``angle`` is exactly k pi / 12 (15 degrees) for an integer k."""
+    return angle == 0 or (sp.sympify(angle) * 12 / sp.pi).is_integer is True
 
 
 def is_exact(joints, ends) -> bool:
     """Whether every fixed angle of a description (twists, offsets, fixed rotations of the
-    joints and end frames) is a rational multiple of pi, so that the joint dual quaternions
-    have the exact cos/sin values the symbolic derivation folds. A robot that is not exact
+    joints and end frames) is a multiple of pi/12 (15 degrees), so that the joint dual
+    quaternions have the exact cos/sin values (radicals) the symbolic derivation folds. A robot that is not exact
     (decimal or calibrated angles) gets its kernels from the numeric product instead
     (:mod:`derive.codegen.fk`)."""
     ops = [op for j in joints for op in (*j.pre, *j.post)] + [op for e in ends.values() for op in e.ops]
     angles = [op.sym[1] for op in ops if op.kind == "R"]
     angles += [j.offset.sym for j in joints if j.type == "revolute"]
-    return all(_rational_multiple_of_pi(a) for a in angles)
+    return all(_multiple_of_pi_12(a) for a in angles)
 
 
 def _snap_angle(value: float):
@@ -434,8 +435,9 @@ def _nominal(value, where: str) -> str:
 class _Context:
     """Per-file state while joints are read: units, parameters, parameter kinds."""
 
-    def __init__(self, where, conv, params, lu, au):
+    def __init__(self, where, conv, params, lu, au, params_raw=None):
         self.where, self.conv, self.params = where, conv, params
+        self.params_raw = params_raw or {}
         self.lf, self.af, self.degrees = LENGTH_UNITS[lu], ANGLE_UNITS[au], au == "deg"
         self.exact = {"length": _EXACT_FACTOR[lu], "angle": _EXACT_FACTOR[au], "unitless": sp.Integer(1)}
         self.symbols = {p: sp.Symbol(p, real=True) for p in params}
@@ -456,24 +458,33 @@ class _Context:
         return Num(v, self._exact_value(raw, kind))
 
     def _exact_value(self, raw, kind):
-        """The field as an exact SI expression; parameters stand for their SI values. A decimal
-        angle within SNAP_TOL of a multiple of pi/12 is that multiple; other decimal angles
-        stay floats (the robot is then not exact, see :func:`is_exact`)."""
-        if isinstance(raw, (int, float)):
-            e = sp.nsimplify(raw, rational=True)
-        else:
-            e = sp.sympify(raw, locals={**self.symbols, "pi": sp.pi})
+        """The field as an exact SI expression; length parameters stand for their SI values,
+        angle parameters are replaced by their exact values. A decimal angle within SNAP_TOL of
+        a multiple of pi/12 is that multiple; other angles that are not such multiples stay
+        floats (the robot is then not exact, see :func:`is_exact`)."""
+        e = self._sym(raw)
         f = self.exact[kind]
         subs = {s: s / self.exact[self.kind_of.get(p, kind)] for p, s in self.symbols.items()}
         e = sp.nsimplify(f * e.subs(subs)) if f != 1 else e
-        if kind == "angle" and not e.free_symbols and not _rational_multiple_of_pi(e):
-            snapped = _snap_angle(float(e))
-            e = snapped if snapped is not None else sp.Float(float(e), 17)
+        if kind == "angle":
+            e = e.subs({s: self._sym(self.params_raw[p]) * self.exact["angle"]
+                        for p, s in self.symbols.items() if self.kind_of.get(p) == "angle"})
+            if not e.free_symbols and not _multiple_of_pi_12(e):
+                snapped = _snap_angle(float(e))
+                e = snapped if snapped is not None else sp.Float(float(e), 17)
         return e
+
+    def _sym(self, raw):
+        if isinstance(raw, (int, float)):
+            return sp.nsimplify(raw, rational=True)
+        return sp.sympify(raw, locals={**self.symbols, "pi": sp.pi})
 
     def _scaled(self, where, raw, what, kind, limit, unit, hint):
         v = self._value(where, raw, what, kind)
-        v = Num(v * (self.lf if kind == "length" else self.af), v.sym)
+        si = v * (self.lf if kind == "length" else self.af)
+        if kind == "angle" and not v.sym.free_symbols and _multiple_of_pi_12(v.sym):
+            si = float(v.sym)           # 1.5707963267948966 and pi/2 + 1e-13 are both pi/2
+        v = Num(si, v.sym)
         if abs(v) > limit:
             raise RobotFileError(f"{where}: {what} = {v:g} {unit} is out of range; {hint}")
         return v

@@ -16,14 +16,14 @@ Every function is a ``casadi.Function`` over SX expressions:
   is total (no NaN: square roots of clipped arguments, atan2), unreachable branches are
   flagged instead of dropped, and duplicates are not merged (the C kernels merge them).
 
-Where the expressions come from. ``fk`` of a library robot is the derived straight-line
-code of the other kernels (:func:`derive.codegen.fk_kernel`: the folded left sides of
+Where the expressions come from. ``fk`` of an exact library robot is the derived straight-line
+code of the other kernels (:func:`derive.codegen.fk.fk_kernel`: the folded left sides of
 B.36-B.42 times G) converted node by node; ``ik`` is the IK program of
-:mod:`derive.ik_codegen` (the W.6, B.29-B.32, C.19/C.21, C.5/C.7 steps) with its branches
-unrolled and ``if_else`` at the singular selections. Robots outside the library (a
-calibrated arm, a general 6R) have no practical exact symbolic derivation: their DH angles
-such as pi/2 + 0.002 make the exact products grow without bound (the UR5 derivation takes
-seconds; a calibrated UR5 did not finish in minutes). For them ``fk`` is the product of the
+:mod:`derive.ik.program` (the W.6, B.29-B.32, C.19/C.21, C.5/C.7 steps) with its branches
+unrolled and ``if_else`` at the singular selections. Robots that are not exact (a calibrated
+arm, a general 6R: :attr:`Robot.exact`) have no practical exact symbolic derivation: their DH
+angles such as pi/2 + 0.002 make the exact products grow without bound; robots outside the
+library are built without waiting for a derivation. For both, ``fk`` is the product of the
 joint dual quaternions in the description's neutral form (Kunze eq. 1.8, 5.28; each rotation
 cos(t/2) + sin(t/2) n, each translation 1 + eps v/2), built directly in SX. The test suite
 checks that both constructions agree on the UR robots.
@@ -38,7 +38,7 @@ from pathlib import Path
 import casadi as ca
 import sympy as sp
 
-from derive.algebra.quaternion import hamilton
+from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import (
     find_artifact,
     memo,
@@ -137,13 +137,6 @@ class _ToSX:
 # --------------------------------------------------------------------------- #
 # FK expressions
 # --------------------------------------------------------------------------- #
-def _dq_mul(a, b):
-    """Dual-quaternion product of two 8-lists (real a_r b_r, dual a_r b_d + a_d b_r)."""
-    real = hamilton(a[:4], b[:4])
-    d1, d2 = hamilton(a[:4], b[4:]), hamilton(a[4:], b[:4])
-    return list(real) + [x + y for x, y in zip(d1, d2)]
-
-
 def _rotation(axis, angle):
     s, c = ca.sin(angle / 2), ca.cos(angle / 2)
     return [c, s * float(axis[0]), s * float(axis[1]), s * float(axis[2]), 0, 0, 0, 0]
@@ -173,15 +166,15 @@ def _fk_product(robot, q, nominal=None, s=None):
         value = j.multiplier * q[j.variable] + j.mimic_offset + mix(j.offset, j0.offset)
         m = _rotation(j.axis, value) if j.type == "revolute" else _translation([value * float(a) for a in j.axis])
         for op, op0 in zip(reversed(j.pre), reversed(j0.pre)):
-            m = _dq_mul(op_dq(op, op0), m)
+            m = dual_hamilton(op_dq(op, op0), m)
         for op, op0 in zip(j.post, j0.post):
-            m = _dq_mul(m, op_dq(op, op0))
-        frames.append(m if j.parent < 0 else _dq_mul(frames[j.parent], m))
+            m = dual_hamilton(m, op_dq(op, op0))
+        frames.append(m if j.parent < 0 else dual_hamilton(frames[j.parent], m))
     end = robot.ends[robot.default_end]
     end0 = end if nominal is None else nominal.ends[nominal.default_end]
     out = frames[end.parent]
     for op, op0 in zip(end.ops, end0.ops):
-        out = _dq_mul(out, op_dq(op, op0))
+        out = dual_hamilton(out, op_dq(op, op0))
     return out
 
 
@@ -260,7 +253,7 @@ def functions(robot, source: str | None = None) -> dict:
 
     Loaded from the artifacts of the robot's identity when they exist (the shipped
     ``generated/<robot>/*.casadi``, then the user cache, :mod:`derive.cache`); otherwise built
-    (FK from the joint dual-quaternion product for robots outside the library: no symbolic
+    (FK from the joint dual-quaternion product for robots outside the library or not exact: no symbolic
     work) and stored in the user cache. ``source`` "derived" or "product" forces a fresh build
     with that FK construction (default: derived for exact library robots, product otherwise).
     Cached per identity."""
@@ -353,9 +346,14 @@ def _ik_function(robot):
     _run(prog.ops, 0, dict(env), ca.SX(1.0), sols, valid)
     if len(sols) != prog.branches:
         raise DeriveError(f"{robot.name}: IK program gave {len(sols)} branches, expected {prog.branches}")
-    two_pi = 2 * math.pi
-    cols = [ca.vertcat(*[a - two_pi * ca.floor((a + math.pi) / two_pi) for a in s]) for s in sols]
+    cols = [ca.vertcat(*[wrap_angle_sx(a) for a in s]) for s in sols]
     return ca.Function("ik", [pose], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose"], ["Q", "valid"])
+
+
+def wrap_angle_sx(a):
+    """``a`` wrapped to (-pi, pi], the convention of :func:`derive.algebra.angles.wrap_angle`
+    and of the generated kernels: a - 2 pi ceil((a - pi) / (2 pi))."""
+    return a - 2 * math.pi * ca.ceil((a - math.pi) / (2 * math.pi))
 
 
 def _run(ops, start, env, ok, sols, valid):
@@ -401,7 +399,7 @@ def write_casadi(robot, out_dir) -> list[Path]:
     paths, roles = [], {}
     for name in SAVED:
         if name in fns:
-            p = folder / f"{robot.name}_{name}.casadi"
+            p = folder / f"{identifier(robot.name)}_{name}.casadi"
             fns[name].save(str(p))
             paths.append(p)
             roles[f"casadi/{name}"] = p.name

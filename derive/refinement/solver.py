@@ -1,7 +1,7 @@
 """Inverse kinematics by numerical refinement with CasADi, from closed-form seeds.
 
 ``refine(robot, pose, q0=None, ...)`` minimises the pose error of
-:mod:`derive.casadi_kin` (e = [t - t*; 2 s v], position in metres, rotation as 2 sin of half
+:mod:`derive.refinement.functions` (e = [t - t*; 2 s v], position in metres, rotation as 2 sin of half
 the error angle) on the robot's actual model, from one or several starting configurations:
 
 * seeds: the given ``q0`` (one (dof,) or several (k, dof)); by default every closed-form
@@ -17,7 +17,7 @@ the error angle) on the robot's actual model, from one or several starting confi
   moved by multiples of 2 pi into their limits where possible (the same pose);
 * a closed-form seed that fails, or lands on another seed's solution, is followed from the
   nominal to the actual geometry (:func:`track`, pseudo-arclength continuation of the
-  geometry homotopy of :func:`derive.casadi_kin.homotopy_function`): a path that reaches the
+  geometry homotopy of :func:`derive.refinement.functions.homotopy_function`): a path that reaches the
   actual arm gives its solution, one that turns at a fold back to another nominal solution
   proves the pair lost (``note``); only an undecided path is retried from a few perturbed
   copies (fixed seed), the first new exact solution replacing it;
@@ -182,7 +182,7 @@ class HomotopyPath:
 def track(hom, q0, target, *, h0: float = 0.05, h_max: float = 0.1, h_min: float = 1e-9,
           max_steps: int = 400, tol: float = 1e-12) -> HomotopyPath:
     """Follow the solution curve e(q, s) = 0 of the geometry homotopy (``hom`` from
-    :func:`derive.casadi_kin.homotopy_function`) from the nominal solution ``q0`` at s = 0.
+    :func:`derive.refinement.functions.homotopy_function`) from the nominal solution ``q0`` at s = 0.
 
     Pseudo-arclength continuation in x = (q, s): the tangent is the null vector of
     J = [de/dq, de/ds] (SVD, oriented along the previous one, first towards s > 0); each

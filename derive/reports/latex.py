@@ -2,7 +2,7 @@
 
 Half-angle sums print as ``\\cos\\frac{\\theta_2+\\theta_3+\\theta_4}{2}``, full-angle
 sums as ``\\cos(\\theta_3+\\theta_4)``, single angles without parentheses. The
-terms of a side keep the order of :func:`derive.trig.compact` (pose variables,
+terms of a side keep the order of :func:`derive.symbolic.trig.compact` (pose variables,
 then parameters, then constants), so the output is stable and reads like the
 thesis's appendices.
 """

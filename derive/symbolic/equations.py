@@ -16,11 +16,11 @@ and 5..7 the translation terms (x, y, z). Other chains get the ``B`` set only.
 Every equation is verified twice:
 
 * symbolically: each printed side, brought to the half-angle normal form
-  (:func:`derive.trig.half_angle_normal_form`), is identical to the product it
+  (:func:`derive.symbolic.trig.half_angle_normal_form`), is identical to the product it
   comes from;
 * numerically: at random joint angles and random parameters, and at the robot's
   own parameters, the pose N_first is taken from the independent numeric
-  reference (:func:`derive.reference.fk` on the same chain written as an
+  reference (:func:`derive.kinematics.fk.fk` on the same chain written as an
   ``axis_angle`` description) and |lhs - rhs| must stay below 1e-12.
 """
 
@@ -213,7 +213,7 @@ def derive_equations(robot, progress: bool = False, symbolic: bool = True) -> tu
     robot = load_robot(robot)
     if not robot.exact:
         raise DeriveError(
-            f"{robot.name}: not every fixed angle is a rational multiple of pi (decimal or "
+            f"{robot.name}: not every fixed angle is a multiple of pi/12 (decimal or "
             "calibrated twists), so the exact equations M_i = N_i are not derived; the FK kernels "
             "come from the numeric product, and derive.refine solves the IK")
     if not symbolic:

@@ -1,6 +1,6 @@
 """Targeted trigonometric rewriting of the chain products.
 
-The products of :mod:`derive.chain` are expanded polynomials in sines and
+The products of :mod:`derive.symbolic.chain` are expanded polynomials in sines and
 cosines. The thesis prints them compactly: each pose variable or geometric
 parameter multiplies a product of sines and cosines of angle sums, e.g.
 ``w cos((t2+t3+t4)/2) cos((t1-t5)/2)``. Generic ``simplify`` is slow and
