@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import math
 import sys
 import time
@@ -17,6 +19,9 @@ from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
 from derive.codegen.emit import write_kernels
 from derive.errors import DeriveError
+from derive.ik.closed_form import closed_form_relation
+from derive.model import export
+from derive.model.classify import classify
 from derive.model.robot import list_robots, load_robot
 from derive.refinement.functions import write_casadi
 from derive.refinement.solver import refine
@@ -28,6 +33,11 @@ DEFAULT_ROBOTS = ("ur3", "ur5")
 #: Robots whose FK/IK kernels and CasADi functions ``dq-derive generate`` writes by default
 #: (every UR robot), so that they load without a derivation.
 UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
+
+
+def _robot(args):
+    """The robot of a subcommand: a library name, a YAML file or a URDF (--base, --tip)."""
+    return load_robot(args.robot, base=args.base, tip=args.tip)
 
 
 def _fmt(values, width=10, prec=6) -> str:
@@ -57,7 +67,7 @@ def _pose_lines(robot, q, end=None) -> list[str]:
 
 
 def cmd_fk(args) -> int:
-    robot = load_robot(args.robot)
+    robot = _robot(args)
     q = np.array(args.q, dtype=float)
     if args.deg:
         revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
@@ -74,6 +84,24 @@ def cmd_fk(args) -> int:
     return 0
 
 
+def cmd_classify(args) -> int:
+    """Kinematic class of a robot: consecutive axes, spherical wrist, UR / OPW / SRS."""
+    robot = _robot(args)
+    c = classify(robot)
+    rel = None if c.closed_form else closed_form_relation(robot)
+    if rel is not None:           # the closed form of a library robot, in other base and tool frames
+        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
+        c = dataclasses.replace(c, closed_form=True, notes=notes + [
+            f"closed-form IK through the library robot {rel.other}: " + rel.describe()])
+    data = c.to_dict()
+    if rel is not None:
+        data["closed_form_through"] = {"robot": rel.other, "base": rel.base.tolist(),
+                                       "tool": rel.tool.tolist(), "signs": rel.signs.tolist(),
+                                       "mismatch": rel.error}
+    print(json.dumps(data, indent=2) if args.json else c.report())
+    return 0
+
+
 def _report(paths, t0=None) -> int:
     for p in paths:
         print(f"wrote {p}")
@@ -84,14 +112,14 @@ def _report(paths, t0=None) -> int:
 
 def cmd_appendix(args) -> int:
     t0 = time.perf_counter()
-    return _report(write_appendix(args.robot, args.out, progress=not args.quiet), t0)
+    return _report(write_appendix(_robot(args), args.out, progress=not args.quiet), t0)
 
 
 def cmd_ik(args) -> int:
     t0 = time.perf_counter()
     if args.pose is not None:
         q = np.array(args.pose, dtype=float)
-        robot = load_robot(args.robot)
+        robot = _robot(args)
         if args.deg:
             q = np.radians(q)
         pose = reference.fk(robot, q)
@@ -100,12 +128,12 @@ def cmd_ik(args) -> int:
         for s, sing in zip(sols, sols.singular):
             print("   ", _fmt(s, 9, 5), "(singular: theta6 from q)" if sing else "")
         return 0
-    return _report(write_ik(args.robot, args.out, progress=not args.quiet), t0)
+    return _report(write_ik(_robot(args), args.out, progress=not args.quiet), t0)
 
 
 def cmd_refine(args) -> int:
     """Refine IK solutions on the robot's model: the pose from --q (FK) or --pose (dual quaternion)."""
-    robot = load_robot(args.robot)
+    robot = _robot(args)
     if (args.q is None) == (args.pose is None):
         raise DeriveError("refine: give exactly one of --q (joint values whose FK is the pose) "
                           "or --pose (8 numbers, a unit dual quaternion)")
@@ -133,8 +161,16 @@ def cmd_refine(args) -> int:
     return 0 if res.success else 1
 
 
+def cmd_export(args) -> int:
+    """Write the robot as a kinematic URDF and/or as our YAML (convention urdf)."""
+    robot = _robot(args)
+    if args.urdf is None and args.yaml is None:
+        raise DeriveError("export: give --urdf FILE and/or --yaml FILE")
+    return _report(export.write(robot, args.urdf, args.yaml))
+
+
 def cmd_kernels(args) -> int:
-    return _report(write_kernels(args.robot, args.out))
+    return _report(write_kernels(_robot(args), args.out))
 
 
 def cmd_generate(args) -> int:
@@ -186,18 +222,29 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("robots", help="list the robots of the library")
     s.set_defaults(func=cmd_robots)
 
+    def robot_argument(s):
+        s.add_argument("robot", help="library name, or path to a description file (.yaml) or URDF (.urdf)")
+        s.add_argument("--base", default=None, help="URDF: the base link of the chain (default: the root link)")
+        s.add_argument("--tip", default=None, help="URDF: the tip link of the chain (default: the single leaf link)")
+
     s = sub.add_parser("fk", help="forward kinematics of one configuration")
-    s.add_argument("robot", help="library name or path to a description file")
+    robot_argument(s)
     s.add_argument("q", nargs="+", type=float, help="joint values (rad and m unless --deg)")
     s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
     s.add_argument("--end", default=None, help="end frame (default: the robot's default end)")
     s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix")
     s.set_defaults(func=cmd_fk)
 
+    s = sub.add_parser("classify", help="kinematic class: parallel / intersecting axes, spherical "
+                                        "wrist, UR / OPW / SRS, near misses")
+    robot_argument(s)
+    s.add_argument("--json", action="store_true", help="print the classification as JSON")
+    s.set_defaults(func=cmd_classify)
+
     def emitter(name, help_text, func, quiet=True):
         """A subcommand that writes files for one robot into --out."""
         s = sub.add_parser(name, help=help_text)
-        s.add_argument("robot", help="library name or path to a description file")
+        robot_argument(s)
         s.add_argument("--out", default="generated", help="output folder (default: generated)")
         if quiet:
             s.add_argument("--quiet", action="store_true", help="no progress output")
@@ -207,7 +254,7 @@ def build_parser() -> argparse.ArgumentParser:
     emitter("appendix", "derive, verify and typeset the M_i = N_i equations", cmd_appendix)
     s = sub.add_parser("refine", help="refine IK solutions numerically with CasADi (calibrated or "
                                       "general arms), from the nominal closed form or random starts")
-    s.add_argument("robot")
+    robot_argument(s)
     s.add_argument("--q", nargs="+", type=float, default=None, help="joint values whose FK is the pose")
     s.add_argument("--pose", nargs=8, type=float, default=None, help="the pose as a unit dual quaternion")
     s.add_argument("--deg", action="store_true", help="--q revolute values in degrees")
@@ -223,6 +270,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="instead of typesetting: solve the pose of this configuration")
     s.add_argument("--deg", action="store_true", help="--pose values in degrees")
     emitter("kernels", "emit the FK kernels (pure Python, numpy, C99)", cmd_kernels, quiet=False)
+
+    s = sub.add_parser("export", help="write a robot (library, YAML or URDF) as a kinematic URDF or our YAML")
+    robot_argument(s)
+    s.add_argument("--urdf", default=None, metavar="FILE", help="write a kinematic URDF here")
+    s.add_argument("--yaml", default=None, metavar="FILE", help="write a description file (convention urdf) here")
+    s.set_defaults(func=cmd_export)
 
     s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")

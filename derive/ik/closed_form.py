@@ -37,8 +37,9 @@ from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
+from derive.kinematics.relate import Relation, relate
 from derive.model.geometry import numeric_chain
-from derive.model.robot import load_robot
+from derive.model.robot import list_robots, load_robot
 
 #: |sin theta5| below this is the wrist singularity (theta6 free)
 WRIST_SINGULAR = 1e-11
@@ -286,6 +287,57 @@ class IKSolutions(np.ndarray):
             self.reason = getattr(obj, "reason", "")
 
 
+def closed_form_relation(robot) -> Relation | None:
+    """For a robot without the UR structure in its own frames (a URDF of a UR arm: another
+    base frame, tool frame or zero of the joints), the relation FK_robot(q) = B FK_lib(s q) T
+    to a library robot that has the closed form (:func:`derive.kinematics.relate.relate`),
+    or None. Cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("closed-form-relation", robot.id, lambda: _find_relation(robot))
+
+
+def _find_relation(robot) -> Relation | None:
+    if robot.dof != 6 or any(j.type != "revolute" for j in robot.joints if not j.is_mimic):
+        return None
+    for name in list_robots():
+        lib = load_robot(name)
+        if lib.dof != 6 or not lib.exact or lib.id == robot.id:
+            continue
+        try:
+            ur_geometry(lib)
+        except DeriveError:
+            continue
+        rel = relate(robot, lib)
+        if rel is not None:
+            return rel
+    return None
+
+
+def has_closed_form(robot) -> bool:
+    """Whether :func:`ik` solves the robot: the UR structure, in its own frames or related."""
+    robot = load_robot(robot)
+    try:
+        ur_geometry(robot)
+        return True
+    except DeriveError:
+        return closed_form_relation(robot) is not None
+
+
+def _solve_related(robot, poses, q6):
+    """:func:`solve` on the robot, or on the library robot it is related to (poses moved into
+    that robot's frames, B^-1 P T^-1, and the solutions' joint directions mapped back)."""
+    try:
+        return solve(robot, ur_geometry(robot), poses, q6)
+    except DeriveError as exc:
+        rel = closed_form_relation(robot)
+        if rel is None:
+            raise exc
+    lib = load_robot(rel.other)
+    moved = dq._mul(dq._mul(dq.conj_quaternion(rel.base)[None], poses), dq.conj_quaternion(rel.tool)[None])
+    q, counts, singular, reasons = solve(lib, ur_geometry(lib), moved, None if q6 is None else q6 * rel.signs[5])
+    return wrap_angle(q * rel.signs), counts, singular, reasons
+
+
 def ik_batch(robot, poses, q_ref=None):
     """Closed-form IK of n poses: (solutions (n, 8, 6) NaN-padded, counts (n,)).
 
@@ -294,13 +346,12 @@ def ik_batch(robot, poses, q_ref=None):
     singularity (default: theta6 chosen for reach, see :func:`_free_theta6`). Solutions are wrapped to (-pi, pi] and checked by FK.
     """
     robot = load_robot(robot)
-    geo = ur_geometry(robot)
     poses, _ = as_pose_batch(poses)
     q6 = None
     if q_ref is not None:
         qr = as_finite_array(q_ref, "q_ref", ndim_min=1)
         q6 = np.broadcast_to(qr[..., 5], (poses.shape[0],)).astype(float)
-    q, counts, _, _ = solve(robot, geo, poses, q6)
+    q, counts, _, _ = _solve_related(robot, poses, q6)
     return q, counts
 
 
@@ -318,7 +369,6 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     An unreachable pose gives an empty (0, 6) result whose ``.reason`` says why.
     """
     robot = load_robot(robot)
-    geo = ur_geometry(robot)
     poses, single = as_pose_batch(pose)
     if not single:
         raise InputError("pose: ik() takes one pose; use ik_batch() for several")
@@ -326,7 +376,7 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     if q_ref is not None:
         q_ref = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
         q6 = np.array([q_ref[5]])
-    q, counts, singular, reasons = solve(robot, geo, poses, q6)
+    q, counts, singular, reasons = _solve_related(robot, poses, q6)
     k = int(counts[0])
     sols, sing = q[0, :k], singular[0, :k]
     reason = reasons[0]

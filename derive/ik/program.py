@@ -33,10 +33,16 @@ from dataclasses import dataclass, field
 
 import sympy as sp
 
-from derive.algebra.quaternion import hamilton
+from derive.algebra import dualquat as dq
+from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.closed_form import REACH_TOL, WRIST_SINGULAR
+from derive.ik.closed_form import (
+    REACH_TOL,
+    WRIST_SINGULAR,
+    closed_form_relation,
+    ur_geometry,
+)
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.model.robot import load_robot
 from derive.symbolic.equations import POSES, derive_equations
@@ -211,6 +217,12 @@ def ik_program(robot) -> IKProgram:
 
 
 def _ik_program(robot) -> IKProgram:
+    try:
+        ur_geometry(robot)
+    except DeriveError:
+        rel = closed_form_relation(robot)
+        if rel is not None:
+            return _related_program(robot, rel)
     if not robot.exact:
         raise DeriveError(f"{robot.name}: no closed-form IK kernel: the description's fixed angles "
                           "are not all multiples of pi/12, so there are no exact equations to "
@@ -343,6 +355,40 @@ def _ik_program(robot) -> IKProgram:
     prog.ops = bld.ops
     prog.branches = 2 ** n_branch
     return prog
+
+
+def _number(x: float):
+    return sp.Integer(0) if x == 0 else sp.Float(float(x), 17)
+
+
+def _related_program(robot, rel) -> IKProgram:
+    """The IK program of a robot related to a library robot with a closed form
+    (:func:`derive.ik.closed_form.closed_form_relation`: FK_robot(q) = B FK_lib(s q) T): the
+    library robot's program after lines that move the pose into its frames (B^-1 P T^-1), its
+    solutions' joint directions multiplied by s."""
+    lib = ik_program(load_robot(rel.other))
+    p = sp.symbols("p0:8", real=True)
+    moved_syms = sp.symbols("pb0:8", real=True)
+    conj_b = [_number(x) for x in dq.conj_quaternion(rel.base)]
+    conj_t = [_number(x) for x in dq.conj_quaternion(rel.tool)]
+    moved = dual_hamilton(dual_hamilton(conj_b, p), conj_t)
+    rep = dict(zip(p, moved_syms))
+
+    def subs(e):
+        return e.xreplace(rep) if isinstance(e, sp.Basic) else e
+
+    ops = [Op("let", str(s), sp.expand(e), depth=0) for s, e in zip(moved_syms, moved)]
+    for op in lib.ops:
+        args = op.args
+        if op.kind == "solution":
+            args = tuple(subs(sp.sympify(a)) * int(s) for a, s in zip(op.args, rel.signs))
+        ops.append(Op(op.kind, op.name, subs(op.expr), op.name2, subs(op.cond), subs(op.other), args, op.depth))
+    flips = [str(i + 1) for i, s in enumerate(rel.signs) if s < 0]
+    steps = [(f"pose in the frames of {rel.other}", "B^-1 P T^-1",
+              [f"base/tool transforms found by derive.kinematics.relate (mismatch {rel.error:.1g})"]
+              + ([f"joints {', '.join(flips)} reversed"] if flips else []))] + list(lib.steps)
+    return IKProgram(robot.name, robot.dof, ops=ops, branches=lib.branches, free_joint=lib.free_joint,
+                     free_rule=lib.free_rule, steps=steps, parameters=dict(lib.parameters))
 
 
 def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):

@@ -50,7 +50,7 @@ def _homog(r, t) -> np.ndarray:
     return m
 
 
-def _op(op) -> np.ndarray:
+def op_matrix(op) -> np.ndarray:
     if op.kind == "R":
         return _homog(_rot(op.axis, op.angle), np.zeros(3))
     return _homog(np.eye(3), op.vector)
@@ -81,7 +81,7 @@ def numeric_chain(robot) -> NumericChain:
                               "form needs independent joints")
         pre = frame
         for op in j.pre:
-            pre = pre @ _op(op)
+            pre = pre @ op_matrix(op)
         axis = pre[:3, :3] @ j.axis
         origin = pre[:3, 3].copy()
         motion = (_homog(_rot(j.axis, float(j.offset)), np.zeros(3)) if j.type == "revolute"
@@ -97,7 +97,7 @@ def numeric_chain(robot) -> NumericChain:
                 continue
             break
         for op in j.post:
-            f = f @ _op(op)
+            f = f @ op_matrix(op)
         axes.append(axis)
         origins.append(origin)
         shifts.append(shift)
@@ -108,7 +108,7 @@ def numeric_chain(robot) -> NumericChain:
     end = robot.ends[robot.default_end]
     end_frame = frame
     for op in end.ops:
-        end_frame = end_frame @ _op(op)
+        end_frame = end_frame @ op_matrix(op)
     return NumericChain(
         robot=robot.name, names=tuple(robot.joints[k].name for k in path),
         types=tuple(robot.joints[k].type for k in path),

@@ -20,6 +20,11 @@ Conventions (theta_i, d_i, a_i, alpha_i the joint's DH numbers):
 * ``axis_angle``:   each joint's axis and link vector in the base frame at the reference
   configuration, where every joint value is zero (thesis section 4.2.1, seed 001 eq. 10-11):
   T = Rot(axis, theta) Trans(link). The joint axis passes through the parent frame's origin.
+* ``urdf``:         the URDF joint form (ROS REP 103 / the URDF specification): each joint's
+  ``origin``, one or a list of fixed transforms {translation, rotation} applied in order (a
+  URDF joint's origin, with the fixed joints before it folded in), then the motion along
+  ``axis`` in the joint frame: T = Origin_1 ... Origin_k Motion(axis, q). URDF files are read
+  into this form by :mod:`derive.model.urdf`.
 """
 
 from __future__ import annotations
@@ -39,10 +44,11 @@ import yaml
 
 from derive.errors import RobotFileError, UnknownRobotError
 from derive.model.identity import digest
+from derive.model.urdf import urdf_description
 
 LIBRARY_DIR = Path(__file__).resolve().parent.parent / "robots"
 
-CONVENTIONS = ("standard_dh", "modified_dh", "kunze", "axis_angle")
+CONVENTIONS = ("standard_dh", "modified_dh", "kunze", "axis_angle", "urdf")
 JOINT_TYPES = ("revolute", "prismatic")
 LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -265,35 +271,58 @@ def list_robots() -> list[str]:
     return sorted(p.stem for p in LIBRARY_DIR.glob("*.yaml"))
 
 
-def load_robot(name_or_path) -> Robot:
-    """Load a robot by library name (``"ur5"``) or from a description file path."""
+def load_robot(name_or_path, base: str | None = None, tip: str | None = None) -> Robot:
+    """Load a robot by library name (``"ur5"``) or from a description file path: our YAML
+    (``.yaml``/``.yml``, docs/robot-format.md) or a URDF (``.urdf``; ``base`` and ``tip`` name
+    the links of the chain, by default the root link and the single leaf, see
+    :mod:`derive.model.urdf`)."""
     if isinstance(name_or_path, Robot):
         return name_or_path
     if not isinstance(name_or_path, (str, Path)):
         raise UnknownRobotError(f"robot must be a name or a path, got {type(name_or_path).__name__}")
     text = str(name_or_path)
     path = Path(text)
-    if path.suffix in (".yaml", ".yml") or path.is_file() or "/" in text:
+    if text.endswith(".xacro"):
+        raise RobotFileError(f"{text}: xacro files are not read; expand it first: "
+                             f"xacro {path.name} > {path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf")
+    if path.suffix in (".yaml", ".yml", ".urdf") or path.is_file() or "/" in text:
         if not path.is_file():
             raise UnknownRobotError(f"robot file {text!r} does not exist")
-        return _load_file(str(path.resolve()))
+        if path.suffix == ".urdf" or (path.suffix not in (".yaml", ".yml") and _looks_like_xml(path)):
+            return _load_file(str(path.resolve()), base, tip, urdf=True)
+        if base is not None or tip is not None:
+            raise RobotFileError(f"{text}: base and tip select the chain of a URDF; this is a YAML file")
+        return _load_file(str(path.resolve()), urdf=False)
+    if base is not None or tip is not None:
+        raise RobotFileError(f"{text}: base and tip select the chain of a URDF file, not of a library robot")
     if text in list_robots():
-        return _load_file(str(LIBRARY_DIR / f"{text}.yaml"))
+        return _load_file(str(LIBRARY_DIR / f"{text}.yaml"), urdf=False)
     raise UnknownRobotError(f"unknown robot {text!r}; the library has: {', '.join(list_robots())}")
 
 
-def _load_file(path: str) -> Robot:
-    """Read a description file; parsed once per (path, content), so an edited file is read anew."""
+def _looks_like_xml(path: Path) -> bool:
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            return fh.read(200).lstrip().startswith("<")
+    except OSError:
+        return False
+
+
+def _load_file(path: str, base: str | None = None, tip: str | None = None, urdf: bool = False) -> Robot:
+    """Read a description file; parsed once per (path, content, base, tip), so an edited file
+    is read anew."""
     try:
         with open(path, encoding="utf-8") as fh:
             text = fh.read()
     except OSError as exc:
         raise RobotFileError(f"{path}: cannot be read ({exc.strerror})") from None
-    return _parse(path, text)
+    return _parse(path, text, base, tip, urdf)
 
 
 @lru_cache(maxsize=64)
-def _parse(path: str, text: str) -> Robot:
+def _parse(path: str, text: str, base, tip, urdf: bool) -> Robot:
+    if urdf:
+        return robot_from_dict(urdf_description(path, text, base, tip), path)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -375,8 +404,11 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
         parent = er.get("parent", joints[last].name)
         if parent not in names:
             raise RobotFileError(f"{where}: ends.{en}.parent {parent!r} is not a joint name")
-        ends[str(en)] = End(str(en), names[parent],
-                            ctx.fixed({k: v for k, v in er.items() if k != "parent"}, f"ends.{en}"))
+        if "origin" in er and set(er) - {"parent", "origin"}:
+            raise RobotFileError(f"{where}: ends.{en}: give 'origin' (a list of transforms) or "
+                                 "'translation' / 'rotation', not both")
+        body = er["origin"] if "origin" in er else {k: v for k, v in er.items() if k != "parent"}
+        ends[str(en)] = End(str(en), names[parent], ctx.fixed(body, f"ends.{en}"))
     if not ends:
         ends["flange"] = End("flange", last, ())
     default_end = data.get("default_end", next(iter(ends)))
@@ -481,10 +513,7 @@ class _Context:
 
     def _scaled(self, where, raw, what, kind, limit, unit, hint):
         v = self._value(where, raw, what, kind)
-        si = v * (self.lf if kind == "length" else self.af)
-        if kind == "angle" and not v.sym.free_symbols and _multiple_of_pi_12(v.sym):
-            si = float(v.sym)           # 1.5707963267948966 and pi/2 + 1e-13 are both pi/2
-        v = Num(si, v.sym)
+        v = Num(v * (self.lf if kind == "length" else self.af), v.sym)
         if abs(v) > limit:
             raise RobotFileError(f"{where}: {what} = {v:g} {unit} is out of range; {hint}")
         return v
@@ -527,7 +556,7 @@ class _Context:
         if jtype not in JOINT_TYPES:
             raise RobotFileError(f"{where}: type {jtype!r} is not one of {JOINT_TYPES}")
 
-        geom = set(_DH_KEYS.get(self.conv, ("axis", "link")))
+        geom = set(_DH_KEYS.get(self.conv, ("origin", "axis") if self.conv == "urdf" else ("axis", "link")))
         unknown = set(jr) - geom - _COMMON_JOINT_KEYS
         if unknown:
             raise RobotFileError(f"{where}: unknown key(s) {sorted(unknown)} for convention "
@@ -550,6 +579,12 @@ class _Context:
             link = self.vector(where, jr["link"], "link")
             pre, post = (), (Op.trans(link),)
             axis = Op.rot(axis, 0.0)  # carries the exact axis
+            offset_raw = jr.get("offset", 0)
+        elif self.conv == "urdf":
+            if "axis" not in jr:
+                raise RobotFileError(f"{where}: missing key 'axis' (convention urdf)")
+            pre, post = self.fixed(jr.get("origin", []), f"joint {jname!r} origin"), ()
+            axis = Op.rot(self.axis(where, jr["axis"]), 0.0)
             offset_raw = jr.get("offset", 0)
         else:
             pre, axis, post, offset_raw = self._dh(where, jr, jtype)
@@ -626,6 +661,10 @@ class _Context:
 
     # -- fixed transforms (tool, ends) ----------------------------------------
     def fixed(self, raw, what) -> tuple[Op, ...]:
+        """The operations of a fixed transform {translation, rotation} (translation first), or of
+        a list of them applied in order."""
+        if isinstance(raw, (list, tuple)):
+            return tuple(op for k, r in enumerate(raw) for op in self.fixed(r, f"{what}[{k}]"))
         where = f"{self.where}: {what}"
         if not isinstance(raw, dict) or set(raw) - {"translation", "rotation"}:
             raise RobotFileError(f"{where}: must be a mapping with 'translation' and/or 'rotation'")

@@ -50,7 +50,7 @@ from derive.cache import (
 from derive.codegen.emit import identifier
 from derive.codegen.fk import fk_kernel
 from derive.errors import DeriveError
-from derive.ik.closed_form import ur_geometry
+from derive.ik.closed_form import has_closed_form
 from derive.ik.program import ik_program
 from derive.model.robot import LIBRARY_DIR, load_robot
 
@@ -335,8 +335,9 @@ def homotopy_function(robot, nominal):
 
 def _ik_function(robot):
     """The IK program's 8 branches in SX (None when the robot has no closed form)."""
+    if not has_closed_form(robot):          # the extraction is used on the UR family only
+        return None
     try:
-        ur_geometry(robot)                  # the extraction is used on the UR family only
         prog = ik_program(robot)
     except DeriveError:
         return None
