@@ -222,3 +222,27 @@ def test_cli_takes_urdf_with_base_and_tip(tmp_path, capsys):
                        reference.fk_matrix("ur10e", np.full(6, 0.3)), atol=1e-12)
     assert main(["fk", path, "0"]) == 2
     assert "several leaf links" in capsys.readouterr().err
+
+
+def test_calibrated_urdf_without_nominal_key_is_refined_from_the_related_closed_form(tmp_path, rng):
+    """A calibrated UR5 exported to URDF has no `nominal` key: its nominal geometry is found as
+    the closest library robot with a closed form (fitted base and tool transforms), and
+    derive.refine polishes those seeds to exact solutions of the calibrated arm."""
+    path = tmp_path / "calibrated.urdf"
+    export.write("ur5-calibrated", urdf_path=path)
+    robot = derive.load_robot(path)
+    rel = derive.ik.closed_form.nominal_relation(robot)
+    assert rel is not None and rel.other == "ur5" and 0.005 < rel.error < 0.03
+    assert derive.ik.closed_form.closed_form_relation(robot) is None      # not the UR5 within 1e-9
+    q = rng.uniform(-math.pi, math.pi, (20, 6))
+    poses = reference.fk(robot, q)
+    generating = 0
+    for i in range(len(q)):
+        res = derive.refine(robot, poses[i])
+        sols = res.solutions
+        assert len(sols) >= 2
+        dp, dr = reference.pose_error(reference.fk(robot, sols), np.repeat(poses[i:i + 1], len(sols), axis=0))
+        assert dp.max() < 1e-10 and dr.max() < 1e-10
+        d = np.abs(np.mod(sols - q[i] + math.pi, 2 * math.pi) - math.pi)
+        generating += bool(np.any(np.all(d < 1e-6, axis=1)))
+    assert generating >= 18

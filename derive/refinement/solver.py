@@ -40,9 +40,16 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from derive.algebra import dualquat as dq
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik.closed_form import ik_batch, solve_batch, ur_geometry
+from derive.ik.closed_form import (
+    closed_form_relation,
+    ik_batch,
+    nominal_relation,
+    solve_batch,
+    ur_geometry,
+)
 from derive.kinematics.pose import as_pose_batch
 from derive.model.robot import load_robot
 from derive.refinement.functions import functions, homotopy_function
@@ -262,15 +269,14 @@ def closed_form_seeds(robot, pose, with_reach: bool = False):
     little farther). (0, dof) when the robot has no closed form. With ``with_reach`` also
     the number of leading seeds that are nominal solutions."""
     robot = load_robot(robot)
-    nominal = load_robot(robot.nominal) if robot.nominal else robot
-    try:
-        if not nominal.exact:   # no exact chain (and so no closed form) to look for
-            raise DeriveError(f"{nominal.name}: no closed form")
-        geo = ur_geometry(nominal)
-    except DeriveError:
+    nominal, rel = _nominal_closed_form(robot)
+    if nominal is None:
         empty = np.zeros((0, robot.dof))
         return (empty, 0) if with_reach else empty
+    geo = ur_geometry(nominal)
     pose = np.asarray(pose, dtype=float)[None]
+    if rel is not None:                 # the pose in the nominal robot's frames: B^-1 P T^-1
+        pose = dq._mul(dq._mul(dq.conj_quaternion(rel.base)[None], pose), dq.conj_quaternion(rel.tool)[None])
     q, counts = ik_batch(nominal, pose)
     out = list(q[0, :counts[0]])
     cand, _, code = solve_batch(geo, pose, keep_unreachable=True)
@@ -285,7 +291,25 @@ def closed_form_seeds(robot, pose, with_reach: bool = False):
             if not any(_same(v, o) for o in out):
                 out.append(v)
     seeds = np.array(out).reshape(-1, robot.dof)
+    if rel is not None:
+        seeds = seeds * rel.signs
     return (seeds, int(counts[0])) if with_reach else seeds
+
+
+def _nominal_closed_form(robot):
+    """(robot with the UR closed form, relation or None) whose solutions seed the refinement:
+    the ``nominal`` robot of the description, the robot itself, a library robot it is related to
+    within 1e-9 (other base and tool frames) or, for a calibrated arm without a ``nominal`` key,
+    within 1e-2; (None, None) when there is none."""
+    candidates = [load_robot(robot.nominal)] if robot.nominal else []
+    for c in candidates + [robot]:
+        try:
+            ur_geometry(c)
+            return c, None
+        except DeriveError:
+            continue
+    rel = closed_form_relation(robot) or nominal_relation(robot)
+    return (None, None) if rel is None else (load_robot(rel.other), rel)
 
 
 def _random_starts(robot, starts: int, seed: int) -> np.ndarray:
