@@ -19,7 +19,7 @@ from derive._version import __version__
 from derive.algebra import dualquat, quaternion
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
-from derive.model.classify import classify
+from derive.ik.closed_form import classify
 from derive.model.robot import Robot, list_robots, load_robot
 from derive.refinement.solver import refine
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import sys
@@ -19,9 +18,8 @@ from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
 from derive.codegen.emit import write_kernels
 from derive.errors import DeriveError
-from derive.ik.closed_form import closed_form_relation
+from derive.ik.closed_form import classify
 from derive.model import export
-from derive.model.classify import classify
 from derive.model.robot import list_robots, load_robot
 from derive.refinement.functions import write_casadi
 from derive.refinement.solver import refine
@@ -86,19 +84,8 @@ def cmd_fk(args) -> int:
 
 def cmd_classify(args) -> int:
     """Kinematic class of a robot: consecutive axes, spherical wrist, UR / OPW / SRS."""
-    robot = _robot(args)
-    c = classify(robot)
-    rel = None if c.closed_form else closed_form_relation(robot)
-    if rel is not None:           # the closed form of a library robot, in other base and tool frames
-        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
-        c = dataclasses.replace(c, closed_form=True, notes=notes + [
-            f"closed-form IK through the library robot {rel.other}: " + rel.describe()])
-    data = c.to_dict()
-    if rel is not None:
-        data["closed_form_through"] = {"robot": rel.other, "base": rel.base.tolist(),
-                                       "tool": rel.tool.tolist(), "signs": rel.signs.tolist(),
-                                       "mismatch": rel.error}
-    print(json.dumps(data, indent=2) if args.json else c.report())
+    c = classify(_robot(args))
+    print(json.dumps(c.to_dict(), indent=2) if args.json else c.report())
     return 0
 
 

@@ -246,3 +246,15 @@ def test_calibrated_urdf_without_nominal_key_is_refined_from_the_related_closed_
         d = np.abs(np.mod(sols - q[i] + math.pi, 2 * math.pi) - math.pi)
         generating += bool(np.any(np.all(d < 1e-6, axis=1)))
     assert generating >= 18
+
+
+def test_classify_urdf_arms():
+    ur5 = derive.classify(derive.load_robot(_data_root() / ARMS[1][0], base="base_link", tip="tool0"))
+    assert ur5.cls == "UR" and not ur5.near_misses
+    panda = derive.classify(derive.load_robot(_data_root() / ARMS[3][0], base="panda_link0", tip="panda_link8"))
+    # 7R with a spherical shoulder at d1 = 0.333 m, but an offset wrist (a = 0.088 m): not SRS
+    assert panda.n == 7 and panda.types == ("revolute",) * 7 and panda.cls == "general"
+    assert panda.shoulder.spread < 1e-12 and np.allclose(panda.shoulder.point, [0, 0, 0.333], atol=1e-12)
+    assert panda.wrist.spread > 0.05
+    kinova = derive.classify(derive.load_robot(_data_root() / ARMS[6][0], tip="j2s6s200_end_effector"))
+    assert kinova.cls == "OPW"

@@ -26,6 +26,7 @@ joint, modulo 2 pi) are merged. All angles are wrapped to (-pi, pi].
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +39,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.kinematics.relate import RELATE_TOL, Relation, relate
+from derive.model.classify import Classification
+from derive.model.classify import classify as geometric_classify
 from derive.model.geometry import numeric_chain
 from derive.model.robot import list_robots, load_robot
 
@@ -289,7 +292,7 @@ class IKSolutions(np.ndarray):
 
 def closed_form_relation(robot) -> Relation | None:
     """For a robot without the UR structure in its own frames (a URDF of a UR arm: another
-    base frame, tool frame or zero of the joints), the relation FK_robot(q) = B FK_lib(s q) T
+    base frame, tool frame or joint directions), the relation FK_robot(q) = B FK_lib(s q) T
     to a library robot that has the closed form (:func:`derive.kinematics.relate.relate`),
     or None. Cached per robot identity."""
     robot = load_robot(robot)
@@ -330,6 +333,25 @@ def _find_relation(robot, tol: float = RELATE_TOL) -> Relation | None:
         if rel is not None and (best is None or rel.error < best.error):
             best = rel
     return best
+
+
+def classify(robot) -> Classification:
+    """The kinematic class of a robot (:func:`derive.model.classify.classify`), with the closed
+    form of dq-derive as it applies: in the robot's own frames, or through a library robot it
+    is related to (then ``closed_form_through`` names it with the base and tool transforms)."""
+    robot = load_robot(robot)
+    c = geometric_classify(robot)
+    if c.closed_form:
+        return c
+    rel = closed_form_relation(robot)
+    if rel is None:
+        return c
+    notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
+    return dataclasses.replace(
+        c, closed_form=True,
+        notes=notes + [f"closed-form IK through the library robot {rel.other}: " + rel.describe()],
+        closed_form_through={"robot": rel.other, "base": rel.base.tolist(), "tool": rel.tool.tolist(),
+                             "signs": rel.signs.tolist(), "mismatch": rel.error})
 
 
 def has_closed_form(robot) -> bool:

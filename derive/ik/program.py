@@ -358,7 +358,8 @@ def _ik_program(robot) -> IKProgram:
 
 
 def _number(x: float):
-    return sp.Integer(0) if x == 0 else sp.Float(float(x), 17)
+    x = float(x)
+    return sp.Integer(int(x)) if x.is_integer() else sp.Float(x, 17)
 
 
 def _related_program(robot, rel) -> IKProgram:

@@ -186,6 +186,7 @@ class Classification:
     closed_form: bool
     pieper: list = field(default_factory=list)     # [(axes, "parallel" | "meet in one point")]
     notes: list = field(default_factory=list)
+    closed_form_through: dict | None = None       # set by derive.ik.closed_form.classify
 
     def to_dict(self) -> dict:
         return {"robot": self.robot, "n": self.n, "types": list(self.types),
@@ -197,7 +198,7 @@ class Classification:
                 "nominal_class": self.nominal_cls, "nominal_test": self.nominal_test,
                 "near_misses": list(self.near_misses), "closed_form": self.closed_form,
                 "pieper": [{"axes": list(a), "kind": k} for a, k in self.pieper],
-                "notes": list(self.notes)}
+                "notes": list(self.notes), "closed_form_through": self.closed_form_through}
 
     def report(self) -> str:
         """The text ``dq-derive classify ROBOT`` prints."""

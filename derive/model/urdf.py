@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -153,9 +154,11 @@ def urdf_description(path: str, text: str, base: str | None = None, tip: str | N
         joints.append(entry)
     if not joints:
         raise RobotFileError(f"{name}: the chain {base} -> {tip} has no moving joint")
-    robot_name = urdf.robot.name or Path(path).stem
+    # the robot is named after the file (ur5_robot.urdf -> ur5_robot), which keeps its outputs
+    # apart from a library robot of the URDF's <robot name> (often ur5, panda)
+    robot_name = re.sub(r"[^A-Za-z0-9_.-]", "-", Path(path).name.removesuffix(".urdf")).lstrip("-.") or "urdf"
     data = {
-        "name": robot_name, "title": f"{robot_name} (URDF {name}, {base} -> {tip})",
+        "name": robot_name, "title": f"{urdf.robot.name or robot_name} (URDF {name}, {base} -> {tip})",
         "source": f"URDF file {path}, chain {base} -> {tip}", "convention": "urdf",
         "joints": joints, "ends": {tip: {"origin": pending}}, "default_end": tip,
     }

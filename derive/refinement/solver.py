@@ -300,7 +300,7 @@ def _nominal_closed_form(robot):
     """(robot with the UR closed form, relation or None) whose solutions seed the refinement:
     the ``nominal`` robot of the description, the robot itself, a library robot it is related to
     within 1e-9 (other base and tool frames) or, for a calibrated arm without a ``nominal`` key,
-    within 1e-2; (None, None) when there is none."""
+    the closest within 0.03 (NEAR_RELATE_TOL); (None, None) when there is none."""
     candidates = [load_robot(robot.nominal)] if robot.nominal else []
     for c in candidates + [robot]:
         try:
