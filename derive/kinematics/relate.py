@@ -24,7 +24,9 @@ import numpy as np
 
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
+from derive.errors import DeriveError
 from derive.kinematics.fk import _pose_error, fk
+from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 
 #: A relation must reproduce the robot's FK within this (m, rad).
@@ -88,7 +90,7 @@ def relate(robot, other, tol: float = RELATE_TOL, samples: int = 12, seed: int =
     joints (module docstring), or None when there is none within ``tol``."""
     robot, other = load_robot(robot), load_robot(other)
     n = robot.dof
-    if other.dof != n:
+    if other.dof != n or not _congruent_axes(robot, other, max(10 * tol, 1e-6)):
         return None
     rng = np.random.default_rng(seed)
     q = rng.uniform(-np.pi, np.pi, size=(samples, n))
@@ -113,6 +115,36 @@ def relate(robot, other, tol: float = RELATE_TOL, samples: int = 12, seed: int =
         if best is None or err < best.error:
             best = Relation(robot.name, other.name, b, t, combos[k].copy(), err)
     return best if best is not None and best.error < tol else None
+
+
+def _axis_invariants(robot) -> tuple:
+    """|cos| of the angle between every two joint axes at q = 0, and the distance between the
+    two lines where they are far from parallel (sin > 0.1; near parallel lines have no stable
+    common normal): unchanged by a base transform, a tool transform and joint directions, so
+    two related robots have the same (the joints' screw axes at zero map onto each other by B)."""
+    c = numeric_chain(robot)
+    points = c.start + np.vstack([np.zeros(3), np.cumsum(c.links, axis=0)[:-1]])
+    n = c.n
+    cos, dist = np.zeros((n, n)), np.full((n, n), np.nan)
+    for i in range(n):
+        for j in range(i + 1, n):
+            a, b = c.axes[i], c.axes[j]
+            cos[i, j] = abs(float(a @ b))
+            cr = np.cross(a, b)
+            if np.linalg.norm(cr) > 0.1:
+                dist[i, j] = abs((points[j] - points[i]) @ cr) / np.linalg.norm(cr)
+    return cos, dist
+
+
+def _congruent_axes(robot, other, tol: float) -> bool:
+    try:
+        (c1, d1), (c2, d2) = _axis_invariants(robot), _axis_invariants(other)
+    except DeriveError:                  # mimic joints on the path: no quick test
+        return True
+    if c1.shape != c2.shape or np.abs(c1 - c2).max(initial=0) > tol:
+        return False
+    both = np.isfinite(d1) & np.isfinite(d2)
+    return bool(np.all(np.abs(d1 - d2)[both] <= tol))
 
 
 def _tidy(d: np.ndarray) -> np.ndarray:

@@ -24,8 +24,6 @@ from __future__ import annotations
 import numpy as np
 import yaml
 from lxml import etree
-from yourdfpy import URDF, Joint, Limit, Link, Mimic
-from yourdfpy import Robot as URDFRobot
 
 from derive.model.geometry import op_matrix
 from derive.model.robot import Op, Robot, load_robot
@@ -67,6 +65,10 @@ def _urdf_names(robot: Robot) -> tuple[str, list, dict, dict]:
 
 def to_urdf(robot) -> str:
     """A kinematic URDF of ``robot`` (module docstring), as text."""
+    # yourdfpy imports trimesh (1.2 s here): loaded when a URDF is first written
+    from yourdfpy import URDF, Joint, Limit, Link, Mimic
+    from yourdfpy import Robot as URDFRobot
+
     robot = load_robot(robot)
     root, links, end_links, end_joints = _urdf_names(robot)
     names = [j.name for j in robot.joints]

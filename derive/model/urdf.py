@@ -27,7 +27,6 @@ import re
 from pathlib import Path
 
 import numpy as np
-import yourdfpy
 from lxml import etree
 
 from derive.algebra import quaternion as quat
@@ -74,6 +73,8 @@ def _load(name: str, text: str):
     root = _parse_xml(name, text)
     if root.tag != "robot":
         raise RobotFileError(f"{name}: the top element is <{root.tag}>, a URDF has <robot>")
+    # yourdfpy imports trimesh (1.2 s here): loaded when a URDF is first read, not with derive
+    import yourdfpy
     try:
         return yourdfpy.URDF.load(io.BytesIO(text.encode("utf-8")), build_scene_graph=False,
                                   load_meshes=False, build_collision_scene_graph=False,
