@@ -34,7 +34,6 @@ import math
 import operator
 import re
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +41,7 @@ import numpy as np
 import sympy as sp
 import yaml
 
+from derive.cache import memo
 from derive.errors import RobotFileError, UnknownRobotError
 from derive.model.identity import digest
 from derive.model.urdf import urdf_description
@@ -316,10 +316,9 @@ def _load_file(path: str, base: str | None = None, tip: str | None = None, urdf:
             text = fh.read()
     except OSError as exc:
         raise RobotFileError(f"{path}: cannot be read ({exc.strerror})") from None
-    return _parse(path, text, base, tip, urdf)
+    return memo("robot-file", (path, text, base, tip, urdf), lambda: _parse(path, text, base, tip, urdf))
 
 
-@lru_cache(maxsize=64)
 def _parse(path: str, text: str, base, tip, urdf: bool) -> Robot:
     if urdf:
         return robot_from_dict(urdf_description(path, text, base, tip), path)
