@@ -64,7 +64,7 @@ def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict
     ident = identifier(robot)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        for name, text in render_kernels(robot).items():
+        for name, text in render_kernels(robot).values():
             (tmp / name).write_text(text)
         src = resources.files("derive.data").joinpath("bench_harness.c").read_text()
         (tmp / "harness.c").write_text(src)

@@ -95,12 +95,13 @@ class _Np(_Shared, NumPyPrinter):
 
 
 class _C(_Shared, C99CodePrinter):
-    # compares, not fmax (a library call without -ffast-math)
-    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "(({0}) > 0.0 ? ({0}) : 0.0)"
+    # compares, not fmax (a library call without -ffast-math), and the choice a branch-free
+    # blend dq_sel(c, a, b) = c ? a : b of the template, so that the batch loops vectorise
+    SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "dq_sel(({0}) > 0.0, {0}, 0.0)"
 
     def _print_Max(self, expr):
         a, b = (self._print(e) for e in expr.args)
-        return f"(({a}) > ({b}) ? ({a}) : ({b}))"
+        return f"dq_sel(({a}) > ({b}), {a}, {b})"
 
     def _print_And(self, expr):         # flags are 0/1 ints: no short circuit, so loops vectorise
         return " & ".join(f"({self._print(a)})" for a in expr.args)

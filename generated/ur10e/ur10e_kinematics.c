@@ -3,6 +3,8 @@
  * Robot identity 86332053fad9a4b5 (hash of its normalised description: derive.load_robot(...).id).
  * Parameters (m): d1 = 0.1807, a2 = -0.6127, a3 = -0.57155, d4 = 0.17415, d5 = 0.11985, d6 = 0.11655 */
 #include <math.h>
+#include <stdint.h>
+#include <string.h>
 #include "ur10e_kinematics.h"
 
 /* The helpers are inlined into the batch loops, which the compiler can then vectorise. */
@@ -11,6 +13,22 @@
 #else
 #define DQ_INLINE static inline
 #endif
+
+/* c ? a : b as a bitwise blend of a and b (both evaluated), with no branch. A plain `c ? a : b`
+ * is a branch in the compiler's intermediate code, and it moves a computation used only by one
+ * arm into that arm; a floating-point operation there may trap, so the loop is not if-converted
+ * and, without masked vector instructions (AVX2, SSE2), not vectorised. */
+DQ_INLINE double dq_sel(int c, double a, double b)
+{
+    uint64_t ua, ub, ur;
+    double r;
+    memcpy(&ua, &a, sizeof ua);
+    memcpy(&ub, &b, sizeof ub);
+    const uint64_t mask = (uint64_t)0 - (uint64_t)(c != 0);
+    ur = (ua & mask) | (ub & ~mask);
+    memcpy(&r, &ur, sizeof r);
+    return r;
+}
 
 /* sin and cos of x without a library call and without branches or integer conversions, so a
  * batch loop can be vectorised. x is reduced to r = x - k pi/2, |r| <= pi/4 (k rounded with the
@@ -166,7 +184,7 @@ void ur10e_fk_batch(size_t n, const double *restrict q, double *restrict out)
                 qb[k][j] = q[(i0 + j) * 6 + k];
             }
         }
-        for (size_t j = 0; j < m; ++j) {
+        for (size_t j = 0; j < m; ++j) {   /* vectorised: fk batch */
             double qj[6], oj[8];
             for (int k = 0; k < 6; ++k) {
                 qj[k] = qb[k][j];
@@ -193,15 +211,15 @@ DQ_INLINE double dq_atan2(double y, double x)
 {
     const double ax = fabs(x), ay = fabs(y);
     const int swap = ay > ax;
-    const double hi0 = swap ? ay : ax;
+    const double hi0 = dq_sel(swap, ay, ax);
     /* both scaled by a power of two (exact) so that hi * sqrt(3) neither overflows nor loses
        bits in the subnormal range */
-    const double sc = hi0 > 0x1p1000 ? 0x1p-600 : (hi0 < 0x1p-900 ? 0x1p600 : 1.0);
-    const double hi = hi0 * sc, lo = (swap ? ax : ay) * sc;
+    const double sc = dq_sel(hi0 > 0x1p1000, 0x1p-600, dq_sel(hi0 < 0x1p-900, 0x1p600, 1.0));
+    const double hi = hi0 * sc, lo = dq_sel(swap, ax, ay) * sc;
     const int red = lo > 0.26794919243112270 * hi;
-    const double num = red ? lo * 1.7320508075688772 - hi : lo;
-    const double den = red ? lo + hi * 1.7320508075688772 : hi;
-    const double u = num / (den > 0.0 ? den : 1.0);   /* den = 0 only with num = 0 */
+    const double num = dq_sel(red, lo * 1.7320508075688772 - hi, lo);
+    const double den = dq_sel(red, lo + hi * 1.7320508075688772, hi);
+    const double u = num / dq_sel(den > 0.0, den, 1.0);   /* den = 0 only with num = 0 */
     const double z = u * u, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4;
     const double e0 = (1.0 / 3.0 - z * (1.0 / 5.0)) + z2 * (1.0 / 7.0 - z * (1.0 / 9.0));
     const double e1 = (1.0 / 11.0 - z * (1.0 / 13.0)) + z2 * (1.0 / 15.0 - z * (1.0 / 17.0));
@@ -209,9 +227,10 @@ DQ_INLINE double dq_atan2(double y, double x)
     const double e3 = 1.0 / 27.0 - z * (1.0 / 29.0);
     const double p = (e0 + z4 * e1) + z8 * (e2 + z4 * e3);
     double r = u - u * z * p;
-    r = red ? r + 0.52359877559829887308 : r;
-    r = swap ? 1.57079632679489661923 - r : r;
-    r = signbit(x) ? 3.14159265358979323846 - r : r;   /* -0.0 too, as C99 atan2 */
+    r = dq_sel(red, r + 0.52359877559829887308, r);
+    r = dq_sel(swap, 1.57079632679489661923 - r, r);
+    /* the sign bit of x (-0.0 too, as C99 atan2) read through copysign: signbit() does not vectorise */
+    r = dq_sel(copysign(1.0, x) < 0.0, 3.14159265358979323846 - r, r);
     return copysign(r, y);
 }
 
@@ -221,7 +240,7 @@ DQ_INLINE double dq_wrap(double x)
     const double round_magic = 6755399441055744.0;
     const double k = (x * 0.15915494309189533577 + round_magic) - round_magic;
     const double r = (x - k * 6.28318530717958623200) - k * 2.44929359829470635446e-16;
-    return r <= -3.14159265358979311600 ? r + 6.28318530717958647693 : r;
+    return dq_sel(r <= -3.14159265358979311600, r + 6.28318530717958647693, r);
 }
 
 static inline int dq_close(double a, double b)
@@ -283,8 +302,8 @@ int ur10e_ik(const double *restrict pose, double *restrict sols)
     const double k3 = -0.17415;
     const double k4 = k1*k1 + k2*k2 - k3*k3;
     const double k5 = dq_atan2(k2, k1);
-    const double k6 = dq_atan2(sqrt(((k4) > 0.0 ? (k4) : 0.0)), -k3);
-    if (!(k4 >= -1e-10*((1.0) > (k3*k3) ? (1.0) : (k3*k3)))) {
+    const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
+    if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
         return 0;
     }
     for (int b1 = 0; b1 < 2; ++b1) {
@@ -310,7 +329,7 @@ int ur10e_ik(const double *restrict pose, double *restrict sols)
         const double f20 = 2.8556034013491898*f13*f15 + 2.8556034013491898*f16*f18;
         const double f21 = 2.8556034013491898*f13*f14 + 2.8556034013491898*f16*f17;
         const double f22 = -f19*f19 + f20*f20 + f21*f21;
-        const double f23 = dq_atan2(f21, f20) + dq_atan2(sqrt(((f22) > 0.0 ? (f22) : 0.0)), -f19);
+        const double f23 = dq_atan2(f21, f20) + dq_atan2(sqrt(dq_sel((f22) > 0.0, f22, 0.0)), -f19);
         const int singular = h10 < 1e-11;
         const int cos_small = h8 < h7;
         for (int b2 = 0; b2 < 2; ++b2) {
@@ -329,7 +348,7 @@ int ur10e_ik(const double *restrict pose, double *restrict sols)
             if (!(fabs(k25) <= 1.0000000001)) {
                 continue;
             }
-            const double k26 = sqrt(((1 - k25*k25) > 0.0 ? (1 - k25*k25) : 0.0));
+            const double k26 = sqrt(dq_sel((1 - k25*k25) > 0.0, 1 - k25*k25, 0.0));
             const double k27 = dq_atan2(k26, k25);
             for (int b3 = 0; b3 < 2; ++b3) {
                 const double sg3 = b3 ? -1.0 : 1.0;
@@ -368,7 +387,7 @@ void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sol
                 pb[k][j] = poses[(i0 + j) * 8 + k];
             }
         }
-        for (size_t j = 0; j < m; ++j) {
+        for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
             const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
             const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
             int ok = 1;
@@ -395,8 +414,8 @@ void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sol
             const double k3 = -0.17415;
             const double k4 = k1*k1 + k2*k2 - k3*k3;
             const double k5 = dq_atan2(k2, k1);
-            const double k6 = dq_atan2(sqrt(((k4) > 0.0 ? (k4) : 0.0)), -k3);
-            ok = ok & (k4 >= -1e-10*((1.0) > (k3*k3) ? (1.0) : (k3*k3)));
+            const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
+            ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
             int ok_0 = ok;
             const double sg1_0 = 1.0;
             int ok_1 = ok;
@@ -443,8 +462,8 @@ void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sol
             const double f21_1 = 2.8556034013491898*f13_1*f14_1 + 2.8556034013491898*f16_1*f17_1;
             const double f22_0 = -f19_0*f19_0 + f20_0*f20_0 + f21_0*f21_0;
             const double f22_1 = -f19_1*f19_1 + f20_1*f20_1 + f21_1*f21_1;
-            const double f23_0 = dq_atan2(f21_0, f20_0) + dq_atan2(sqrt(((f22_0) > 0.0 ? (f22_0) : 0.0)), -f19_0);
-            const double f23_1 = dq_atan2(f21_1, f20_1) + dq_atan2(sqrt(((f22_1) > 0.0 ? (f22_1) : 0.0)), -f19_1);
+            const double f23_0 = dq_atan2(f21_0, f20_0) + dq_atan2(sqrt(dq_sel((f22_0) > 0.0, f22_0, 0.0)), -f19_0);
+            const double f23_1 = dq_atan2(f21_1, f20_1) + dq_atan2(sqrt(dq_sel((f22_1) > 0.0, f22_1, 0.0)), -f19_1);
             const int singular_0 = h10_0 < 1e-11;
             const int singular_1 = h10_1 < 1e-11;
             const int cos_small_0 = h8_0 < h7_0;
@@ -457,26 +476,26 @@ void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sol
             const double sg2_10 = 1.0;
             int ok_11 = ok_1;
             const double sg2_11 = -1.0;
-            const double theta5_singular_00 = (cos_small_0) ? 3.141592653589793 : 0;
-            const double theta5_singular_01 = (cos_small_0) ? 3.141592653589793 : 0;
-            const double theta5_singular_10 = (cos_small_1) ? 3.141592653589793 : 0;
-            const double theta5_singular_11 = (cos_small_1) ? 3.141592653589793 : 0;
-            const double theta5_00 = (singular_0) ? theta5_singular_00 : 2.0*h9_0*sg2_00;
-            const double theta5_01 = (singular_0) ? theta5_singular_01 : 2.0*h9_0*sg2_01;
-            const double theta5_10 = (singular_1) ? theta5_singular_10 : 2.0*h9_1*sg2_10;
-            const double theta5_11 = (singular_1) ? theta5_singular_11 : 2.0*h9_1*sg2_11;
+            const double theta5_singular_00 = dq_sel(cos_small_0, 3.141592653589793, 0);
+            const double theta5_singular_01 = dq_sel(cos_small_0, 3.141592653589793, 0);
+            const double theta5_singular_10 = dq_sel(cos_small_1, 3.141592653589793, 0);
+            const double theta5_singular_11 = dq_sel(cos_small_1, 3.141592653589793, 0);
+            const double theta5_00 = dq_sel(singular_0, theta5_singular_00, 2.0*h9_0*sg2_00);
+            const double theta5_01 = dq_sel(singular_0, theta5_singular_01, 2.0*h9_0*sg2_01);
+            const double theta5_10 = dq_sel(singular_1, theta5_singular_10, 2.0*h9_1*sg2_10);
+            const double theta5_11 = dq_sel(singular_1, theta5_singular_11, 2.0*h9_1*sg2_11);
             const double h24_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
             const double h24_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
             const double h24_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
             const double h24_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
-            const double sigma1_00 = ((singular_0) & (!(cos_small_0))) ? -f23_0 + h11_0 : h24_00;
-            const double sigma1_01 = ((singular_0) & (!(cos_small_0))) ? -f23_0 + h11_0 : h24_01;
-            const double sigma1_10 = ((singular_1) & (!(cos_small_1))) ? -f23_1 + h11_1 : h24_10;
-            const double sigma1_11 = ((singular_1) & (!(cos_small_1))) ? -f23_1 + h11_1 : h24_11;
-            const double sigma2_00 = ((cos_small_0) & (singular_0)) ? f23_0 + h24_00 : h11_0;
-            const double sigma2_01 = ((cos_small_0) & (singular_0)) ? f23_0 + h24_01 : h11_0;
-            const double sigma2_10 = ((cos_small_1) & (singular_1)) ? f23_1 + h24_10 : h11_1;
-            const double sigma2_11 = ((cos_small_1) & (singular_1)) ? f23_1 + h24_11 : h11_1;
+            const double sigma1_00 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_00);
+            const double sigma1_01 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_01);
+            const double sigma1_10 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_10);
+            const double sigma1_11 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_11);
+            const double sigma2_00 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_00, h11_0);
+            const double sigma2_01 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_01, h11_0);
+            const double sigma2_10 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_10, h11_1);
+            const double sigma2_11 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_11, h11_1);
             const double theta6_00 = -sigma1_00 + sigma2_00;
             const double theta6_01 = -sigma1_01 + sigma2_01;
             const double theta6_10 = -sigma1_10 + sigma2_10;
@@ -505,10 +524,10 @@ void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sol
             ok_01 = ok_01 & (fabs(k25_01) <= 1.0000000001);
             ok_10 = ok_10 & (fabs(k25_10) <= 1.0000000001);
             ok_11 = ok_11 & (fabs(k25_11) <= 1.0000000001);
-            const double k26_00 = sqrt(((1 - k25_00*k25_00) > 0.0 ? (1 - k25_00*k25_00) : 0.0));
-            const double k26_01 = sqrt(((1 - k25_01*k25_01) > 0.0 ? (1 - k25_01*k25_01) : 0.0));
-            const double k26_10 = sqrt(((1 - k25_10*k25_10) > 0.0 ? (1 - k25_10*k25_10) : 0.0));
-            const double k26_11 = sqrt(((1 - k25_11*k25_11) > 0.0 ? (1 - k25_11*k25_11) : 0.0));
+            const double k26_00 = sqrt(dq_sel((1 - k25_00*k25_00) > 0.0, 1 - k25_00*k25_00, 0.0));
+            const double k26_01 = sqrt(dq_sel((1 - k25_01*k25_01) > 0.0, 1 - k25_01*k25_01, 0.0));
+            const double k26_10 = sqrt(dq_sel((1 - k25_10*k25_10) > 0.0, 1 - k25_10*k25_10, 0.0));
+            const double k26_11 = sqrt(dq_sel((1 - k25_11*k25_11) > 0.0, 1 - k25_11*k25_11, 0.0));
             const double k27_00 = dq_atan2(k26_00, k25_00);
             const double k27_01 = dq_atan2(k26_01, k25_01);
             const double k27_10 = dq_atan2(k26_10, k25_10);
