@@ -155,6 +155,18 @@ def write_manifest(folder: Path, data: dict) -> Path:
     return path
 
 
+def claim_folder(folder, robot_id: str, name: str, force: bool = False) -> None:
+    """Refuse (DeriveError) to write a robot's outputs into a folder whose manifest records
+    another robot's identity, for example a file named ``ur5`` with other numbers written into
+    ``generated/`` over the library UR5's shipped artifacts; ``force`` allows it
+    (``dq-derive generate`` regenerating the library's own folders)."""
+    held = read_manifest(Path(folder)).get("id")
+    if held and held != robot_id and not force:
+        raise DeriveError(
+            f"{folder} holds the outputs of another robot (identity {held}); {name!r} has identity "
+            f"{robot_id}. Choose another --out, or give the robot another name")
+
+
 def find_artifact(robot_id: str, role: str) -> Path | None:
     """The file of ``role`` (for example "c_source", "casadi/fk") for a robot identity: first
     a shipped folder, then the user cache; None when neither has it."""

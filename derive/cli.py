@@ -168,9 +168,9 @@ def cmd_generate(args) -> int:
     written = []
     for name in robots:
         t = time.perf_counter()
-        paths = write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}")
-        paths += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}")
-        paths += write_kernels(name, args.out, command=f"dq-derive kernels {name}")
+        paths = write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}", force=True)
+        paths += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}", force=True)
+        paths += write_kernels(name, args.out, command=f"dq-derive kernels {name}", force=True)
         written += paths
         print(f"{name}: appendix B and C equations and the closed-form IK derived, verified and written in "
               f"{time.perf_counter() - t:.2f} s")
@@ -178,8 +178,8 @@ def cmd_generate(args) -> int:
         t = time.perf_counter()
         for name in UR_ROBOTS:
             if name not in robots:
-                written += write_kernels(name, args.out, command=f"dq-derive kernels {name}")
-            written += write_casadi(name, args.out)
+                written += write_kernels(name, args.out, command=f"dq-derive kernels {name}", force=True)
+            written += write_casadi(name, args.out, force=True)
         print(f"FK/IK kernels and CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, "
               f"residual, ik) of {', '.join(UR_ROBOTS)} written in {time.perf_counter() - t:.2f} s")
     cmd_robots(args)
@@ -292,4 +292,7 @@ def main(argv=None) -> int:
         return args.func(args)
     except DeriveError as exc:
         print(f"dq-derive: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:                 # an output folder or file that cannot be written
+        print(f"dq-derive: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2

@@ -142,8 +142,11 @@ def test_file_named_ur5_with_another_d1_gets_its_own_kernels(tmp_path, cache, ba
         assert max(err[0].max(), err[1].max()) < 1e-10
 
 
-def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache, rng):
-    path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="decimal-ur5"), 1.5707963267948966))
+def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache, rng, capfd):
+    # decimal twists (snapped to pi/2 within 1e-12) and a number of its own: derived, not shipped
+    path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="decimal-ur5", parameters={"d1": 0.1}),
+                                                         1.5707963267948966))
+    assert derive.load_robot(path).exact and derive.load_robot(path).id != derive.load_robot("ur5").id
     q = rng.uniform(-np.pi, np.pi, (300, 6))
     poses = reference.fk(path, q)
     for backend in ("python", "numpy", "c"):
@@ -158,6 +161,8 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
             d = np.abs(np.mod(s - q[i] + np.pi, 2 * np.pi) - np.pi)
             found += bool(np.any(np.all(d < 1e-8, axis=1)))
         assert found == len(q)
+    err = capfd.readouterr().err
+    assert "[decimal-ur5] no kernels of identity" in err and "IK step" in err   # progress lines
 
 
 def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
@@ -254,3 +259,35 @@ def test_bad_robot_name_is_refused_before_any_work(tmp_path, capsys):
     assert main(["kernels", str(path), "--out", str(tmp_path / "out")]) != 0
     assert "name '../escape'" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_outputs_of_another_robot_are_not_overwritten(tmp_path, capsys):
+    """A file named ur5 with other numbers cannot write over the library UR5's folder."""
+    out = tmp_path / "out"
+    assert main(["kernels", "ur5", "--out", str(out)]) == 0
+    before = (out / "ur5" / "ur5_kinematics.c").read_bytes()
+    path = _write(tmp_path / "ur5.yaml", _ur5(parameters={"d1": 0.5}))
+    capsys.readouterr()
+    assert main(["kernels", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "holds the outputs of another robot" in err and derive.load_robot("ur5").id in err
+    assert (out / "ur5" / "ur5_kinematics.c").read_bytes() == before
+    assert json.loads((out / "ur5" / "manifest.json").read_text())["id"] == derive.load_robot("ur5").id
+
+
+def test_non_finite_numbers_and_unwritable_outputs_are_clear_errors(tmp_path, capsys):
+    for field in ("d", "a", "alpha", "offset"):
+        data = _ur5(name="nan-arm")
+        data["joints"][1][field] = float("nan")
+        with pytest.raises(derive.RobotFileError, match=f"{field} = nan is not finite"):
+            derive.load_robot(_write(tmp_path / f"{field}.yaml", data))
+    data = _ur5(name="nan-arm")
+    data["joints"][0]["limits"] = [float("nan"), 1.0]
+    with pytest.raises(derive.RobotFileError, match="limits = nan is not finite"):
+        derive.load_robot(_write(tmp_path / "lim.yaml", data))
+    blocker = tmp_path / "afile"
+    blocker.write_text("")
+    assert main(["kernels", "ur5", "--out", str(blocker)]) == 2
+    assert main(["export", "ur5", "--yaml", str(tmp_path / "no" / "such" / "dir.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("dq-derive: error:") == 2 and "Traceback" not in err

@@ -165,6 +165,10 @@ def _bad(tmp_path, name, old, new, src=ARMS[1][0]):
      {"base": "base_link", "tip": "tool0"}, r"floating\.urdf: joint 'elbow_joint': type 'floating' is not supported"),
     ("planar.urdf", '<joint name="wrist_2_joint" type="revolute">', '<joint name="wrist_2_joint" type="planar">',
      {"base": "base_link", "tip": "tool0"}, r"planar\.urdf: joint 'wrist_2_joint': type 'planar'"),
+    ("nan.urdf", 'xyz="0.0 0.13585 0.0"', 'xyz="nan 0.13585 0.0"', {"base": "base_link", "tip": "tool0"},
+     r"nan\.urdf: joint 'shoulder_lift_joint': the origin is not finite"),
+    ("inf.urdf", 'rpy="0.0 1.57079632679 0.0" xyz="0.0 0.13585 0.0"', 'rpy="0.0 inf 0.0" xyz="0.0 0.13585 0.0"',
+     {"base": "base_link", "tip": "tool0"}, r"inf\.urdf: joint 'shoulder_lift_joint': the origin is not finite"),
 ])
 def test_bad_urdfs_name_the_culprit(tmp_path, name, old, new, kwargs, message):
     with pytest.raises(RobotFileError, match=message):

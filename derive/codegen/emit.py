@@ -16,7 +16,7 @@ from sympy.printing.numpy import NumPyPrinter
 from sympy.printing.pycode import PythonCodePrinter
 
 from derive._version import __version__
-from derive.cache import write_manifest
+from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
@@ -275,13 +275,17 @@ def kernel_manifest(robot) -> dict:
             "dof": robot.dof, "dq_derive": __version__}
 
 
-def write_kernels(robot, out_dir, command: str | None = None) -> list:
-    """Write the kernel files into out_dir/<robot name>/ and record them in its manifest."""
+def write_kernels(robot, out_dir, command: str | None = None, force: bool = False) -> list:
+    """Write the kernel files into out_dir/<robot name>/ and record them in its manifest (a
+    folder of another robot is refused unless ``force``: :func:`derive.cache.claim_folder`)."""
     robot = load_robot(robot)
     out = Path(out_dir) / robot.name
+    claim_folder(out, robot.id, robot.name, force)
+    with task(robot.name):
+        step("rendering the FK/IK kernels")
+        files = render_kernels(robot, command)
     out.mkdir(parents=True, exist_ok=True)
     written = []
-    files = render_kernels(robot, command)
     for name, text in files.values():
         (out / name).write_text(text, encoding="utf-8")
         written.append(out / name)

@@ -35,8 +35,8 @@ import sympy as sp
 
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import hamilton
-from derive.cache import check as check_budget
 from derive.cache import memo
+from derive.cache import step as report_step
 from derive.errors import DeriveError
 from derive.kinematics import fk as reference
 from derive.model.robot import load_robot
@@ -421,10 +421,12 @@ def _extract(robot, progress: bool) -> Extraction:
         cands.sort(key=lambda c: (c[0], c[1], [_id_key(i) for i in c[2].equations]))
         _, _, step, forms = cands[0]
         step.forms = [_fold_form(f) for f in step.forms]
+        line = (f"IK step {len(ext.steps) + 1}: {step.unknown} by {step.pattern} from "
+                f"{', '.join(step.equations)}")
         if progress:
-            print(f"[{chain.robot}] IK step {len(ext.steps) + 1}: {step.unknown} by {step.pattern} "
-                  f"from {', '.join(step.equations)}", file=sys.stderr, flush=True)
-        check_budget()
+            print(f"[{chain.robot}] {line}", file=sys.stderr, flush=True)
+        else:
+            report_step(line)
         unknown = sp.sympify(step.unknown, locals={str(t): t for t in thetas})
         n_sigma = sum(1 for st in ext.steps if st.symbol is not None and st.symbol not in thetas)
         step.symbol = unknown if unknown in thetas else sp.Symbol(f"sigma{n_sigma + 1}", real=True)

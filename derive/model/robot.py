@@ -223,6 +223,8 @@ class _Expr:
         if isinstance(value, bool) or value is None:
             raise RobotFileError(f"{self.where}: {what} must be a number, got {value!r}")
         if isinstance(value, (int, float)):
+            if not math.isfinite(value):
+                raise RobotFileError(f"{self.where}: {what} = {value!r} is not finite")
             return float(value)
         if not isinstance(value, str):
             raise RobotFileError(f"{self.where}: {what} must be a number or expression, got {value!r}")

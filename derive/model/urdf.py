@@ -38,6 +38,8 @@ MOVING = {"revolute": "revolute", "continuous": "revolute", "prismatic": "prisma
 def _origin(matrix, where: str) -> dict:
     """{translation, rotation} of a 4x4 origin (rotation omitted when it is the identity)."""
     m = np.asarray(matrix, dtype=float)
+    if not np.all(np.isfinite(m)):
+        raise RobotFileError(f"{where}: the origin is not finite (nan or inf in xyz or rpy)")
     out = {"translation": [float(x) for x in m[:3, 3]]}
     q = quat.from_matrix(m[:3, :3])
     q = -q if q[0] < 0 else q
@@ -76,9 +78,10 @@ def _load(name: str, text: str):
     # yourdfpy imports trimesh (1.2 s here): loaded when a URDF is first read, not with derive
     import yourdfpy
     try:
-        return yourdfpy.URDF.load(io.BytesIO(text.encode("utf-8")), build_scene_graph=False,
-                                  load_meshes=False, build_collision_scene_graph=False,
-                                  load_collision_meshes=False)
+        with np.errstate(invalid="ignore"):      # nan / inf origins are reported below, by joint
+            return yourdfpy.URDF.load(io.BytesIO(text.encode("utf-8")), build_scene_graph=False,
+                                      load_meshes=False, build_collision_scene_graph=False,
+                                      load_collision_meshes=False)
     except ValueError as exc:
         where = _non_numeric(root)
         raise RobotFileError(f"{name}: {where or f'not a valid URDF ({exc})'}") from None
@@ -99,11 +102,12 @@ def _chain(name: str, robot, base: str | None, tip: str | None) -> tuple[str, st
     leaves = sorted(links - parents)
     if base is None:
         if len(roots) != 1:
-            raise RobotFileError(f"{name}: several root links {roots}; choose one with base=")
+            raise RobotFileError(f"{name}: several root links {roots}; choose one with base= (--base)"
+                                 if roots else f"{name}: no root link (the file has no links, or a cycle)")
         base = roots[0]
     if tip is None:
         if len(leaves) != 1:
-            raise RobotFileError(f"{name}: several leaf links {leaves}; choose the tip with tip=")
+            raise RobotFileError(f"{name}: several leaf links {leaves}; choose the tip with tip= (--tip)")
         tip = leaves[0]
     for role, link in (("base", base), ("tip", tip)):
         if link not in links:
@@ -137,8 +141,8 @@ def urdf_description(path: str, text: str, base: str | None = None, tip: str | N
                                  "(revolute, continuous, prismatic and fixed joints are)")
         axis = [float(x) for x in (j.axis if j.axis is not None else (1.0, 0.0, 0.0))]
         n = math.sqrt(sum(x * x for x in axis))
-        if n == 0.0:
-            raise RobotFileError(f"{where}: axis is the zero vector")
+        if not math.isfinite(n) or n == 0.0:
+            raise RobotFileError(f"{where}: axis {axis} is not a direction (zero, nan or inf)")
         entry = {"name": j.name, "type": MOVING[j.type], "origin": pending + [origin],
                  "axis": [x / n for x in axis]}
         pending = []

@@ -40,6 +40,7 @@ import sympy as sp
 
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import (
+    claim_folder,
     find_artifact,
     memo,
     step,
@@ -389,11 +390,13 @@ def _run(ops, start, env, ok, sols, valid):
             raise DeriveError(f"CasADi IK: unknown program line {op.kind}")
 
 
-def write_casadi(robot, out_dir) -> list[Path]:
+def write_casadi(robot, out_dir, force: bool = False) -> list[Path]:
     """Build the functions afresh and save them with ``Function.save`` into
-    out_dir/<robot name>/<robot name>_<function>.casadi, recorded in the folder's manifest."""
+    out_dir/<robot name>/<robot name>_<function>.casadi, recorded in the folder's manifest (a
+    folder of another robot is refused unless ``force``: :func:`derive.cache.claim_folder`)."""
     robot = load_robot(robot)
     folder = Path(out_dir) / robot.name
+    claim_folder(folder, robot.id, robot.name, force)
     folder.mkdir(parents=True, exist_ok=True)
     source = "derived" if is_library_robot(robot) and robot.exact else "product"
     fns = functions(robot, source)

@@ -17,6 +17,7 @@ from pathlib import Path
 import sympy as sp
 
 from derive._version import __version__
+from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
 from derive.model.robot import load_robot
 from derive.reports.latex import latex, side
@@ -119,12 +120,15 @@ def _json(ctx: dict) -> str:
     return json.dumps(data, indent=1, ensure_ascii=True) + "\n"
 
 
-def write_appendix(robot, out_dir, progress: bool = False, command: str | None = None) -> list:
-    """Derive, verify and write the three files for one robot into out_dir/<robot name>/;
-    returns the paths written."""
+def write_appendix(robot, out_dir, progress: bool = False, command: str | None = None,
+                   force: bool = False) -> list:
+    """Derive, verify and write the three files for one robot into out_dir/<robot name>/,
+    recorded in its manifest (a folder of another robot is refused unless ``force``); returns
+    the paths written."""
     t0 = time.perf_counter()
     robot = load_robot(robot)
     robot_name = robot.name
+    claim_folder(Path(out_dir) / robot_name, robot.id, robot_name, force)
     chain, sets = derive_equations(robot, progress=progress)
     command = command or f"dq-derive appendix {robot_name}"
     ctx = build_context(robot, chain, sets, command)
@@ -138,6 +142,8 @@ def write_appendix(robot, out_dir, progress: bool = False, command: str | None =
         path = out / name
         path.write_text(text, encoding="utf-8")
         written.append(path)
+    written.append(write_manifest(out, {"id": robot.id, "robot": robot_name, "files": {
+        "appendix/md": "appendix.md", "appendix/tex": "appendix.tex", "appendix/json": "equations.json"}}))
     if progress:
         print(f"[{robot_name}] wrote {len(written)} files, {ctx['n_equations']} equations "
               f"({time.perf_counter() - t0:.2f} s)", file=sys.stderr)

@@ -11,6 +11,7 @@ import sympy as sp
 import yaml
 
 from derive._version import __version__
+from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
 from derive.ik.extract import R_SYMS, check_numerically, extract
 from derive.model.robot import load_robot
@@ -114,11 +115,14 @@ def build_ik_context(robot, command: str) -> dict:
     }
 
 
-def write_ik(robot, out_dir, progress: bool = False, command: str | None = None) -> list:
-    """Extract and typeset the closed-form IK into out_dir/<robot name>/ik.{md,tex}."""
+def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
+             force: bool = False) -> list:
+    """Extract and typeset the closed-form IK into out_dir/<robot name>/ik.{md,tex}, recorded in
+    its manifest (a folder of another robot is refused unless ``force``)."""
     t0 = time.perf_counter()
     robot = load_robot(robot)
     robot_name = robot.name
+    claim_folder(Path(out_dir) / robot_name, robot.id, robot_name, force)
     command = command or f"dq-derive ik {robot_name}"
     ctx = build_ik_context(robot, command)
     env = template_environment()
@@ -129,6 +133,8 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None)
         path = out / name
         path.write_text(env.get_template(name + ".j2").render(ctx), encoding="utf-8")
         written.append(path)
+    written.append(write_manifest(out, {"id": robot.id, "robot": robot_name,
+                                        "files": {"ik/md": "ik.md", "ik/tex": "ik.tex"}}))
     if progress:
         print(f"[{robot_name}] IK extracted and typeset ({time.perf_counter() - t0:.2f} s)", file=sys.stderr)
     return written

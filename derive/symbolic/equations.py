@@ -34,7 +34,7 @@ import numpy as np
 import sympy as sp
 
 from derive.cache import check as check_budget
-from derive.cache import memo, peek
+from derive.cache import memo, peek, step
 from derive.errors import DeriveError
 from derive.kinematics import fk as reference
 from derive.model.robot import load_robot
@@ -100,8 +100,12 @@ class EquationSet:
 
 
 def _say(progress, msg):
+    """A progress line: printed when ``progress``, else reported to the running task (if any:
+    :func:`derive.cache.step` prints it with the elapsed time and checks the time budget)."""
     if progress:
         print(msg, file=sys.stderr, flush=True)
+    else:
+        step(msg.split("] ", 1)[-1])
 
 
 def set_specs(chain: SymChain) -> list:
