@@ -374,6 +374,30 @@ int ur3_ik(const double *restrict pose, double *restrict sols)
     return dq_merge((const double (*)[6])cand, valid, sols);
 }
 
+/* The scalar pass after the vectorised loop of the batch IK: the candidates of each of the m
+ * poses of a block merged (dq_merge) and NaN-padded, with their count. Kept out of the batch
+ * function so that its loops are the vectorised ones only. */
+static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK],
+                           double *restrict sols, int *restrict counts)
+{
+    for (size_t j = 0; j < m; ++j) {
+        double cand[8][6];
+        int valid[8];
+        for (int b = 0; b < 8; ++b) {
+            valid[b] = vb[b][j];
+            for (int k = 0; k < 6; ++k) {
+                cand[b][k] = cb[b][k][j];
+            }
+        }
+        double *const s = sols + j * 48;
+        const int c = dq_merge((const double (*)[6])cand, valid, s);
+        for (int k = c * 6; k < 48; ++k) {
+            s[k] = NAN;
+        }
+        counts[j] = c;
+    }
+}
+
 /* n poses (n x 8) in blocks of DQ_BLOCK: the IK program with its branches unrolled runs over
  * the poses of a block with unit stride (vectorisable), then each pose's candidates are merged. */
 void ur3_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts)
@@ -646,21 +670,6 @@ void ur3_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[7][5][j] = dq_wrap(theta6_11);
             vb[7][j] = ok_111;
         }
-        for (size_t j = 0; j < m; ++j) {
-            double cand[8][6];
-            int valid[8];
-            for (int b = 0; b < 8; ++b) {
-                valid[b] = vb[b][j];
-                for (int k = 0; k < 6; ++k) {
-                    cand[b][k] = cb[b][k][j];
-                }
-            }
-            double *const s = sols + (i0 + j) * 48;
-            const int c = dq_merge((const double (*)[6])cand, valid, s);
-            for (int k = c * 6; k < 48; ++k) {
-                s[k] = NAN;
-            }
-            counts[i0 + j] = c;
-        }
+        dq_merge_block(m, cb, vb, sols + i0 * 48, counts + i0);
     }
 }
