@@ -53,9 +53,8 @@ def peek(kind: str, key):
 def clear_memory(kinds=None) -> None:
     """Forget the in-memory results of the given kinds (all when None), and the index of the
     shipped folders; tests use it to load artifacts as a fresh process would."""
-    for k in [k for k in _MEMO if kinds is None or k[0] in kinds]:
+    for k in [k for k in _MEMO if kinds is None or k[0] in kinds or k[0] == "shipped-index"]:
         del _MEMO[k]
-    _SHIPPED.clear()
 
 
 # --------------------------------------------------------------------------- #
@@ -111,22 +110,21 @@ def generated_root() -> Path | None:
     return root if root.is_dir() else None
 
 
-_SHIPPED: dict = {}
-
-
 def shipped_index() -> dict:
-    """{robot identity: folder} of the shipped ``generated/<robot>/`` folders."""
-    if not _SHIPPED:
-        root = generated_root()
-        index = {}
-        if root is not None:
-            for m in sorted(root.glob(f"*/{MANIFEST}")):
-                try:
-                    index[json.loads(m.read_text(encoding="utf-8"))["id"]] = m.parent
-                except (OSError, ValueError, KeyError):
-                    continue
-        _SHIPPED["index"] = index
-    return _SHIPPED["index"]
+    """{robot identity: folder} of the shipped ``generated/<robot>/`` folders (read once)."""
+    return memo("shipped-index", None, _shipped_index)
+
+
+def _shipped_index() -> dict:
+    root = generated_root()
+    index = {}
+    if root is not None:
+        for m in sorted(root.glob(f"*/{MANIFEST}")):
+            try:
+                index[json.loads(m.read_text(encoding="utf-8"))["id"]] = m.parent
+            except (OSError, ValueError, KeyError):
+                continue
+    return index
 
 
 def read_manifest(folder: Path) -> dict:

@@ -374,8 +374,8 @@ def _solve_related(robot, poses, q6):
         if rel is None:
             raise exc
     lib = load_robot(rel.other)
-    moved = dq._mul(dq._mul(dq.conj_quaternion(rel.base)[None], poses), dq.conj_quaternion(rel.tool)[None])
-    q, counts, singular, reasons = solve(lib, ur_geometry(lib), moved, None if q6 is None else q6 * rel.signs[5])
+    q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
+                                         None if q6 is None else q6 * rel.signs[5])
     return wrap_angle(q * rel.signs), counts, singular, reasons
 
 

@@ -45,6 +45,10 @@ class Relation:
     signs: np.ndarray       # (dof,) of +-1
     error: float
 
+    def into_other(self, poses: np.ndarray) -> np.ndarray:
+        """Poses (n, 8) of the robot's end frame as poses of the other robot's: B^-1 P T^-1."""
+        return dq._mul(dq._mul(dq.conj_quaternion(self.base)[None], poses), dq.conj_quaternion(self.tool)[None])
+
     def describe(self) -> str:
         def pose(d):
             r, t = dq.to_rt(d)

@@ -40,7 +40,6 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from derive.algebra import dualquat as dq
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik.closed_form import (
@@ -276,7 +275,7 @@ def closed_form_seeds(robot, pose, with_reach: bool = False):
     geo = ur_geometry(nominal)
     pose = np.asarray(pose, dtype=float)[None]
     if rel is not None:                 # the pose in the nominal robot's frames: B^-1 P T^-1
-        pose = dq._mul(dq._mul(dq.conj_quaternion(rel.base)[None], pose), dq.conj_quaternion(rel.tool)[None])
+        pose = rel.into_other(pose)
     q, counts = ik_batch(nominal, pose)
     out = list(q[0, :counts[0]])
     cand, _, code = solve_batch(geo, pose, keep_unreachable=True)
