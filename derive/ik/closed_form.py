@@ -36,6 +36,9 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
+from derive.ik import spherical
+from derive.ik.spherical import SWGeometry, sw_geometry
+from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.kinematics.relate import RELATE_TOL, Relation, relate
@@ -43,16 +46,6 @@ from derive.model.classify import Classification
 from derive.model.classify import classify as geometric_classify
 from derive.model.geometry import numeric_chain
 from derive.model.robot import list_robots, load_robot
-
-#: |sin theta5| below this is the wrist singularity (theta6 free)
-WRIST_SINGULAR = 1e-11
-#: Candidates whose FK misses the pose by more than this (m or rad) are dropped.
-ACCEPT_TOL = 1e-8
-#: Solutions closer than this in every joint (mod 2 pi) are one solution: such pairs only arise
-#: within about 1e-7 of a singular set, where a double root splits by rounding (sqrt of noise).
-MERGE_TOL = 1e-6
-#: Slack on |cos| <= 1 and on the discriminant before a branch counts as unreachable.
-REACH_TOL = 1e-10
 
 REASON_OK = ""
 REASON_WRIST_NEAR_AXIS = ("unreachable: the wrist centre is closer to the base axis than the "
@@ -225,9 +218,18 @@ def _residuals(robot, poses_rep, cand):
     return _pose_error(fk(robot, cand), poses_rep)
 
 
-def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = None,
+def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
           chunk: int = 20000):
-    """Checked, merged solutions: (q (n,8,6) NaN-padded, counts (n,), singular (n,8), reasons list)."""
+    """Checked, merged solutions: (q (n,8,6) NaN-padded, counts (n,), singular (n,8), reasons list).
+
+    ``geo``: a :class:`URGeometry` (candidates from :func:`solve_batch`; ``q_free`` the
+    reference theta6 of the wrist singularity) or a :class:`derive.ik.spherical.SWGeometry`
+    (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4)."""
+    if isinstance(geo, SWGeometry):
+        batch, why = spherical.solve_batch, (spherical.REASON_LATERAL, spherical.REASON_REACH)
+    else:
+        batch, why = solve_batch, (REASON_WRIST_NEAR_AXIS, REASON_ARM_REACH)
+    q6_ref = q_free
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
     sing_all = np.zeros((n, 8), dtype=bool)
@@ -235,7 +237,7 @@ def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None =
     reasons = [REASON_OK] * n
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
-        cand, sing, code = solve_batch(geo, poses[s:e], None if q6_ref is None else q6_ref[s:e])
+        cand, sing, code = batch(geo, poses[s:e], None if q6_ref is None else q6_ref[s:e])
         m = e - s
         flat = cand.reshape(-1, 6)
         valid = ~np.isnan(flat[:, 0])
@@ -262,8 +264,8 @@ def solve(robot, geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None =
         counts[s:e] = keep_sorted.sum(axis=1)
         for k in np.nonzero(counts[s:e] == 0)[0]:
             codes = code[k]
-            reasons[s + k] = (REASON_WRIST_NEAR_AXIS if np.all(codes == 1) else
-                              REASON_ARM_REACH if np.all(codes > 0) else REASON_NO_CANDIDATE)
+            reasons[s + k] = (why[0] if np.all(codes == 1) else
+                              why[1] if np.all(codes > 0) else REASON_NO_CANDIDATE)
     return q_all, counts, sing_all, reasons
 
 
@@ -343,6 +345,14 @@ def classify(robot) -> Classification:
     c = geometric_classify(robot)
     if c.closed_form:
         return c
+    try:
+        geo = sw_geometry(robot)
+    except DeriveError:
+        geo = None
+    if geo is not None:
+        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
+        return dataclasses.replace(c, closed_form=True, notes=notes + [
+            "closed-form IK of the spherical-wrist class (derive.ik.spherical): " + spherical.describe(geo)])
     rel = closed_form_relation(robot)
     if rel is None:
         return c
@@ -355,28 +365,50 @@ def classify(robot) -> Classification:
 
 
 def has_closed_form(robot) -> bool:
-    """Whether :func:`ik` solves the robot: the UR structure, in its own frames or related."""
+    """Whether :func:`ik` solves the robot: the UR structure (in its own frames or related to a
+    library robot) or the spherical-wrist class."""
     robot = load_robot(robot)
     try:
         ur_geometry(robot)
         return True
     except DeriveError:
-        return closed_form_relation(robot) is not None
+        return spherical.is_spherical(robot) or closed_form_relation(robot) is not None
 
 
-def _solve_related(robot, poses, q6):
-    """:func:`solve` on the robot, or on the library robot it is related to (poses moved into
-    that robot's frames, B^-1 P T^-1, and the solutions' joint directions mapped back)."""
+def _solve_related(robot, poses, q_ref):
+    """:func:`solve` on the robot (UR family or spherical wrist), or on the library robot it is
+    related to (poses moved into that robot's frames, B^-1 P T^-1, and the solutions' joint
+    directions mapped back). ``q_ref`` (n, 6) or None: reference configurations whose free joint
+    (theta6 of the UR, q4 of the spherical wrist) is used at the wrist singularity."""
     try:
-        return solve(robot, ur_geometry(robot), poses, q6)
+        return solve(robot, ur_geometry(robot), poses, None if q_ref is None else q_ref[:, 5])
     except DeriveError as exc:
-        rel = closed_form_relation(robot)
-        if rel is None:
-            raise exc
+        first = exc
+    try:
+        geo = sw_geometry(robot)
+    except DeriveError:
+        geo = None
+    if geo is not None:
+        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, 3])
+    rel = closed_form_relation(robot)
+    if rel is None:
+        raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
+                          "UR family and the spherical-wrist (OPW) class, and this chain is in "
+                          f"neither ({str(first).split(': ', 1)[-1]}; "
+                          f"{spherical_reason(robot).split(': ', 1)[-1]}); use derive.refine")
     lib = load_robot(rel.other)
     q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
-                                         None if q6 is None else q6 * rel.signs[5])
+                                         None if q_ref is None else q_ref[:, 5] * rel.signs[5])
     return wrap_angle(q * rel.signs), counts, singular, reasons
+
+
+def spherical_reason(robot) -> str:
+    """Why the robot is not of the spherical-wrist class ("" if it is)."""
+    try:
+        sw_geometry(robot)
+        return ""
+    except DeriveError as exc:
+        return str(exc)
 
 
 def ik_batch(robot, poses, q_ref=None):
@@ -388,11 +420,11 @@ def ik_batch(robot, poses, q_ref=None):
     """
     robot = load_robot(robot)
     poses, _ = as_pose_batch(poses)
-    q6 = None
+    qr = None
     if q_ref is not None:
-        qr = as_finite_array(q_ref, "q_ref", ndim_min=1)
-        q6 = np.broadcast_to(qr[..., 5], (poses.shape[0],)).astype(float)
-    q, counts, _, _ = _solve_related(robot, poses, q6)
+        qr = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
+        qr = np.broadcast_to(qr, (poses.shape[0], robot.dof)).astype(float)
+    q, counts, _, _ = _solve_related(robot, poses, qr)
     return q, counts
 
 
@@ -413,11 +445,10 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     poses, single = as_pose_batch(pose)
     if not single:
         raise InputError("pose: ik() takes one pose; use ik_batch() for several")
-    q6 = None
+    qr = None
     if q_ref is not None:
-        q_ref = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
-        q6 = np.array([q_ref[5]])
-    q, counts, singular, reasons = _solve_related(robot, poses, q6)
+        qr = as_finite_array(q_ref, "q_ref", last_dim=robot.dof).reshape(1, robot.dof)
+    q, counts, singular, reasons = _solve_related(robot, poses, qr)
     k = int(counts[0])
     sols, sing = q[0, :k], singular[0, :k]
     reason = reasons[0]

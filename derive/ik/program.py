@@ -37,14 +37,12 @@ from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.closed_form import (
-    REACH_TOL,
-    WRIST_SINGULAR,
-    closed_form_relation,
-    ur_geometry,
-)
+from derive.ik.closed_form import closed_form_relation, ur_geometry
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
+from derive.ik.spherical import SWGeometry, canonical_robot, sw_geometry
+from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
 from derive.model.robot import load_robot
+from derive.symbolic.chain import runs_quaternion
 from derive.symbolic.equations import POSES, derive_equations
 
 #: Functions the printers map to each language.
@@ -220,6 +218,10 @@ def _ik_program(robot) -> IKProgram:
     try:
         ur_geometry(robot)
     except DeriveError:
+        try:
+            return _spherical_program(robot, sw_geometry(robot))
+        except DeriveError:
+            pass
         rel = closed_form_relation(robot)
         if rel is not None:
             return _related_program(robot, rel)
@@ -435,3 +437,189 @@ def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):
 def _is_acos(step) -> bool:
     return all(isinstance(f, sp.acos) or (isinstance(f, sp.Mul) and f.args[0] == -1
                                            and isinstance(f.args[1], sp.acos)) for f in step.forms)
+
+
+# --------------------------------------------------------------------------- #
+# Spherical-wrist class (derive.ik.spherical)
+# --------------------------------------------------------------------------- #
+def _s2_pair(eqs, ids, form, thetas, u):
+    """(n_s, n_c, d) of a pair of equations linear in (cos v, sin v) of the compound ``form``:
+    cos v = n_c / d, sin v = n_s / d (common factors cancelled), as :func:`_s2_data`."""
+    (a1, b1, c1), (a2, b2, c2) = (_as_linear_in(eqs[i], form, thetas, u) for i in ids)
+    det = sp.expand(a1 * b2 - a2 * b1)
+    nc = sp.expand(-c1 * b2 + c2 * b1)
+    ns = sp.expand(-a1 * c2 + a2 * c1)
+    g = sp.gcd(sp.gcd(nc, ns), det)
+    return sp.cancel(ns / g), sp.cancel(nc / g), sp.cancel(det / g)
+
+
+@dataclass
+class SphericalForms:
+    """The symbolic pieces of the spherical-wrist closed form, taken from the class's equations
+    (parameters a1 ... c4 as symbols): the S1 coefficients (A, B, C) of theta1 (P.13, C = -b)
+    and of theta3 (sum of squares of P.12, P.14, in the arm-plane coordinates X, Z, whose
+    definitions are ``x_def``, ``z_def``), the S2 numerators and divisor of theta2 and of the
+    wrist compounds (t4 + t6)/2 ("cos": divided by k cos(t5/2)) and (t4 - t6)/2 ("sin")."""
+
+    theta1: tuple
+    theta3: tuple
+    theta2: tuple
+    x_def: object
+    z_def: object
+    halves: dict
+    X: sp.Symbol
+    Z: sp.Symbol
+
+
+def spherical_forms(chain, eqs: dict) -> SphericalForms:
+    """:class:`SphericalForms` from the equations (id -> lhs - rhs) of the sets P and O."""
+    thetas = [j.theta for j in chain.joints]
+    t1, t2, t3, t4, t5, t6 = thetas
+    u = sp.Symbol("u", real=True)
+    par = {str(k): k for k in chain.parameters}
+    a, b, c = _as_linear_in(eqs["P.13"], _linear_form(t1, thetas), thetas, u)
+    if sp.expand(c - par["b"]) == 0:
+        a, b, c = -a, -b, -c
+    if sp.expand(c + par["b"]) != 0:
+        raise DeriveError(f"{chain.robot}: P.13 is not the theta1 equation of the class")
+    X, Z = sp.Symbol("X", real=True), sp.Symbol("Z", real=True)
+    sides = {}
+    for eid, sym in (("P.12", X), ("P.14", Z)):
+        e = eqs[eid]
+        known = sum(t for t in e.as_ordered_terms() if not (t.free_symbols & {t2, t3}))
+        sides[sym] = (sp.expand(e - known), sp.expand(-known))      # theta2,3 part = known part
+    lhs2 = sp.expand(sp.trigsimp(sp.expand(sp.expand_trig(sides[X][0] ** 2 + sides[Z][0] ** 2))))
+    if t2 in lhs2.free_symbols:
+        raise DeriveError(f"{chain.robot}: the sum of squares of P.12, P.14 keeps theta2")
+    th3 = _as_linear_in(sp.expand(lhs2 - X * X - Z * Z), _linear_form(t3, thetas), thetas, u)
+    pair = {"P.12": sides[X][0] - X, "P.14": sides[Z][0] - Z}
+    th2 = _s2_pair(pair, ("P.12", "P.14"), _linear_form(t2, thetas), thetas, u)
+    halves = {}
+    for ids, form in ((("O.15", "O.18"), (0, 0, 0, sp.S.Half, 0, sp.S.Half)),
+                      (("O.16", "O.17"), (0, 0, 0, sp.S.Half, 0, -sp.S.Half))):
+        ns, nc, d = _s2_pair(eqs, ids, form, thetas, u)
+        hf = _half_factor(d, t5)
+        if hf is None:
+            raise DeriveError(f"{chain.robot}: {ids} are not divided by a half angle of theta5")
+        halves[hf[0]] = (ns, nc, hf[1], ids)
+    if set(halves) != {"sin", "cos"}:
+        raise DeriveError(f"{chain.robot}: the wrist pairs do not give sin and cos of theta5/2")
+    return SphericalForms((a, b, c), th3, th2, sides[X][1], sides[Z][1], halves, X, Z)
+
+
+def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
+    """The IK program of a spherical-wrist arm, from the equations of its class's canonical chain
+    (:mod:`derive.symbolic.equations`, sets P and O) with the robot's numbers substituted.
+
+    Steps (equation ids of the sets P and O):
+
+    0. the pose moved into the canonical chain's frames (B^-1 P T^-1) and the wrist centre
+       (x_w, y_w, z_w) = p - R (0, 0, c4), the chain end frame without its tool;
+    1. theta1 from P.13, A cos t1 + B sin t1 + C = 0 with C = -b: t1 = atan2(A, -B) -
+       atan2(-C, +-sqrt(A^2 + B^2 - C^2)), two branches; unreachable when A^2 + B^2 < C^2
+       (the wrist centre nearer axis 1 than b); on axis 1 (b = 0) the two branches are the two
+       opposite arm planes;
+    2. theta3 from P.12, P.14 by the sum of squares (theta2 drops out), an S1 equation in
+       theta3, two branches, unreachable beyond the reach of the arm, clipped within
+       :data:`REACH_TOL` (full stretch or fold of the elbow);
+    3. theta2 from P.12, P.14 as a 2x2 system in (cos t2, sin t2), without division;
+    4. the wrist from O.15-O.18, the quaternion of (Q1 Q2 Q3)^-1 N1 = Q4 Q5 Q6: cos(t5/2) and
+       sin(t5/2) up to sign are the magnitudes of the pairs (O.15, O.18) and (O.16, O.17), the
+       compounds (t4 + t6)/2 and (t4 - t6)/2 their S2 solutions, t5 = +-2 atan2(|sin|, |cos|)
+       (exact at t5 = 0 and pi); at the wrist singularity (sin t5 below WRIST_SINGULAR) joint 4
+       is free: the program takes the robot's q4 = 0 and joint 6 takes the rest.
+    """
+    canon = canonical_robot(geo)
+    chain, sets = derive_equations(canon, symbolic=False)
+    eqs = {e.id: sp.expand(e.lhs - e.rhs) for s in sets for e in s.equations}
+    thetas = [j.theta for j in chain.joints]
+    t1, t2, t3, t4, t5, t6 = thetas
+    values = {k: _number(v) for k, v in chain.parameters.items()}
+
+    def num(e):
+        return sp.sympify(e).xreplace(values)
+
+    bld = _Builder({})          # numbers substituted here: the builder's trig names c1, c2 ...
+    p = sp.symbols("p0:8", real=True)
+    bld.known.update(p)
+    # 0. pose in the canonical frames, chain end frame (tool removed), wrist centre
+    conj_b = [_number(x) for x in dq.conj_quaternion(geo.base)]
+    conj_t = [_number(x) for x in dq.conj_quaternion(geo.tool)]
+    moved = [sp.expand(e) for e in dual_hamilton(dual_hamilton(conj_b, p), conj_t)]
+    pb = list(p) if moved == list(p) else [bld.let(f"pb{i}", e) for i, e in enumerate(moved)]
+    gq, gt = chain.end_transform
+    if tuple(sp.sympify(e) for e in gq) != (1, 0, 0, 0):
+        raise DeriveError(f"{robot.name}: the canonical chain's end transform has a rotation")
+    qw = pb[:4]
+    trans = [2 * e for e in hamilton(pb[4:], (qw[0], -qw[1], -qw[2], -qw[3]))[1:]]
+    rot = _rot(qw)
+    w_w, a_w, b_w, c_w, x_w, y_w, z_w = POSES["P"]
+    g_t = [num(e) for e in gt]
+    for i, sym in enumerate((x_w, y_w, z_w)):
+        bld.let(sym, sp.expand(trans[i] - sum(rot[i, k] * g_t[k] for k in range(3))))
+    sf = spherical_forms(chain, eqs)
+    X, Z = sf.X, sf.Z
+    # 1. theta1 (P.13)
+    ka, kb, kc = (bld.tmp(num(e)) for e in sf.theta1)
+    disc = bld.tmp(ka * ka + kb * kb - kc * kc)
+    bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
+    beta = bld.tmp(sp.atan2(ka, -kb))
+    root = bld.tmp(sp.sqrt(pos(disc)))
+    sg1 = bld.branch("sg1")
+    bld.let(t1, beta - sp.atan2(-kc, sg1 * root))
+    # 2. theta3 (P.12, P.14): the unknown sides squared and added lose theta2
+    kx, kz = bld.tmp(num(sf.x_def), "w"), bld.tmp(num(sf.z_def), "w")
+    ka, kb, kc = (bld.tmp(num(e).xreplace({X: kx, Z: kz})) for e in sf.theta3)
+    disc = bld.tmp(ka * ka + kb * kb - kc * kc)
+    bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
+    phi = bld.tmp(sp.atan2(kb, ka))
+    psi = bld.tmp(sp.atan2(sp.sqrt(pos(disc)), -kc))
+    sg2 = bld.branch("sg2")
+    bld.let(t3, phi + sg2 * psi)
+    # 3. theta2 (P.12, P.14 as a 2x2 system)
+    ns, nc, d = (num(e).xreplace({X: kx, Z: kz}) for e in sf.theta2)
+    sd = bld.tmp(sgn(d))
+    bld.let(t2, sp.atan2(sd * ns, sd * nc))
+    # 4. the wrist (O.15-O.18): O pose quaternion = (Q1 Q2 Q3)^-1 rotation of the chain pose
+    w_r, a_r, b_r, c_r = POSES["O"][:4]
+    j = chain.joints
+    inv = runs_quaternion([(j[2].axis, -t3), (j[1].axis, -t2), (j[0].axis, -t1)])
+    for sym, e in zip((w_r, a_r, b_r, c_r), hamilton(inv, qw)):
+        bld.let(sym, sp.expand(e))
+    halves = sf.halves
+    mags, base = {}, {}
+    for kind, (ns, nc, k, _) in halves.items():
+        mags[kind] = bld.tmp(sp.sqrt(ns * ns + nc * nc) / abs(k), "h")
+        sk = 1 if k > 0 else -1
+        base[kind] = bld.tmp(sp.atan2(sk * ns, sk * nc), "h")
+    hs, hc = mags["sin"], mags["cos"]
+    half = bld.tmp(sp.atan2(hs, hc), "h")
+    sing_val = bld.tmp(2 * hs * hc / (hs * hs + hc * hc), "h")
+    free = _number(geo.offsets[3])          # the robot's q4 = 0
+    sing = bld.flag("singular", sing_val < WRIST_SINGULAR)
+    cos_small = bld.flag("cos_small", hc < hs)
+    sg3 = bld.branch("sg3")
+    at_sing = bld.select("theta5_singular", cos_small, sp.pi, 0)
+    bld.select(str(t5), sing, at_sing, 2 * sg3 * half)
+    s_sum = base["cos"]                                           # (t4 + t6) / 2
+    s_dif = bld.tmp(base["sin"] + sp.pi * (1 - sg3) / 2, "h")      # (t4 - t6) / 2
+    bld.select(str(t4), sing, free, s_sum + s_dif)
+    t6_sing = bld.select("theta6_singular", cos_small, free - 2 * s_dif, 2 * s_sum - free)
+    bld.select(str(t6), sing, t6_sing, s_sum - s_dif)
+    order = [int(s) * (t - _number(o)) for t, s, o in zip(thetas, geo.signs, geo.offsets)]
+    bld.ops.append(Op("solution", args=tuple(order), depth=bld.depth))
+    steps = [
+        ("pose in the canonical chain's frames", "B^-1 P T^-1",
+         [f"spherical-wrist class, relation mismatch {geo.error:.1g}"]),
+        ("wrist centre", "W = p - R (0, 0, c4)", []),
+        ("theta1", "S1", ["P.13"]),
+        ("theta3", "S3", ["P.12", "P.14"]),
+        ("theta2", "S2", ["P.12", "P.14"]),
+        ("theta5", "half angles", ["O.15", "O.16", "O.17", "O.18"]),
+        ("(theta4 + theta6)/2", "S2", ["O.15", "O.18"]),
+        ("(theta4 - theta6)/2", "S2", ["O.16", "O.17"]),
+        ("theta4, theta6", "span", []),
+    ]
+    return IKProgram(robot.name, robot.dof, ops=bld.ops, branches=8, free_joint=3,
+                     free_rule="set to the robot's q4 = 0, joint 6 taking the rest",
+                     steps=steps, parameters=dict(geo.values))

@@ -9,6 +9,18 @@ Three sets are derived for a 6R chain (thesis section 4.3.3-4.3.4):
 * ``C``: shoulder to wrist 1, i = 2..4, the last translation set to zero,
   N_2 = ([w4, <a4, b4, c4>], <x4, y4, z4>) (appendix C, C.1-C.21).
 
+The canonical chain of the spherical-wrist class (:mod:`derive.ik.spherical`: axes z, y, y, z,
+y, z, the links of joints 4 and 5 zero, so axes 4, 5, 6 meet at the wrist centre) gets two sets
+instead, the decomposition of Pieper's criterion into position and orientation:
+
+* ``P``: base to wrist centre, i = 1..3, N_1 = ([w_w, <a_w, b_w, c_w>], <x_w, y_w, z_w>) the
+  frame at the wrist centre: its translation is the pose's position less the last link
+  (W = p - R l6, fixed by joints 4 to 6), its rotation depends on joints 4 to 6, so the
+  translation terms alone solve theta1 to theta3 (P.1-P.21);
+* ``O``: the wrist, i = 4..6, the last translation set to zero, N_4 = ([w_r, <a_r, b_r, c_r>],
+  <x_r, y_r, z_r>) = (Q1 Q2 Q3)^-1 N_1 (1, -l6), whose quaternion terms solve theta4 to
+  theta6 in half angles (O.1-O.21).
+
 Equation ids follow the thesis: for products i = first..last the seven terms of
 M_i = N_i are numbered 7 (last - i) + j, j = 1..4 the quaternion terms (w, i, j, k)
 and 5..7 the translation terms (x, y, z). Other chains get the ``B`` set only.
@@ -47,13 +59,28 @@ POSES = {
     "B": sp.symbols("w a b c x y z", real=True),
     "W": sp.symbols("w5 a5 b5 c5 x5 y5 z5", real=True),
     "C": sp.symbols("w4 a4 b4 c4 x4 y4 z4", real=True),
+    "P": sp.symbols("w_w a_w b_w c_w x_w y_w z_w", real=True),
+    "O": sp.symbols("w_r a_r b_r c_r x_r y_r z_r", real=True),
 }
 
 SET_INFO = {
     "B": ("Base to wrist 3", "appendix B"),
     "W": ("Base to wrist 2, frame-5 coordinates", "section 4.3.3"),
     "C": ("Shoulder to wrist 1", "appendix C"),
+    "P": ("Base to wrist centre (position)", "spherical-wrist class, Pieper's decomposition"),
+    "O": ("Wrist (orientation)", "spherical-wrist class, Pieper's decomposition"),
 }
+
+#: Axes of the spherical-wrist class's canonical chain (derive.ik.spherical).
+SW_AXES = ((0, 0, 1), (0, 1, 0), (0, 1, 0), (0, 0, 1), (0, 1, 0), (0, 0, 1))
+
+
+def is_spherical_chain(chain: SymChain) -> bool:
+    """Whether ``chain`` is the spherical-wrist canonical chain (axes :data:`SW_AXES`, the
+    links of joints 4 and 5 zero)."""
+    return (chain.n == 6 and all(j.type == "revolute" for j in chain.joints)
+            and all(tuple(j.axis) == a for j, a in zip(chain.joints, SW_AXES))
+            and all(e == 0 for j in chain.joints[3:5] for e in j.link))
 
 
 @dataclass
@@ -111,6 +138,8 @@ def _say(progress, msg):
 def set_specs(chain: SymChain) -> list:
     """(key, first, last, zero_last_link) of the sets that apply to ``chain``."""
     n = chain.n
+    if is_spherical_chain(chain):
+        return [("P", 1, 3, False), ("O", 4, 6, True)]
     specs = [("B", 1, n, False)]
     if n == 6 and all(j.type == "revolute" for j in chain.joints):
         specs += [("W", 1, 5, True), ("C", 2, 4, True)]

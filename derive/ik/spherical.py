@@ -1,0 +1,389 @@
+"""Closed-form inverse kinematics of 6R arms with an ortho-parallel base and a spherical wrist.
+
+The class (Brandstoetter, Angerer, Hofbaur, "An analytical solution of the inverse kinematics
+problem of industrial serial manipulators with an ortho-parallel basis and a spherical wrist",
+2014; "OPW" below): axis 1 perpendicular to axis 2, axes 2 and 3 parallel, axes 4, 5, 6 meeting
+in one point (the wrist centre) with axis 4 perpendicular to axes 3 and 5 and axis 5
+perpendicular to axis 6. ABB, KUKA, FANUC, Staubli, Yaskawa and Kawasaki arms and the PUMA 560
+are of this class.
+
+Every such arm is one **canonical chain** with seven numbers, written as a robot description in
+thesis axis-angle form (:func:`canonical_description`; the OPW paper's parameters):
+
+=====  ==========  ===========================================================
+joint  axis (q=0)  link to the next axis point
+=====  ==========  ===========================================================
+1      z           (a1, b, c1): shoulder offset a1, lateral offset b, height c1
+2      y           (0, 0, c2): upper arm, pointing up at zero
+3      y           (a2, 0, c3): elbow offset a2 and forearm c3 to the wrist centre
+4      z           0
+5      y           0
+6      z           0; the end frame (flange) is the tool (0, 0, c4) from the wrist centre
+=====  ==========  ===========================================================
+
+so that the wrist centre is at (a1 + a2, b, c1 + c2 + c3) at zero and the orientation is
+R = Rz(t1) Ry(t2 + t3) Rz(t4) Ry(t5) Rz(t6). A robot of the class is related to its canonical
+chain by constant transforms, joint directions and joint offsets:
+
+    FK_robot(q) = B  FK_canonical(s * q + o)  T          (s_i = +-1)
+
+which :func:`sw_geometry` finds from the robot's axes at the zero pose (no symbolic work) and
+checks on random configurations. The equations M_i = N_i of the canonical chain are derived
+once for the class (:mod:`derive.symbolic.equations`, sets P and O), the IK program is built
+from them (:func:`derive.ik.program.ik_program`), and each robot's numbers are substituted at
+emission.
+
+This module also holds the numeric reference of the class, written by hand in numpy with
+rotation matrices after the OPW paper's section 3 (independent of the derived program, which
+works on the dual-quaternion equations): :func:`solve_batch`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import memo
+from derive.errors import DeriveError
+from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
+from derive.kinematics.fk import _pose_error, fk
+from derive.model.geometry import numeric_chain
+from derive.model.robot import load_robot, robot_from_dict
+
+#: Geometric properties of the class must hold within this (rad for angles, m for distances).
+CLASS_TOL = 1e-10
+#: The relation FK_robot = B FK_canonical(s q + o) T must hold within this (m, rad).
+MAP_TOL = 1e-10
+
+#: Parameter names of the canonical chain, in the OPW paper's order.
+PARAMETERS = ("a1", "a2", "b", "c1", "c2", "c3", "c4")
+
+REASON_LATERAL = ("unreachable: the wrist centre is closer to axis 1 than the lateral offset b "
+                  "allows")
+REASON_REACH = ("unreachable: the distance from axis 2 to the wrist centre is outside the range "
+                "the upper arm c2 and the forearm sqrt(a2^2 + c3^2) can span")
+
+
+@dataclass(frozen=True)
+class SWGeometry:
+    """The canonical parameters of a spherical-wrist arm and its relation to them:
+    FK_robot(q) = base * FK_canonical(signs * q + offsets) * tool."""
+
+    robot: str
+    a1: float
+    a2: float
+    b: float
+    c1: float
+    c2: float
+    c3: float
+    c4: float
+    base: np.ndarray        # (8,) unit dual quaternion B
+    tool: np.ndarray        # (8,) unit dual quaternion T
+    signs: np.ndarray       # (6,) of +-1
+    offsets: np.ndarray     # (6,) rad
+    error: float            # largest mismatch of the relation on the check configurations
+
+    @property
+    def values(self) -> dict:
+        return {k: getattr(self, k) for k in PARAMETERS}
+
+    def to_canonical(self, q) -> np.ndarray:
+        """Joint values of the robot -> angles of the canonical chain (s q + o)."""
+        return np.asarray(q, dtype=float) * self.signs + self.offsets
+
+    def from_canonical(self, theta) -> np.ndarray:
+        """Angles of the canonical chain -> joint values of the robot, wrapped to (-pi, pi]."""
+        return wrap_angle((np.asarray(theta, dtype=float) - self.offsets) * self.signs)
+
+    def into_canonical(self, poses: np.ndarray) -> np.ndarray:
+        """Poses (n, 8) of the robot's end frame as poses of the canonical chain: B^-1 P T^-1."""
+        return dq._mul(dq._mul(dq.conj_quaternion(self.base)[None], poses),
+                       dq.conj_quaternion(self.tool)[None])
+
+
+def describe(geo: SWGeometry) -> str:
+    """One line: the parameters (m) and the relation's joint signs and offsets (deg)."""
+    par = ", ".join(f"{k} = {v:.12g}" for k, v in geo.values.items())
+    flips = [str(i + 1) for i, s in enumerate(geo.signs) if s < 0]
+    offs = [f"o{i + 1} = {math.degrees(o):.12g} deg" for i, o in enumerate(geo.offsets) if o != 0]
+    return (f"{par} m; canonical angles = s q + o with "
+            f"{'joints ' + ', '.join(flips) + ' reversed' if flips else 'no joint reversed'}"
+            f"{', ' + ', '.join(offs) if offs else ', no offsets'}")
+
+
+def canonical_description(values: dict, name: str = "spherical-wrist") -> dict:
+    """The canonical chain (module docstring) as a robot description, lengths named a1 ... c4
+    with the given values (metres)."""
+    return {
+        "name": name,
+        "title": "Spherical-wrist arm with an ortho-parallel base, canonical chain",
+        "source": "Brandstoetter, Angerer, Hofbaur 2014, parameters a1, a2, b, c1, c2, c3, c4",
+        "convention": "axis_angle",
+        "parameters": {k: float(values[k]) for k in PARAMETERS},
+        "joints": [
+            {"name": "j1", "axis": [0, 0, 1], "link": ["a1", "b", "c1"]},
+            {"name": "j2", "axis": [0, 1, 0], "link": [0, 0, "c2"]},
+            {"name": "j3", "axis": [0, 1, 0], "link": ["a2", 0, "c3"]},
+            {"name": "j4", "axis": [0, 0, 1], "link": [0, 0, 0]},
+            {"name": "j5", "axis": [0, 1, 0], "link": [0, 0, 0]},
+            {"name": "j6", "axis": [0, 0, 1], "link": [0, 0, 0]},
+        ],
+        "tool": {"translation": [0, 0, "c4"]},
+    }
+
+
+def canonical_robot(geo: SWGeometry):
+    """The canonical chain with the numbers of ``geo`` (a Robot)."""
+    return robot_from_dict(canonical_description(geo.values, f"{geo.robot}-canonical"))
+
+
+def sw_geometry(robot) -> SWGeometry:
+    """The canonical form of a spherical-wrist arm (module docstring), or DeriveError naming the
+    property the robot lacks; cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("sw-geometry", robot.id, lambda: _sw_geometry(robot))
+
+
+def is_spherical(robot) -> bool:
+    try:
+        sw_geometry(robot)
+        return True
+    except DeriveError:
+        return False
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _line_distance(p1, h1, p2, h2) -> float:
+    n = np.cross(h1, h2)
+    if np.linalg.norm(n) < 1e-12:
+        return float(np.linalg.norm(np.cross(p2 - p1, h1)))
+    return float(abs(np.dot(p2 - p1, _unit(n))))
+
+
+def _ry(t):
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(t):
+    c, s = math.cos(t), math.sin(t)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _snap(x: float, step: float, tol: float = 1e-12) -> float:
+    k = round(x / step)
+    return k * step if abs(x - k * step) <= tol else x
+
+
+def _sw_geometry(robot) -> SWGeometry:
+    name = robot.name
+
+    def fail(why):
+        raise DeriveError(f"{name}: not a spherical-wrist arm with an ortho-parallel base (OPW "
+                          f"class): {why}")
+
+    if robot.dof != 6:
+        fail(f"{robot.dof} joints, the class has 6")
+    chain = numeric_chain(robot)
+    if chain.n != 6 or any(t != "revolute" for t in chain.types):
+        fail("the path to the end has a prismatic joint or not 6 joints")
+    h = np.array([_unit(a) for a in chain.axes])
+    pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:6]
+    end_origin = chain.start + chain.links.sum(axis=0)
+    tol = CLASS_TOL
+    if abs(h[0] @ h[1]) > tol:
+        fail("axis 1 is not perpendicular to axis 2")
+    if np.linalg.norm(np.cross(h[1], h[2])) > tol:
+        fail("axes 2 and 3 are not parallel")
+    for i, j in ((2, 3), (3, 4), (4, 5)):
+        if abs(h[i] @ h[j]) > tol:
+            fail(f"axis {j + 1} is not perpendicular to axis {i + 1}")
+    # wrist centre: the point of axis 5 nearest to axis 4 (they must meet), on axis 6 too
+    if _line_distance(pts[3], h[3], pts[4], h[4]) > tol or _line_distance(pts[4], h[4], pts[5], h[5]) > tol \
+            or _line_distance(pts[3], h[3], pts[5], h[5]) > tol:
+        fail("axes 4, 5 and 6 do not meet in one point")
+    # intersection of lines 4 and 5 (perpendicular): point on 4 nearest to 5
+    d45 = pts[4] - pts[3]
+    w = pts[3] + h[3] * (d45 @ h[3] - (d45 @ h[4]) * (h[3] @ h[4])) / (1.0 - (h[3] @ h[4]) ** 2)
+    if _line_distance(w, h[3], pts[5], h[5]) > tol and np.linalg.norm(np.cross(w - pts[5], h[5])) > tol:
+        fail("axes 4, 5 and 6 do not meet in one point")
+
+    # canonical base frame: z along axis 1, origin at the foot of the base origin on axis 1
+    s1 = 1.0 if h[0][2] >= 0 else -1.0
+    zc = s1 * h[0]
+    oc = pts[0] + (-pts[0] @ h[0]) * h[0]
+    d = pts[1] - oc
+    foot2 = pts[1] - (d @ h[1]) * h[1]                   # point of axis 2 nearest to axis 1
+    c1 = float(d @ zc)
+    radial = foot2 - (oc + c1 * zc)
+    s2 = 1.0
+    if np.cross(h[1], zc) @ radial < 0:
+        s2 = -1.0
+    yc = s2 * h[1]
+    xc = np.cross(yc, zc)
+    a1 = float(radial @ xc)
+    frame = np.column_stack([xc, yc, zc])                 # canonical axes in robot base coordinates
+
+    def local(v):
+        return frame.T @ v
+
+    wl, p3l = local(w - oc), local(pts[2] - oc)
+    b = float(wl[1])
+    s3 = s2 * (1.0 if h[2] @ h[1] > 0 else -1.0)
+    # joint 2 offset: the upper arm (axis 2 -> axis 3, in the x-z plane) points up at theta2 = 0
+    v23 = np.array([p3l[0] - a1, p3l[2] - c1])
+    c2 = float(np.hypot(*v23))
+    if c2 < 1e-9:
+        fail("axes 2 and 3 coincide (no upper arm)")
+    o2 = math.atan2(v23[0], v23[1])
+    # theta2 + theta3 offset: axis 4 along +-z at theta2 = theta3 = 0, forearm c3 >= 0
+    h4l = local(h[3])
+    v3w = np.array([wl[0] - p3l[0], 0.0, wl[2] - p3l[2]])
+    best = None
+    for s4 in (1.0, -1.0):
+        alpha = math.atan2(s4 * h4l[0], s4 * h4l[2])
+        fore = _ry(-alpha) @ v3w
+        if best is None or fore[2] > best[2][2] + 1e-12:
+            best = (s4, alpha, fore)
+    s4, alpha, fore = best
+    a2, c3 = float(fore[0]), float(fore[2])
+    o3 = alpha - o2
+    # joint 4 offset: axis 5 along +y; joint 5 offset: axis 6 along +z
+    v5 = _ry(-alpha) @ local(h[4])
+    o4 = math.atan2(-v5[0], v5[1])
+    u6 = _rz(-o4) @ _ry(-alpha) @ local(h[5])
+    o5 = math.atan2(u6[0], u6[2])
+    c4 = float((end_origin - w) @ h[5])
+
+    signs = np.array([s1, s2, s3, s4, 1.0, 1.0])
+    offsets = np.array([0.0, o2, o3, o4, o5, 0.0])
+    offsets = np.array([_snap(float(wrap_angle(x)), math.pi / 12) for x in offsets]) + 0.0
+    vals = {k: round(v, 12) + 0.0 for k, v in zip(PARAMETERS, (a1, a2, b, c1, c2, c3, c4))}
+    base = dq.from_rt(quat.from_matrix(frame), oc)
+    geo = SWGeometry(name, **vals, base=base, tool=dq.IDENTITY.copy(), signs=signs,
+                     offsets=offsets, error=0.0)
+    canon = canonical_robot(geo)
+    # T = FK_c(o)^-1 B^-1 FK_robot(0)
+    pose0 = fk(robot, np.zeros(6))
+    c0 = fk(canon, offsets)
+    tool = dq._mul(dq.conj_quaternion(c0)[None],
+                   dq._mul(dq.conj_quaternion(base)[None], pose0[None]))[0]
+    tool = _tidy(tool)
+    base = _tidy(base)
+    geo = SWGeometry(name, **vals, base=base, tool=tool, signs=signs, offsets=offsets, error=0.0)
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-math.pi, math.pi, size=(24, 6))
+    ref = fk(robot, q)
+    via = dq._mul(dq._mul(np.broadcast_to(base, (24, 8)), fk(canon, geo.to_canonical(q))),
+                  np.broadcast_to(tool, (24, 8)))
+    dp, dr = _pose_error(ref, via)
+    err = float(max(dp.max(), dr.max()))
+    if not err <= MAP_TOL:
+        fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
+    return SWGeometry(name, **vals, base=base, tool=tool, signs=signs, offsets=offsets, error=err)
+
+
+def _tidy(d: np.ndarray) -> np.ndarray:
+    """A unit dual quaternion with rotation and translation rounded to 1e-13 (noise of the
+    construction), the real part's first non-zero entry positive."""
+    r, t = dq.to_rt(d)
+    r = np.round(r, 13)
+    r = r / np.linalg.norm(r)
+    lead = r[np.argmax(np.abs(r) > 0)]
+    return dq.from_rt(r if lead > 0 else -r, np.round(t, 13) + 0.0)
+
+
+# --------------------------------------------------------------------------- #
+# Numeric reference solver (rotation matrices, OPW paper section 3)
+# --------------------------------------------------------------------------- #
+def _batch_rz(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _batch_ry(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = None,
+                keep_unreachable: bool = False):
+    """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
+    robot's joint values, singular (n, 8), reason codes (n, 8): 0 ok, 1 theta1 unreachable
+    (lateral offset), 2 theta3 unreachable (arm reach)). Not yet checked by FK.
+
+    In the canonical chain (pose B^-1 P T^-1, rotation R, flange position p):
+
+    1. wrist centre W = p - c4 R e_z; theta1 puts W in the arm plane (its y coordinate in
+       frame 1 is b): t1 = atan2(Wy, Wx) - atan2(b, +-sqrt(Wx^2 + Wy^2 - b^2)); the square
+       root is the distance X' of W from axis 1 in the arm plane;
+    2. theta3 by the cosine law in the arm plane: with X = X' - a1, Z = Wz - c1, k^2 = a2^2 + c3^2,
+       cos(t3 + psi3) = (X^2 + Z^2 - c2^2 - k^2) / (2 c2 k), psi3 = atan2(a2, c3); two roots;
+    3. theta2 = atan2(u X - v Z, u Z + v X), u = c2 + k cos(t3 + psi3), v = k sin(t3 + psi3);
+    4. the wrist: M = (Rz(t1) Ry(t2 + t3))^T R = Rz(t4) Ry(t5) Rz(t6):
+       t5 = atan2(+-hypot(M13, M23), M33), t4 = atan2(+-M23, +-M13), t6 = atan2(+-M32, -+M31);
+       where |sin t5| < WRIST_SINGULAR only t4 + t6 (t5 = 0) or t4 - t6 (t5 = pi) is
+       determined: t4 is taken from ``q4_ref`` (robot joint values) or as the robot's q4 = 0,
+       and t6 from the rest of the rotation, Rz(t6) = Ry(t5)^T Rz(t4)^T M; such solutions are
+       marked singular.
+
+    Unreachable branches are NaN unless ``keep_unreachable`` (square roots clipped to 0).
+    """
+    n = poses.shape[0]
+    chain = geo.into_canonical(poses)
+    r = quat._to_matrix(chain[:, :4])
+    p = dq._translation(chain)
+    w = p - geo.c4 * r[:, :, 2]
+    out = np.full((n, 8, 6), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    code = np.zeros((n, 8), dtype=np.int8)
+    k = math.hypot(geo.a2, geo.c3)
+    psi3 = math.atan2(geo.a2, geo.c3)
+    disc1 = w[:, 0] ** 2 + w[:, 1] ** 2 - geo.b ** 2
+    bad1 = disc1 < -REACH_TOL * max(1.0, geo.b ** 2)
+    root1 = np.sqrt(np.clip(disc1, 0.0, None))
+    beta = np.arctan2(w[:, 1], w[:, 0])
+    if q4_ref is None:
+        t4_free = np.full(n, geo.offsets[3])
+    else:
+        t4_free = np.broadcast_to(geo.signs[3] * np.asarray(q4_ref, dtype=float) + geo.offsets[3], (n,))
+    for i1, sg1 in enumerate((1.0, -1.0)):
+        t1 = beta - np.arctan2(geo.b, sg1 * root1)
+        x = w[:, 0] * np.cos(t1) + w[:, 1] * np.sin(t1) - geo.a1
+        z = w[:, 2] - geo.c1
+        cg = (x * x + z * z - geo.c2 ** 2 - k * k) / (2.0 * geo.c2 * k)
+        bad3 = np.abs(cg) > 1.0 + REACH_TOL
+        cg = np.clip(cg, -1.0, 1.0)
+        sg_abs = np.sqrt(1.0 - cg * cg)
+        for i3, sg3 in enumerate((1.0, -1.0)):
+            gamma = np.arctan2(sg3 * sg_abs, cg)
+            t3 = gamma - psi3
+            u = geo.c2 + k * np.cos(gamma)
+            v = k * np.sin(gamma)
+            t2 = np.arctan2(u * x - v * z, u * z + v * x)
+            m = np.swapaxes(_batch_rz(t1) @ _batch_ry(t2 + t3), -1, -2) @ r
+            s5abs = np.hypot(m[:, 0, 2], m[:, 1, 2])
+            sing = s5abs < WRIST_SINGULAR
+            for i5, sg5 in enumerate((1.0, -1.0)):
+                t5 = np.where(sing, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), np.arctan2(sg5 * s5abs, m[:, 2, 2]))
+                t4 = np.where(sing, t4_free, np.arctan2(sg5 * m[:, 1, 2], sg5 * m[:, 0, 2]))
+                rest = np.swapaxes(_batch_rz(t4) @ _batch_ry(t5), -1, -2) @ m
+                t6 = np.arctan2(rest[:, 1, 0], rest[:, 0, 0])
+                kk = 4 * i1 + 2 * i3 + i5
+                theta = np.stack([t1, t2, t3, t4, t5, t6], -1)
+                out[:, kk] = geo.from_canonical(theta)
+                singular[:, kk] = sing
+                code[:, kk] = np.where(bad1, 1, np.where(bad3, 2, 0))
+    if not keep_unreachable:
+        out[code > 0] = np.nan
+    return out, singular, code
