@@ -31,6 +31,10 @@ DEFAULT_ROBOTS = ("ur3", "ur5")
 #: Robots whose FK/IK kernels and CasADi functions ``dq-derive generate`` writes by default
 #: (every UR robot), so that they load without a derivation.
 UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
+#: Spherical-wrist robots whose outputs ``dq-derive generate`` writes by default: appendix, IK
+#: report, kernels and CasADi functions of the first, kernels and CasADi functions of the rest.
+#: Every other robot of the class gets them on request (``dq-derive kernels ROBOT`` ...).
+SW_ROBOTS = ("irb120", "kr6-r900")
 
 
 def _robot(args):
@@ -113,7 +117,7 @@ def cmd_ik(args) -> int:
         sols = reference.ik(robot, pose, q_ref=q)
         print(f"{robot.name}: pose of q = {_fmt(q, 8, 4)} has {len(sols)} solution(s){sols.reason}")
         for s, sing in zip(sols, sols.singular):
-            print("   ", _fmt(s, 9, 5), "(singular: theta6 from q)" if sing else "")
+            print("   ", _fmt(s, 9, 5), "(singular: the free wrist joint from q)" if sing else "")
         return 0
     return _report(write_ik(_robot(args), args.out, progress=not args.quiet), t0)
 
@@ -176,12 +180,19 @@ def cmd_generate(args) -> int:
               f"{time.perf_counter() - t:.2f} s")
     if not args.robots:
         t = time.perf_counter()
-        for name in UR_ROBOTS:
+        sw = [n for n in SW_ROBOTS if n in list_robots()]
+        name = sw[0]
+        written += write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}", force=True)
+        written += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}", force=True)
+        print(f"{name}: spherical-wrist class equations and closed-form IK written in "
+              f"{time.perf_counter() - t:.2f} s")
+        t = time.perf_counter()
+        for name in UR_ROBOTS + tuple(sw):
             if name not in robots:
                 written += write_kernels(name, args.out, command=f"dq-derive kernels {name}", force=True)
             written += write_casadi(name, args.out, force=True)
         print(f"FK/IK kernels and CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, "
-              f"residual, ik) of {', '.join(UR_ROBOTS)} written in {time.perf_counter() - t:.2f} s")
+              f"residual, ik) of {', '.join(UR_ROBOTS + tuple(sw))} written in {time.perf_counter() - t:.2f} s")
     cmd_robots(args)
     print()
     print("Forward kinematics at reference configurations (dual-quaternion product;"

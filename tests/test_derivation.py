@@ -164,9 +164,10 @@ def test_generated_is_byte_identical_to_a_fresh_regeneration(tmp_path, capsys):
 
 
 @pytest.mark.skipif(shutil.which("pdflatex") is None, reason="pdflatex not installed")
-def test_latex_appendix_compiles(tmp_path):
+@pytest.mark.parametrize("robot", ["ur3", "irb120"])
+def test_latex_appendix_compiles(tmp_path, robot):
     for name in ("appendix", "ik"):
-        shutil.copy(GENERATED / "ur3" / f"{name}.tex", tmp_path)
+        shutil.copy(GENERATED / robot / f"{name}.tex", tmp_path)
         res = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", f"{name}.tex"],
                              cwd=tmp_path, capture_output=True, text=True, timeout=120)
         assert res.returncode == 0, res.stdout[-2000:]

@@ -98,6 +98,8 @@ class _C(_Shared, C99CodePrinter):
     # compares, not fmax (a library call without -ffast-math), and the choice a branch-free
     # blend dq_sel(c, a, b) = c ? a : b of the template, so that the batch loops vectorise
     SQRT, SGN, POS = "sqrt({})", "copysign(1.0, {})", "dq_sel(({0}) > 0.0, {0}, 0.0)"
+    # constants as numbers, never the macros M_PI_4, M_SQRT2 ... (not C99: absent under -std=c99)
+    math_macros: dict = {}
 
     def _print_Max(self, expr):
         a, b = (self._print(e) for e in expr.args)

@@ -493,7 +493,8 @@ def spherical_forms(chain, eqs: dict) -> SphericalForms:
         raise DeriveError(f"{chain.robot}: the sum of squares of P.12, P.14 keeps theta2")
     th3 = _as_linear_in(sp.expand(lhs2 - X * X - Z * Z), _linear_form(t3, thetas), thetas, u)
     pair = {"P.12": sides[X][0] - X, "P.14": sides[Z][0] - Z}
-    th2 = _s2_pair(pair, ("P.12", "P.14"), _linear_form(t2, thetas), thetas, u)
+    th2 = tuple(sp.factor_terms(sp.trigsimp(e))
+                for e in _s2_pair(pair, ("P.12", "P.14"), _linear_form(t2, thetas), thetas, u))
     halves = {}
     for ids, form in ((("O.15", "O.18"), (0, 0, 0, sp.S.Half, 0, sp.S.Half)),
                       (("O.16", "O.17"), (0, 0, 0, sp.S.Half, 0, -sp.S.Half))):

@@ -197,7 +197,6 @@ def _sw_geometry(robot) -> SWGeometry:
         fail("the path to the end has a prismatic joint or not 6 joints")
     h = np.array([_unit(a) for a in chain.axes])
     pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:6]
-    end_origin = chain.start + chain.links.sum(axis=0)
     tol = CLASS_TOL
     if abs(h[0] @ h[1]) > tol:
         fail("axis 1 is not perpendicular to axis 2")
@@ -261,9 +260,13 @@ def _sw_geometry(robot) -> SWGeometry:
     o4 = math.atan2(-v5[0], v5[1])
     u6 = _rz(-o4) @ _ry(-alpha) @ local(h[5])
     o5 = math.atan2(u6[0], u6[2])
-    c4 = float((end_origin - w) @ h[5])
+    # the end frame's origin at zero (tool included) along axis 6; what is off the axis stays in T
+    c4 = float((dq._translation(fk(robot, np.zeros(6))[None])[0] - w) @ h[5])
+    s6 = 1.0
+    if c4 < -1e-12:          # the flange lies along -axis 6: reverse joint 6, turn joint 5 by pi
+        s6, o5, c4 = -1.0, o5 + math.pi, -c4
 
-    signs = np.array([s1, s2, s3, s4, 1.0, 1.0])
+    signs = np.array([s1, s2, s3, s4, 1.0, s6])
     offsets = np.array([0.0, o2, o3, o4, o5, 0.0])
     offsets = np.array([_snap(float(wrap_angle(x)), math.pi / 12) for x in offsets]) + 0.0
     vals = {k: round(v, 12) + 0.0 for k, v in zip(PARAMETERS, (a1, a2, b, c1, c2, c3, c4))}

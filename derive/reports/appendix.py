@@ -14,11 +14,16 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import sympy as sp
 
 from derive._version import __version__
+from derive.algebra import dualquat as dq
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
+from derive.errors import DeriveError
+from derive.ik.closed_form import ur_geometry
+from derive.ik.spherical import MAP_TOL, SWGeometry, canonical_robot, sw_geometry
 from derive.model.robot import load_robot
 from derive.reports.latex import latex, side
 from derive.symbolic.chain import SymChain
@@ -66,10 +71,50 @@ def _set_context(eset: EquationSet, chain: SymChain) -> dict:
     }
 
 
-def build_context(robot, chain: SymChain, sets, command: str) -> dict:
+def _num(x: float) -> str:
+    return f"{x + 0.0:.12g}"
+
+
+def class_context(geo: SWGeometry, robot) -> dict:
+    """The relation of a spherical-wrist robot to its class's canonical chain, for the reports."""
+    def pose(d):
+        r, t = dq.to_rt(d)
+        return {"rotation": [_num(v) for v in r], "translation": [_num(v) for v in t],
+                "identity": bool(np.allclose(d, dq.IDENTITY, atol=0))}
+    joints = [j.name for j in robot.joints if not j.is_mimic]
+    return {
+        "values": [(k, _num(v)) for k, v in geo.values.items()],
+        "joints": [{"index": i + 1, "name": n, "sign": "+1" if s > 0 else "-1",
+                    "offset_deg": _num(float(np.degrees(o))), "offset_rad": _num(float(o))}
+                   for i, (n, s, o) in enumerate(zip(joints, geo.signs, geo.offsets))],
+        "base": pose(geo.base), "tool": pose(geo.tool), "error": f"below {MAP_TOL:g}",
+    }
+
+
+def equations_of(robot) -> tuple:
+    """(chain, sets, class context or None) of a robot's appendix: its own chain's equations,
+    or for a spherical-wrist arm (not of the UR family) those of its class's canonical chain."""
+    robot = load_robot(robot)
+    try:
+        ur_geometry(robot)
+        geo = None
+    except DeriveError:
+        try:
+            geo = sw_geometry(robot)
+        except DeriveError:
+            geo = None
+    if geo is None:
+        chain, sets = derive_equations(robot)
+        return chain, sets, None
+    chain, sets = derive_equations(canonical_robot(geo))
+    return chain, sets, class_context(geo, robot)
+
+
+def build_context(robot, chain: SymChain, sets, command: str, sw: dict | None = None) -> dict:
     robot = load_robot(robot)
     g_q, g_t = chain.end_transform
     return {
+        "sw": sw,
         "version": __version__,
         "command": command,
         "robot": robot,
@@ -107,6 +152,16 @@ def _json(ctx: dict) -> str:
                          "numeric": "random angles and parameters, pose from derive.reference.fk"},
         "sets": [],
     }
+    if ctx["sw"]:
+        sw = ctx["sw"]
+        data["class"] = {
+            "name": "spherical wrist with an ortho-parallel base (OPW)",
+            "relation": "FK_robot(q) = B FK_canonical(s q + o) T",
+            "parameters": {k: float(v) for k, v in sw["values"]},
+            "signs": [int(j["sign"]) for j in sw["joints"]],
+            "offsets_rad": [float(j["offset_rad"]) for j in sw["joints"]],
+            "base": sw["base"], "tool": sw["tool"],
+        }
     for s in ctx["sets"]:
         data["sets"].append({
             "key": s["key"], "title": s["title"], "source": s["source"],
@@ -129,9 +184,9 @@ def write_appendix(robot, out_dir, progress: bool = False, command: str | None =
     robot = load_robot(robot)
     robot_name = robot.name
     claim_folder(Path(out_dir) / robot_name, robot.id, robot_name, force)
-    chain, sets = derive_equations(robot, progress=progress)
+    chain, sets, sw = equations_of(robot)
     command = command or f"dq-derive appendix {robot_name}"
-    ctx = build_context(robot, chain, sets, command)
+    ctx = build_context(robot, chain, sets, command, sw)
     env = template_environment()
     out = Path(out_dir) / robot_name
     out.mkdir(parents=True, exist_ok=True)
