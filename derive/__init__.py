@@ -8,6 +8,8 @@ Quick start::
     T = derive.reference.fk_matrix(robot, [0, -1.57, 1.57, 0, 1.57, 0])  # 4x4 matrix
     k = derive.kernels(robot, "c")                                  # generated C kernels
     sols, count = k.ik(Q)
+    best = k.nearest(Q, q_seed=[0, -1.5, 1.5, 0, 1.5, 0])          # .q, .found, .branch ...
+    P = derive.pose.from_position_quaternion([0.4, 0.1, 0.3], [1, 0, 0, 0], order="xyzw")
 
 The package is in layers whose imports point one way (see docs/architecture.md):
 algebra -> model -> kinematics -> symbolic -> ik -> codegen -> refinement -> reports ->
@@ -20,11 +22,12 @@ from derive.algebra import dualquat, quaternion
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
 from derive.ik.closed_form import classify
+from derive.kinematics import pose
 from derive.model.robot import Robot, list_robots, load_robot
 from derive.refinement.solver import refine
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
     "Robot", "list_robots", "load_robot", "kernels", "refine", "classify",
-    "dualquat", "quaternion", "reference", "__version__",
+    "dualquat", "quaternion", "reference", "pose", "__version__",
 ]

@@ -17,6 +17,7 @@ from derive.algebra import quaternion as quat
 from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
 from derive.codegen.emit import write_kernels
+from derive.codegen.loader import kernels
 from derive.errors import DeriveError
 from derive.ik.closed_form import classify
 from derive.model import export
@@ -114,12 +115,37 @@ def cmd_ik(args) -> int:
         if args.deg:
             q = np.radians(q)
         pose = reference.fk(robot, q)
+        if args.seed is not None or args.within_limits:
+            return _ik_select(robot, pose, q, args)
         sols = reference.ik(robot, pose, q_ref=q)
         print(f"{robot.name}: pose of q = {_fmt(q, 8, 4)} has {len(sols)} solution(s){sols.reason}")
         for s, sing in zip(sols, sols.singular):
             print("   ", _fmt(s, 9, 5), "(singular: the free wrist joint from q)" if sing else "")
         return 0
     return _report(write_ik(_robot(args), args.out, progress=not args.quiet), t0)
+
+
+def _ik_select(robot, pose, q, args) -> int:
+    """ik --pose Q with --within-limits and/or --seed: the C kernels' selection."""
+    k = kernels(robot, "c")
+    conv = np.degrees if args.deg else (lambda x: x)
+    unit = "deg" if args.deg else "rad"
+    if args.seed is not None:
+        seed = np.radians(args.seed) if args.deg else np.array(args.seed, dtype=float)
+        res = k.nearest(pose, seed)
+        if not res.found:
+            print(f"{robot.name}: no solution inside the joint limits")
+            return 0
+        print(f"{robot.name}: solution nearest to the seed (largest joint move "
+              f"{conv(res.max_move):.5g} {unit}, summed {conv(res.total_move):.5g} {unit}, branch "
+              f"{int(res.branch)}{', singular' if res.singular else ''}):")
+        print("   ", _fmt(conv(res.q), 9, 5), f"({unit})")
+        return 0
+    sols, count, branch, sing = k.ik(pose, within_limits=True, details=True)
+    print(f"{robot.name}: {count} solution(s) inside the joint limits, every 2 pi winding ({unit}):")
+    for s, b, g in zip(sols[:count], branch[:count], sing[:count]):
+        print("   ", _fmt(conv(s), 9, 5), f"branch {int(b)}" + (", singular" if g else ""))
+    return 0
 
 
 def cmd_refine(args) -> int:
@@ -266,7 +292,11 @@ def build_parser() -> argparse.ArgumentParser:
                 cmd_ik)
     s.add_argument("--pose", nargs=6, type=float, default=None, metavar="Q",
                    help="instead of typesetting: solve the pose of this configuration")
-    s.add_argument("--deg", action="store_true", help="--pose values in degrees")
+    s.add_argument("--deg", action="store_true", help="--pose and --seed values (and the output) in degrees")
+    s.add_argument("--within-limits", action="store_true",
+                   help="with --pose: every solution inside the joint limits, 2 pi windings included (C kernels)")
+    s.add_argument("--seed", nargs="+", type=float, default=None, metavar="Q",
+                   help="with --pose: only the solution nearest to these joint values (C kernels)")
     emitter("kernels", "emit the FK kernels (pure Python, numpy, C99)", cmd_kernels, quiet=False)
 
     s = sub.add_parser("export", help="write a robot (library, YAML or URDF) as a kinematic URDF or our YAML")

@@ -7,8 +7,11 @@ Measured on the same poses in the same run:
   generated FK/IK batch and single-pose functions, and plain 4x4 homogeneous-matrix FK written in
   the harness (standard DH, libm sin/cos);
 * when installed (the optional ``bench`` extra): Pinocchio's ``forwardKinematics`` called in a
-  Python loop, EAIK's ``IK_batched`` and IK-Geo's ``get_ik``;
-* exactness at the wrist singularity (theta5 = 0): for poses of configurations with theta5 = 0, how
+  Python loop, EAIK's ``IK_batched`` and IK-Geo's ``get_ik`` (UR robots, standard DH); for a
+  spherical-wrist arm EAIK's ``HPRobot`` built from the robot's axes and py-opw-kinematics'
+  ``inverse`` (all solutions, one pose per call) on the same poses;
+* exactness at the wrist singularity (theta5 = 0 of the UR; the wrist angle of the canonical chain
+  0 for a spherical-wrist arm): for poses of configurations with theta5 = 0, how
   many poses each tool solves exactly (a returned solution with residual < 1e-10) and how many
   returned solutions are only approximate.
 
@@ -29,11 +32,15 @@ import numpy as np
 import sympy as sp
 
 from derive import reference
+from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.bench.machine import machine
 from derive.codegen.emit import identifier, render_kernels
 from derive.codegen.loader import c_flags, kernels
 from derive.errors import DeriveError
+from derive.ik.closed_form import ur_geometry
+from derive.ik.spherical import sw_geometry
+from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 from derive.symbolic.chain import chain_from_robot
 
@@ -68,7 +75,11 @@ def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict
             (tmp / name).write_text(text)
         src = resources.files("derive.data").joinpath("bench_harness.c").read_text()
         (tmp / "harness.c").write_text(src)
-        dh_table(robot).astype(np.float64).tofile(tmp / "dh.bin")
+        try:
+            dh = dh_table(robot)
+        except DeriveError:          # not standard DH: the harness's matrix FK has no table
+            dh = None
+        (np.zeros((6, 3)) if dh is None else dh).astype(np.float64).tofile(tmp / "dh.bin")
         np.ascontiguousarray(q).tofile(tmp / "q.bin")
         np.ascontiguousarray(poses).tofile(tmp / "poses.bin")
         exe = tmp / "harness"
@@ -82,7 +93,10 @@ def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict
                              capture_output=True, text=True, check=True)
         out = json.loads(run.stdout)
         mat = np.fromfile(tmp / "mat.bin").reshape(-1, 4, 4)
-        out["matrix_fk_max_error"] = float(np.abs(mat - reference.fk_matrix(robot, q)).max())
+        if dh is None:
+            out.pop("matrix_fk_ns", None)
+        else:
+            out["matrix_fk_max_error"] = float(np.abs(mat - reference.fk_matrix(robot, q)).max())
         out["flags"] = " ".join(c_flags())
         return out
 
@@ -152,6 +166,59 @@ def _eaik(robot, mats):
     return {"batch_ns": batch * 1e9, "single_ns": single * 1e9, "sols": sols, "flagged_ls": approx}
 
 
+def _eaik_hp(robot, mats, threads: int = 1):
+    """EAIK's HPRobot of a spherical-wrist arm from its numeric axes and axis points at zero
+    (H the axes, P the vectors between consecutive points, the last to the end frame; EAIK's end
+    frame has the base orientation at zero, so the poses' rotations are turned by R0^T)."""
+    try:
+        from eaik.IK_HP import HPRobot
+    except ImportError:
+        return None
+    ch = numeric_chain(robot)
+    pts = ch.start + np.vstack([np.zeros(3), np.cumsum(ch.links, axis=0)])
+    t0 = reference.fk_matrix(robot, np.zeros(6))
+    P = np.vstack([pts[0], np.diff(pts[:6], axis=0), t0[:3, 3] - pts[5]])
+    bot = HPRobot(np.array(ch.axes, dtype=float), P)
+    me = np.array(mats, dtype=float)
+    me[:, :3, :3] = me[:, :3, :3] @ t0[:3, :3].T
+    t = time.perf_counter()
+    res = bot.IK_batched(me, threads)
+    batch = (time.perf_counter() - t) / len(me)
+    t = time.perf_counter()
+    for m in me[:2000]:
+        bot.IK(m)
+    single = (time.perf_counter() - t) / min(2000, len(me))
+    sols = np.full((len(me), 8, 6), np.nan)
+    approx = 0
+    for i, r in enumerate(res):
+        Q = np.asarray(r.Q, dtype=float).reshape(-1, 6)[:8]
+        ls = np.asarray(r.is_LS, dtype=bool).reshape(-1)[:8]
+        sols[i, :len(Q)] = Q
+        approx += int(ls.sum())
+    return {"batch_ns": batch * 1e9, "single_ns": single * 1e9, "sols": sols, "flagged_ls": approx,
+            "threads": threads}
+
+
+def _py_opw(geo, poses, limit: int = 5000):
+    """py-opw-kinematics (Rust, from Python) on the canonical chain's poses: its ``inverse``
+    returns every solution of one pose; timed over ``limit`` poses."""
+    try:
+        import py_opw_kinematics as opw
+        from scipy.spatial.transform import RigidTransform
+    except ImportError:
+        return None
+    model = opw.KinematicModel(**{k: float(v) for k, v in geo.values.items()},
+                               offsets=(0.0,) * 6, flip_axes=(False,) * 6)
+    bot = opw.Robot(model, degrees=False)
+    canon = geo.into_canonical(poses[:limit])
+    mats = dq.to_matrix(canon)
+    tf = [RigidTransform.from_matrix(m) for m in mats]
+    t = time.perf_counter()
+    out = [bot.inverse(x) for x in tf]
+    single = (time.perf_counter() - t) / len(tf)
+    return {"single_ns": single * 1e9, "n": len(tf), "mean_solutions": float(np.mean([len(o) for o in out]))}
+
+
 def _ikgeo(robot, mats):
     try:
         import ik_geo
@@ -188,6 +255,7 @@ def _ikgeo(robot, mats):
 def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: int = 0,
                   singular: int = 2000) -> dict:
     rng = np.random.default_rng(seed)
+    geo = _spherical(robot)
     q = rng.uniform(-np.pi, np.pi, size=(n, 6))
     poses = reference.fk(robot, q)
     mats = reference.fk_matrix(robot, q)
@@ -200,15 +268,16 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
         out[backend] = {"fk_batch_ns": _time(lambda: k.fk(q[:m]), repeats if backend != "python" else 1) / m * 1e9,
                         "ik_batch_ns": _time(lambda: k.ik(poses[:m]), repeats if backend != "python" else 1) / m * 1e9}
         s = 2000
-        out[backend]["fk_single_ns"] = _time(lambda: [k.fk(row) for row in q[:s]], 1) / s * 1e9
-        out[backend]["ik_single_ns"] = _time(lambda: [k.ik(row) for row in poses[:s]], 1) / s * 1e9
+        rep = 3 if backend == "c" else 1
+        out[backend]["fk_single_ns"] = _time(lambda: [k.fk(row) for row in q[:s]], rep) / s * 1e9
+        out[backend]["ik_single_ns"] = _time(lambda: [k.ik(row) for row in poses[:s]], rep) / s * 1e9
     out["harness"] = _harness(robot, q, poses, repeats)
-    pin = _pinocchio_fk(robot, q, 20_000)
+    pin = _pinocchio_fk(robot, q, 20_000) if load_robot(robot).convention == "standard_dh" else None
     if pin:
         out["pinocchio"] = pin
     # IK peers on the same poses (a subset for the slow ones) and the wrist-singular set
     qs = rng.uniform(-np.pi, np.pi, size=(singular, 6))
-    qs[:, 4] = 0.0
+    qs[:, 4] = 0.0 if geo is None else -geo.signs[4] * geo.offsets[4]
     spose = reference.fk(robot, qs)
     smats = reference.fk_matrix(robot, qs)
     ours_s, ours_c = kernels(robot, "c").ik(spose)
@@ -216,6 +285,8 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
     out["singular"] = {"n": singular, "ours": {"exact_poses": int(exact_ours.any(axis=1).sum()),
                                               "approximate_solutions": int((~exact_ours & ~np.isnan(ours_s[..., 0])).sum())}}
     m_peer = min(n, 20_000)
+    if geo is not None:
+        return _spherical_peers(out, robot, geo, poses, mats, spose, smats, m_peer)
     ea = _eaik(robot, mats[:m_peer])
     if ea:
         out["eaik"] = {k: v for k, v in ea.items() if k != "sols"} | {"n": m_peer}
@@ -237,6 +308,37 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
     return out
 
 
+def _spherical(robot):
+    try:
+        ur_geometry(robot)
+        return None
+    except DeriveError:
+        pass
+    try:
+        return sw_geometry(robot)
+    except DeriveError:
+        return None
+
+
+def _spherical_peers(out, robot, geo, poses, mats, spose, smats, m_peer) -> dict:
+    """EAIK (HPRobot, batched with 1 thread, and single calls) and py-opw-kinematics on the
+    poses of a spherical-wrist arm; EAIK's exactness on the wrist-singular set."""
+    ea = _eaik_hp(robot, mats[:m_peer])
+    if ea:
+        ok = _residual_ok(robot, ea["sols"], poses[:m_peer])
+        out["eaik"] = {k: v for k, v in ea.items() if k != "sols"} | {
+            "n": m_peer, "exact_fraction": float(ok.any(axis=1).mean())}
+        es = _eaik_hp(robot, smats)
+        ok = _residual_ok(robot, es["sols"], spose)
+        out["singular"]["eaik"] = {"exact_poses": int(ok.any(axis=1).sum()),
+                                   "approximate_solutions": int((~ok & ~np.isnan(es["sols"][..., 0])).sum()),
+                                   "flagged_ls": es["flagged_ls"]}
+    po = _py_opw(geo, poses)
+    if po:
+        out["py_opw"] = po
+    return out
+
+
 def report(r: dict) -> str:
     h = r["harness"]
     lines = [f"generated kernels of {r['robot']}, {r['n']} poses, {r['machine']}, {r['date']}",
@@ -249,7 +351,7 @@ def report(r: dict) -> str:
         x = r[b]
         lines.append(f"  {b:<6} via kernels()  {x['fk_batch_ns']:9.1f} {x['fk_single_ns']:10.1f} "
                      f"{x['ik_batch_ns']:10.1f} {x['ik_single_ns']:10.1f}")
-    if "error" not in h:
+    if "error" not in h and "matrix_fk_ns" in h:
         lines.append(f"plain 4x4-matrix C FK: {h['matrix_fk_ns']:.1f} ns per pose "
                      f"(max error {h['matrix_fk_max_error']:.1e}); generated C FK batch is "
                      f"{h['matrix_fk_ns'] / h['fk_batch_ns']:.1f}x faster")
@@ -260,7 +362,14 @@ def report(r: dict) -> str:
     if "eaik" in r:
         e = r["eaik"]
         lines.append(f"EAIK IK_batched: {e['batch_ns']:.0f} ns per pose, single IK {e['single_ns']:.0f} ns "
-                     f"({e['batch_ns'] / h.get('ik_batch_ns', float('nan')):.0f}x the C IK batch)")
+                     f"({e['batch_ns'] / h.get('ik_batch_ns', float('nan')):.0f}x the C IK batch)"
+                     + (f", an exact solution for {100 * e['exact_fraction']:.2f} % of the poses"
+                        if "exact_fraction" in e else ""))
+    if "py_opw" in r:
+        o = r["py_opw"]
+        lines.append(f"py-opw-kinematics inverse (all solutions, one pose per call from Python): "
+                     f"{o['single_ns']:.0f} ns per pose, {o['mean_solutions']:.2f} solutions per pose "
+                     f"({o['single_ns'] / r['c']['ik_single_ns']:.1f}x our C single call via kernels())")
     if "ikgeo" in r:
         g = r["ikgeo"]
         lines.append(f"IK-Geo get_ik (Python loop): {g['single_ns']:.0f} ns per pose; exact solution found for "

@@ -191,7 +191,11 @@ def _ik_context(robot) -> dict:
     leaf = " + ".join(f"{2 ** (k - 1 - i)}*{b}" if k - 1 - i else b for i, b in enumerate(branch_index))
     flat = _flat_ops(prog, printers["cc"], numeric)
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
+    labels = list(prog.branch_labels) or [f"step {i + 1}" for i in range(k)]
+    bits = [f"{2 ** (k - 1 - i)} x ({lab}: 1 for the second root)" for i, lab in enumerate(labels)]
+    branch_doc = "index = " + " + ".join(bits) if bits else "always 0"
     return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
+                   "branch_doc": branch_doc, "branch_labels": labels,
                    "free_joint": prog.free_joint, "free_rule": prog.free_rule,
                    "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
             "ik_missing": ""}
@@ -246,7 +250,8 @@ def _flat_ops(prog, printer, numeric) -> list:
                 d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
             elif op.kind == "solution":
                 leaf = int("".join(map(str, path)) or "0", 2)
-                d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args]}
+                d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
+                     "sing": name("singular", path) if "singular" in depth_of else "0"}
             out.append(d)
     return out
 

@@ -35,11 +35,10 @@ from derive.cache import memo, step
 from derive.errors import DeriveError
 from derive.ik.closed_form import ur_geometry
 from derive.ik.extract import _rot
-from derive.ik.spherical import canonical_robot, sw_geometry
+from derive.ik.spherical import sw_geometry
 from derive.model.geometry import path_to_end
 from derive.model.robot import load_robot
-from derive.symbolic.chain import chain_from_robot, products
-from derive.symbolic.equations import POSES, derive_equations
+from derive.symbolic.equations import derive_equations
 
 
 @dataclass
@@ -82,30 +81,6 @@ def _spherical(robot):
         return sw_geometry(robot)
     except DeriveError:
         return None
-
-
-def _fk_spherical(geo, qs) -> list:
-    """The 8 components of B M_1(s q + o) G T for a spherical-wrist arm: M_1 the product of its
-    class's canonical chain (:mod:`derive.ik.spherical`, built in a fraction of a second
-    whatever the robot), the robot's numbers, joint directions and offsets substituted."""
-    chain = chain_from_robot(canonical_robot(geo))
-    m_side, _ = products(chain, 1, chain.n, POSES["P"])
-    m1 = list(m_side[1].terms)
-    q, p = m1[:4], m1[4:]
-    gq, gt = (tuple(sp.sympify(v) for v in part) for part in chain.end_transform)
-    rq = _rot(q)
-    p = [p[i] + sum(rq[i, k] * gt[k] for k in range(3)) for i in range(3)]
-    real = hamilton(q, gq)
-    dual = tuple(e / 2 for e in hamilton((0, *p), real))
-    values = {k: _number(v) for k, v in chain.parameters.items()}
-    angles = {j.theta: int(s) * qs[i] + _number(o)
-              for i, (j, s, o) in enumerate(zip(chain.joints, geo.signs, geo.offsets))}
-    m = tuple(sp.expand(e.xreplace(values)).xreplace(angles) for e in tuple(real) + dual)
-    for left, c in ((True, geo.base), (False, geo.tool)):
-        if not np.array_equal(c, dq.IDENTITY):
-            k = tuple(_number(x) for x in c)
-            m = dual_hamilton(k, m) if left else dual_hamilton(m, k)
-    return list(m)
 
 
 def fk_kernel(robot) -> Kernel:
@@ -181,11 +156,11 @@ def _fk_numeric(robot, qs) -> Kernel:
 def _fk_kernel(robot) -> Kernel:
     qs = sp.symbols(f"q0:{robot.dof}", real=True)
     symbolic = None
-    geo = _spherical(robot)
-    if geo is not None:
-        outs = _fk_spherical(geo, qs)
-        parameters = {sp.Symbol(k, real=True): v for k, v in geo.values.items()}
-    elif robot.exact:
+    if _spherical(robot) is not None:
+        # a spherical-wrist arm: the product of its joints' dual quaternions, constants multiplied
+        # out (a second; folding the expanded product of the canonical chain gave 20x more code)
+        return _fk_numeric(robot, qs)
+    if robot.exact:
         try:
             symbolic = _fk_symbolic(robot)
         except DeriveError as exc:      # e.g. a chain whose axis 1 misses the base origin
@@ -200,7 +175,7 @@ def _fk_kernel(robot) -> Kernel:
         subs_q = {j.theta: qs[var_index[j.name]] for j in chain.joints}
         outs = [e.xreplace(subs_q) for e in outs]
         parameters = dict(chain.parameters)
-    elif geo is None:
+    else:
         if not robot.exact:
             step("FK from the numeric product of the joint dual quaternions (not exact: no folding)")
         return _fk_numeric(robot, qs)

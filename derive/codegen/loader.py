@@ -16,17 +16,23 @@ by a digest of the source, the compiler flags and the CPU.
 
 from __future__ import annotations
 
+import copy
 import ctypes
 import hashlib
+import importlib.machinery
 import importlib.util
 import os
 import platform
 import shutil
 import subprocess
+import sysconfig
 from pathlib import Path
 
 import numpy as np
 
+from derive._version import __version__
+from derive.algebra import dualquat as dq
+from derive.algebra.dualquat import UNIT_TOL
 from derive.cache import (
     build_folder,
     memo,
@@ -37,9 +43,13 @@ from derive.cache import (
     task,
     user_folder,
 )
-from derive.codegen.emit import FILES, kernel_manifest, render_kernels
+from derive.codegen.emit import FILES, identifier, kernel_manifest, render_kernels
+from derive.codegen.templates import template_environment
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.kinematics.pose import as_pose_batch
+from derive.ik import select
+from derive.ik.closed_form import ik_batch as reference_ik_batch
+from derive.ik.program import ik_program
+from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
 BACKENDS = ("python", "numpy", "c")
@@ -110,6 +120,54 @@ def _compile(source: Path, prefix: str) -> Path:
     return lib
 
 
+#: |q| beyond this is refused by the C backend: dq_sincos reduces its argument accurately up to
+#: about this size (a revolute joint's value can always be reduced modulo 2 pi first).
+Q_MAX = 1e6
+
+
+def _extension(robot, source: Path, prefix: str, has_ik: bool):
+    """The CPython extension module of a C kernel source (templates/pyext.c.j2: input checks in
+    C, single calls as batches of one), compiled once per (source, flags, CPU, Python); None
+    when it cannot be built (no Python headers), and the loader uses ctypes instead."""
+    include = sysconfig.get_paths().get("include")
+    if not include or not (Path(include) / "Python.h").exists():
+        return None
+    text = template_environment().get_template("pyext.c.j2").render(
+        version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
+        prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, q_max=repr(Q_MAX),
+        unit_tol=repr(UNIT_TOL), module="MODULE")
+    digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
+                             + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
+    module = f"_dqk_{identifier(robot.name)}_{digest}"
+    text = text.replace("MODULE", module)
+    lib = build_folder() / f"{module}{sysconfig.get_config_var('EXT_SUFFIX')}"
+    if not lib.exists():
+        compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+        if compiler is None:
+            return None
+        lib.parent.mkdir(parents=True, exist_ok=True)
+        src = lib.with_suffix(".c")
+        src.write_text(text, encoding="utf-8")
+        tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
+        res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
+                              f"-I{np.get_include()}", "-o", str(tmp), str(src), "-lm"],
+                             capture_output=True, text=True)
+        if res.returncode != 0:
+            step(f"the CPython extension of the C kernels did not build (ctypes instead):\n{res.stderr[-800:]}")
+            return None
+        os.replace(tmp, lib)
+    loader = importlib.machinery.ExtensionFileLoader(module, str(lib))
+    spec = importlib.util.spec_from_file_location(module, lib, loader=loader)
+    try:
+        ext = importlib.util.module_from_spec(spec)
+        loader.exec_module(ext)
+    except ImportError as exc:
+        step(f"the CPython extension of the C kernels did not load (ctypes instead): {exc}")
+        return None
+    ext.set_error(InputError)
+    return ext
+
+
 def _import(path: Path, name: str):
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
@@ -133,6 +191,10 @@ class Kernels:
         elif backend == "numpy":
             self._mod = _import(folder / files["numpy"], f"{ident}_kinematics_numpy_{self.robot.id}")
         elif backend == "c":
+            text = (folder / files["c_source"]).read_text(encoding="utf-8")
+            # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
+            if "_ik_batch(" not in text or "_ik_batch_ex(" in text:
+                self._ext = _extension(self.robot, folder / files["c_source"], ident, "_ik_batch(" in text)
             self.library = _compile(folder / files["c_source"], ident)
             self._lib = ctypes.CDLL(str(self.library))
             f = getattr(self._lib, f"{ident}_fk_batch")
@@ -155,8 +217,21 @@ class Kernels:
             raise InputError(f"Q: expected shape ({self.dof},) or (n, {self.dof}), got {q.shape}")
         return np.ascontiguousarray(q2, dtype=np.float64), single
 
+    _ext = None
+    _tool = None
+
+    def with_tool(self, tool) -> "Kernels":
+        """The same kernels for the end frame moved by a fixed tool transform T (any pose form of
+        :func:`derive.kinematics.pose.as_pose`): ``fk`` returns FK(q) T and ``ik`` solves poses of
+        the tool frame (as P T^-1). No regeneration; ``with_tool(None)`` removes it."""
+        k = copy.copy(self)
+        k._tool = None if tool is None else as_pose(tool, "tool")
+        return k
+
     def fk(self, Q) -> np.ndarray:
         """Unit dual quaternions (n, 8) of the end frame (sign as the product gives)."""
+        if self._ext is not None:
+            return self._ext.fk(Q, self._tool)
         q, single = self._q(Q)
         if self.backend == "python":
             out = np.array([self._mod.fk(tuple(row)) for row in q.tolist()], dtype=float).reshape(-1, 8)
@@ -165,6 +240,8 @@ class Kernels:
         else:
             out = np.empty((q.shape[0], 8))
             self._fk_batch(q.shape[0], q.ctypes.data, out.ctypes.data)
+        if self._tool is not None:
+            out = dq._mul(out, self._tool[None])
         return out[0] if single else out
 
     @property
@@ -173,20 +250,55 @@ class Kernels:
             return hasattr(self, "_ik_batch")
         return hasattr(self._mod, "ik")
 
-    def ik(self, P):
-        """All closed-form solutions: (solutions (n, 8, dof) NaN-padded, counts (n,)).
+    @property
+    def _has_ik(self) -> bool:
+        return self.__dict__.setdefault("_has_ik_value", self.has_ik)
 
-        P: unit dual quaternions (n, 8) / (8,) or matrices (n, 4, 4) / (4, 4) of the end frame;
-        a pose farther than 1e-6 from unit raises InputError. At the wrist singularity the free
-        joint is chosen for reach (see the generated file's header)."""
-
+    def _require_ik(self):
         if not self.has_ik:
             why = ("its fixed angles are not all multiples of pi/12, so there are no exact equations "
                    "to solve" if not self.robot.exact else
                    "the extraction found no closed form for this chain")
             raise DeriveError(f"{self.robot.name}: no closed-form IK kernel ({why}); "
                               "use derive.refine")
+
+    def ik(self, P, within_limits: bool = False, details: bool = False):
+        """All closed-form solutions: (solutions (n, 8, dof) NaN-padded, counts (n,)).
+
+        P: unit dual quaternions (n, 8) / (8,) or matrices (n, 4, 4) / (4, 4) of the end frame
+        (of the tool frame after :meth:`with_tool`); a pose farther than 1e-6 from unit raises
+        InputError. At the wrist singularity the free joint is chosen as the generated file's
+        header says.
+
+        ``details`` (C backend): also the branch index of each solution (which root each
+        closed-form step took, :attr:`branch_labels`; -1 in the padding) and its singular flag:
+        (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
+        solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
+        call."""
+        if self._ext is not None and not (details or within_limits) and self._has_ik:
+            out = self._ext.ik(P, self._tool)          # the fast path: one C call, checks in C
+            if out is not NotImplemented:
+                return out
+        self._require_ik()
+        if details or within_limits:
+            sols, counts, branch, sing = self._ik_details(P, need=details)
+            single = sols.ndim == 2
+            if within_limits:
+                s3, c1 = (sols[None], np.atleast_1d(counts)) if single else (sols, counts)
+                b3, g3 = (branch[None], sing[None]) if single else (branch, sing)
+                sols3, cnt, b3, g3 = select.within_limits(s3, c1, self.robot.limits, self._revolute, b3, g3)
+                sols, counts, branch, sing = ((sols3[0], int(cnt[0]), b3[0], g3[0]) if single
+                                              else (sols3, cnt, b3, g3))
+            return (sols, counts, branch, sing) if details else (sols, counts)
+        if self._ext is not None:
+            out = self._ext.ik(P, self._tool)
+            if out is not NotImplemented:
+                return out
+            poses, single = as_pose_batch(P)
+            return self._ext.ik(poses[0] if single else poses, self._tool)
         poses, single = as_pose_batch(P)
+        if self._tool is not None:
+            poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
         poses = np.ascontiguousarray(poses, dtype=np.float64)
         n = poses.shape[0]
         if self.backend == "python":
@@ -205,6 +317,63 @@ class Kernels:
             self._ik_batch(n, poses.ctypes.data, sols.ctypes.data, c.ctypes.data)
             counts = c.astype(np.int64)
         return (sols[0], int(counts[0])) if single else (sols, counts)
+
+    @property
+    def _revolute(self) -> np.ndarray:
+        return np.array([j.type == "revolute" for j in self.robot.joints if not j.is_mimic])
+
+    def _ik_details(self, P, need: bool):
+        if self._ext is None:
+            if need:
+                raise DeriveError("ik(details=True) needs the C backend's extension "
+                                  "(derive.kernels(robot, 'c') with the Python headers installed)")
+            sols, counts = self.ik(P)
+            shape = sols.shape[:-1]
+            return sols, counts, np.full(shape, -1), np.zeros(shape, dtype=bool)
+        out = self._ext.ik(P, self._tool, True)
+        if out is NotImplemented:
+            poses, single = as_pose_batch(P)
+            out = self._ext.ik(poses[0] if single else poses, self._tool, True)
+        return out
+
+    def nearest(self, P, q_seed, tol=None) -> select.Nearest:
+        """Per pose the solution nearest to the seed configuration(s) ``q_seed`` ((dof,) or (n,
+        dof)): inside the joint limits with every winding, by the largest single-joint move, then
+        the summed move (:func:`derive.ik.select.nearest`); ``found`` is False where no solution
+        is within ``tol`` (rad or m) of the seed, or none is inside the limits. Where the chosen
+        solution lies on a singular set, the free joint is the seed's (the reference solver
+        re-solves those poses with the seed as reference configuration)."""
+        self._require_ik()
+        sols, counts, branch, sing = self._ik_details(P, need=False)
+        single = sols.ndim == 2
+        if single:
+            sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
+        seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
+        seeds = np.broadcast_to(seeds, (len(sols), self.dof))
+        res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
+        if np.any(res.singular):
+            at = np.nonzero(res.singular)[0]
+            poses, _ = as_pose_batch(P)
+            poses = np.broadcast_to(poses, (len(sols), 8))[at]
+            if self._tool is not None:
+                poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
+            qs, cs = reference_ik_batch(self.robot, poses, q_ref=seeds[at])
+            again = select.nearest(qs, cs, seeds[at], self.robot.limits, self._revolute, tol=tol)
+            q = res.q.copy()
+            ok = again.found & (again.max_move <= res.max_move[at] + 1e-12)
+            q[at[ok]] = again.q[ok]
+            mx, tot = res.max_move.copy(), res.total_move.copy()
+            mx[at[ok]], tot[at[ok]] = again.max_move[ok], again.total_move[ok]
+            res = select.Nearest(q, res.found, mx, tot, res.branch, res.singular)
+        if single:
+            return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
+                                                               "branch", "singular")))
+        return res
+
+    @property
+    def branch_labels(self) -> list:
+        """The closed-form steps whose roots the bits of a branch index choose, most significant first."""
+        return list(ik_program(self.robot).branch_labels) if self.has_ik else []
 
 
 def kernels(robot, backend: str = "numpy") -> Kernels:

@@ -80,6 +80,7 @@ class IKProgram:
     free_rule: str = "set to 0"             # how the program chooses it there
     steps: list = field(default_factory=list)   # (unknown, pattern, equations) for the header
     parameters: dict = field(default_factory=dict)
+    branch_labels: list = field(default_factory=list)   # the unknown each branch bit chooses the root of
 
 
 class _Builder:
@@ -91,6 +92,7 @@ class _Builder:
         self.trig: dict = {}              # angle argument -> (sin symbol, cos symbol)
         self.n_trig = 0
         self.n_tmp = 0
+        self.labels: list = []
 
     def _num(self, e):
         """The robot's numbers substituted for the parameters."""
@@ -107,7 +109,8 @@ class _Builder:
         self.n_tmp += 1
         return self.let(f"{stem}{self.n_tmp}", expr)
 
-    def branch(self, name) -> sp.Symbol:
+    def branch(self, name, label: str = "") -> sp.Symbol:
+        self.labels.append(label or name)
         self.depth += 1
         sym = sp.Symbol(name, real=True)
         self.ops.append(Op("branch", name, depth=self.depth))
@@ -273,7 +276,7 @@ def _ik_program(robot) -> IKProgram:
             psi = bld.tmp(sp.atan2(sp.sqrt(pos(disc)), -kc))
             bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
             n_branch += 1
-            sg = bld.branch(f"sg{n_branch}")
+            sg = bld.branch(f"sg{n_branch}", str(u))
             value[u] = bld.let(str(u), phi + sg * psi)
         elif st.pattern == "S1":
             # acos step: cos u = v. Look for later S2 steps divided by k sin(u/2), k' cos(u/2).
@@ -311,7 +314,7 @@ def _ik_program(robot) -> IKProgram:
             sing = bld.flag("singular", sing_val < WRIST_SINGULAR)
             cos_small = bld.flag("cos_small", hc < hs)
             n_branch += 1
-            sg = bld.branch(f"sg{n_branch}")
+            sg = bld.branch(f"sg{n_branch}", f"{u} sign")
             # at the singular set u is exactly 0 (sin small) or pi (cos small)
             at_sing = bld.select(f"{u}_singular", cos_small, sp.pi, 0)
             value[u] = bld.select(str(u), sing, at_sing, 2 * sg * half)
@@ -338,7 +341,7 @@ def _ik_program(robot) -> IKProgram:
             sq = bld.tmp(sp.sqrt(pos(1 - v * v)))
             ang = bld.tmp(sp.atan2(sq, v))
             n_branch += 1
-            sg = bld.branch(f"sg{n_branch}")
+            sg = bld.branch(f"sg{n_branch}", str(u))
             value[u] = bld.let(str(u), sg * ang)
             bld.set_trig(u, sg * sq, v)                  # sin u, cos u known exactly
         elif st.pattern == "span":
@@ -356,6 +359,7 @@ def _ik_program(robot) -> IKProgram:
     bld.ops.append(Op("solution", args=tuple(order), depth=bld.depth))
     prog.ops = bld.ops
     prog.branches = 2 ** n_branch
+    prog.branch_labels = list(bld.labels)
     return prog
 
 
@@ -391,7 +395,8 @@ def _related_program(robot, rel) -> IKProgram:
               [f"base/tool transforms found by derive.kinematics.relate (mismatch {rel.error:.1g})"]
               + ([f"joints {', '.join(flips)} reversed"] if flips else []))] + list(lib.steps)
     return IKProgram(robot.name, robot.dof, ops=ops, branches=lib.branches, free_joint=lib.free_joint,
-                     free_rule=lib.free_rule, steps=steps, parameters=dict(lib.parameters))
+                     free_rule=lib.free_rule, steps=steps, parameters=dict(lib.parameters),
+                     branch_labels=list(lib.branch_labels))
 
 
 def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):
@@ -566,8 +571,9 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
     beta = bld.tmp(sp.atan2(ka, -kb))
     root = bld.tmp(sp.sqrt(pos(disc)))
-    sg1 = bld.branch("sg1")
+    sg1 = bld.branch("sg1", "theta1, shoulder")
     bld.let(t1, beta - sp.atan2(-kc, sg1 * root))
+    bld._trig(sp.sin(t1 / 2))       # the half angle first: the full angle then by doubling
     # 2. theta3 (P.12, P.14): the unknown sides squared and added lose theta2
     kx, kz = bld.tmp(num(sf.x_def), "w"), bld.tmp(num(sf.z_def), "w")
     ka, kb, kc = (bld.tmp(num(e).xreplace({X: kx, Z: kz})) for e in sf.theta3)
@@ -575,7 +581,7 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     bld.require(disc >= -REACH_TOL * sp.Max(1, kc * kc))
     phi = bld.tmp(sp.atan2(kb, ka))
     psi = bld.tmp(sp.atan2(sp.sqrt(pos(disc)), -kc))
-    sg2 = bld.branch("sg2")
+    sg2 = bld.branch("sg2", "theta3, elbow")
     bld.let(t3, phi + sg2 * psi)
     # 3. theta2 (P.12, P.14 as a 2x2 system)
     ns, nc, d = (num(e).xreplace({X: kx, Z: kz}) for e in sf.theta2)
@@ -599,7 +605,7 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     free = _number(geo.offsets[3])          # the robot's q4 = 0
     sing = bld.flag("singular", sing_val < WRIST_SINGULAR)
     cos_small = bld.flag("cos_small", hc < hs)
-    sg3 = bld.branch("sg3")
+    sg3 = bld.branch("sg3", "theta5, wrist")
     at_sing = bld.select("theta5_singular", cos_small, sp.pi, 0)
     bld.select(str(t5), sing, at_sing, 2 * sg3 * half)
     s_sum = base["cos"]                                           # (t4 + t6) / 2
@@ -623,4 +629,4 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     ]
     return IKProgram(robot.name, robot.dof, ops=bld.ops, branches=8, free_joint=3,
                      free_rule="set to the robot's q4 = 0, joint 6 taking the rest",
-                     steps=steps, parameters=dict(geo.values))
+                     steps=steps, parameters=dict(geo.values), branch_labels=list(bld.labels))

@@ -8,6 +8,68 @@ from derive.algebra import dualquat as dq
 from derive.errors import InputError, as_finite_array
 
 
+def as_pose(pose, name: str = "pose") -> np.ndarray:
+    """One pose (8,) from any of its forms: a unit dual quaternion (8,) (ours: [real w x y z,
+    dual w x y z]), a 4x4 matrix, a pair (R, t) of a 3x3 rotation matrix or a
+    ``scipy.spatial.transform.Rotation`` and a translation (m). For position + quaternion use
+    :func:`from_position_quaternion`, which needs the quaternion order said."""
+    if isinstance(pose, tuple) and len(pose) == 2:
+        rot, t = pose
+        if hasattr(rot, "as_matrix"):
+            rot = rot.as_matrix()
+        r = as_finite_array(rot, f"{name} rotation")
+        t = as_finite_array(t, f"{name} translation", last_dim=3)
+        if r.shape != (3, 3) or t.shape != (3,):
+            raise InputError(f"{name}: (R, t) needs R (3, 3) and t (3,), got {r.shape} and {t.shape}")
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = r, t
+        pose = m
+    out, single = as_pose_batch(pose)
+    if not single:
+        raise InputError(f"{name}: expected one pose, got {out.shape[0]}")
+    return out[0]
+
+
+def from_position_quaternion(position, quaternion, order: str) -> np.ndarray:
+    """Unit dual quaternions (8,) / (n, 8) from positions (m) and rotation quaternions in the
+    given ``order``: "xyzw" (scipy, ROS geometry_msgs) or "wxyz" (ours, Eigen's constructor)."""
+    if order not in ("xyzw", "wxyz"):
+        raise InputError(f"order: 'xyzw' (scipy, ROS) or 'wxyz', got {order!r}")
+    p = as_finite_array(position, "position", last_dim=3)
+    q = as_finite_array(quaternion, "quaternion", last_dim=4)
+    if order == "xyzw":
+        q = np.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    if np.any(np.abs(n - 1.0) > 1e-6):
+        raise InputError(f"quaternion: not unit (| |q| - 1 | = {float(np.max(np.abs(n - 1))):.3g})")
+    return dq.from_rt(q / n, p)
+
+
+def to_position_quaternion(pose, order: str) -> tuple:
+    """(positions (..., 3), quaternions (..., 4) in ``order`` "xyzw" or "wxyz") of poses."""
+    if order not in ("xyzw", "wxyz"):
+        raise InputError(f"order: 'xyzw' (scipy, ROS) or 'wxyz', got {order!r}")
+    poses, single = as_pose_batch(pose)
+    q, t = poses[:, :4], dq._translation(poses)
+    if order == "xyzw":
+        q = np.concatenate([q[:, 1:], q[:, :1]], axis=-1)
+    return (t[0], q[0]) if single else (t, q)
+
+
+def to_scipy(pose) -> tuple:
+    """(scipy Rotation, translations) of poses (any form :func:`as_pose_batch` takes)."""
+    from scipy.spatial.transform import (
+        Rotation,  # scipy only where asked for (optional)
+    )
+    t, q = to_position_quaternion(pose, "xyzw")
+    return Rotation.from_quat(q), t
+
+
+def from_scipy(rotation, translation) -> np.ndarray:
+    """Unit dual quaternions from a scipy Rotation (one or n) and translations (3,) / (n, 3)."""
+    return from_position_quaternion(translation, rotation.as_quat(), "xyzw")
+
+
 def as_pose_batch(pose) -> tuple:
     """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4) or (n, 4, 4) input; single flag."""
     arr = as_finite_array(pose, "pose", ndim_min=1)

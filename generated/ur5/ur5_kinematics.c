@@ -250,8 +250,10 @@ static inline int dq_close(double a, double b)
     return d < 1e-06 || d > 6.28318530717958647693 - 1e-06;
 }
 
-/* Candidates without near-duplicates (the first of each group kept), packed into sols. */
-static int dq_merge(const double cand[8][6], const int valid[8], double *restrict sols)
+/* Candidates without near-duplicates (the first of each group kept), packed into sols; where
+ * ids is not NULL, ids[k] is the branch (leaf) index of solution k. */
+static int dq_merge(const double cand[8][6], const int valid[8], double *restrict sols,
+                    int *restrict ids)
 {
     int count = 0;
     for (int i = 0; i < 8; ++i) {
@@ -267,6 +269,9 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
         if (!dup) {
             for (int k = 0; k < 6; ++k) {
                 sols[count * 6 + k] = cand[i][k];
+            }
+            if (ids) {
+                ids[count] = i;
             }
             ++count;
         }
@@ -371,18 +376,21 @@ int ur5_ik(const double *restrict pose, double *restrict sols)
             }
         }
     }
-    return dq_merge((const double (*)[6])cand, valid, sols);
+    return dq_merge((const double (*)[6])cand, valid, sols, NULL);
 }
 
 /* The scalar pass after the vectorised loop of the batch IK: the candidates of each of the m
- * poses of a block merged (dq_merge) and NaN-padded, with their count. Kept out of the batch
- * function so that its loops are the vectorised ones only. */
-static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK],
-                           double *restrict sols, int *restrict counts)
+ * poses of a block merged (dq_merge) and NaN-padded, with their count, and (where branch is not
+ * NULL) each solution's branch index and singular flag (-1 and 0 in the padding). Kept out of
+ * the batch function so that its loops are the vectorised ones only. */
+static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK], int sb[][DQ_BLOCK],
+                           double *restrict sols, int *restrict counts, int *restrict branch,
+                           int *restrict singular)
 {
     for (size_t j = 0; j < m; ++j) {
         double cand[8][6];
         int valid[8];
+        int ids[8];
         for (int b = 0; b < 8; ++b) {
             valid[b] = vb[b][j];
             for (int k = 0; k < 6; ++k) {
@@ -390,21 +398,29 @@ static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK
             }
         }
         double *const s = sols + j * 48;
-        const int c = dq_merge((const double (*)[6])cand, valid, s);
+        const int c = dq_merge((const double (*)[6])cand, valid, s, ids);
         for (int k = c * 6; k < 48; ++k) {
             s[k] = NAN;
         }
         counts[j] = c;
+        if (branch) {
+            for (int k = 0; k < 8; ++k) {
+                branch[j * 8 + k] = k < c ? ids[k] : -1;
+                singular[j * 8 + k] = k < c ? sb[ids[k]][j] : 0;
+            }
+        }
     }
 }
 
 /* n poses (n x 8) in blocks of DQ_BLOCK: the IK program with its branches unrolled runs over
  * the poses of a block with unit stride (vectorisable), then each pose's candidates are merged. */
-void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts)
+void ur5_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
+                        int *restrict branch, int *restrict singular)
 {
     double pb[8][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
     int vb[8][DQ_BLOCK];
+    int sb[8][DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -620,6 +636,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[0][4][j] = dq_wrap(theta5_00);
             cb[0][5][j] = dq_wrap(theta6_00);
             vb[0][j] = ok_000;
+            sb[0][j] = singular_0;
             cb[1][0][j] = dq_wrap(theta1_0);
             cb[1][1][j] = dq_wrap(theta2_001);
             cb[1][2][j] = dq_wrap(theta3_001);
@@ -627,6 +644,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[1][4][j] = dq_wrap(theta5_00);
             cb[1][5][j] = dq_wrap(theta6_00);
             vb[1][j] = ok_001;
+            sb[1][j] = singular_0;
             cb[2][0][j] = dq_wrap(theta1_0);
             cb[2][1][j] = dq_wrap(theta2_010);
             cb[2][2][j] = dq_wrap(theta3_010);
@@ -634,6 +652,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[2][4][j] = dq_wrap(theta5_01);
             cb[2][5][j] = dq_wrap(theta6_01);
             vb[2][j] = ok_010;
+            sb[2][j] = singular_0;
             cb[3][0][j] = dq_wrap(theta1_0);
             cb[3][1][j] = dq_wrap(theta2_011);
             cb[3][2][j] = dq_wrap(theta3_011);
@@ -641,6 +660,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[3][4][j] = dq_wrap(theta5_01);
             cb[3][5][j] = dq_wrap(theta6_01);
             vb[3][j] = ok_011;
+            sb[3][j] = singular_0;
             cb[4][0][j] = dq_wrap(theta1_1);
             cb[4][1][j] = dq_wrap(theta2_100);
             cb[4][2][j] = dq_wrap(theta3_100);
@@ -648,6 +668,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[4][4][j] = dq_wrap(theta5_10);
             cb[4][5][j] = dq_wrap(theta6_10);
             vb[4][j] = ok_100;
+            sb[4][j] = singular_1;
             cb[5][0][j] = dq_wrap(theta1_1);
             cb[5][1][j] = dq_wrap(theta2_101);
             cb[5][2][j] = dq_wrap(theta3_101);
@@ -655,6 +676,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[5][4][j] = dq_wrap(theta5_10);
             cb[5][5][j] = dq_wrap(theta6_10);
             vb[5][j] = ok_101;
+            sb[5][j] = singular_1;
             cb[6][0][j] = dq_wrap(theta1_1);
             cb[6][1][j] = dq_wrap(theta2_110);
             cb[6][2][j] = dq_wrap(theta3_110);
@@ -662,6 +684,7 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[6][4][j] = dq_wrap(theta5_11);
             cb[6][5][j] = dq_wrap(theta6_11);
             vb[6][j] = ok_110;
+            sb[6][j] = singular_1;
             cb[7][0][j] = dq_wrap(theta1_1);
             cb[7][1][j] = dq_wrap(theta2_111);
             cb[7][2][j] = dq_wrap(theta3_111);
@@ -669,7 +692,14 @@ void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols,
             cb[7][4][j] = dq_wrap(theta5_11);
             cb[7][5][j] = dq_wrap(theta6_11);
             vb[7][j] = ok_111;
+            sb[7][j] = singular_1;
         }
-        dq_merge_block(m, cb, vb, sols + i0 * 48, counts + i0);
+        dq_merge_block(m, cb, vb, sb, sols + i0 * 48, counts + i0,
+                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
     }
+}
+
+void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts)
+{
+    ur5_ik_batch_ex(n, poses, sols, counts, NULL, NULL);
 }

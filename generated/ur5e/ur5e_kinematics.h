@@ -22,7 +22,12 @@ void ur5e_fk_batch(size_t n, const double *restrict q, double *restrict out);
 
 #define UR5E_IK_MAX 8
 
-/* All IK solutions of one pose: pose[8] a unit dual quaternion of the end frame (either sign);
+/* Input contract (every function): finite numbers; joint values |q| <= 1e6 (dq_sincos reduces
+ * larger arguments inaccurately: reduce revolute joints modulo 2 pi first); poses unit dual
+ * quaternions (|real| = 1, <real, dual> = 0, to rounding: other input gives meaningless
+ * results, it is not detected). The Python layer (derive.kernels) checks all of this.
+ *
+ * All IK solutions of one pose: pose[8] a unit dual quaternion of the end frame (either sign);
  * writes up to 8 solutions of 6 angles in (-pi, pi] to sols (8 x 6, row-major)
  * and returns their number (0: out of reach). Solutions closer than 1e-06 rad in every
  * joint are one; at a singular set (sin theta5 = 0) joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). */
@@ -30,5 +35,12 @@ int ur5e_ik(const double *restrict pose, double *restrict sols);
 
 /* n poses (n x 8): sols is n x 8 x 6, rows past counts[i] set to NaN. */
 void ur5e_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
+
+/* As ur5e_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
+ * index of the closed form's branch it comes from, index = 4 x (theta1: 1 for the second root) + 2 x (theta5 sign: 1 for the second root) + 1 x (theta3: 1 for the second root), the same for the same
+ * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
+ * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
+void ur5e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
+                        int *restrict branch, int *restrict singular);
 
 #endif

@@ -1,0 +1,132 @@
+"""Choosing among closed-form IK solutions: joint limits with every 2 pi winding, and the
+solution nearest to a seed configuration.
+
+Both work on batches of NaN-padded solutions (n, m, dof) with their counts, as the kernels
+return them (:mod:`derive.codegen.loader`), and are plain numpy:
+
+* :func:`within_limits`: every representation q + 2 pi k (k integer, per revolute joint) of
+  each solution that lies inside the joint limits (closed intervals, 1e-12 rad of slack). A
+  joint with limits +-2 pi has two values for almost every angle (three at exactly 0), so a UR
+  pose has up to 8 x 2^6 solutions within its limits;
+* :func:`nearest`: per pose, the solution inside the limits (windings included) whose largest
+  single-joint move from the seed is smallest (then the smallest summed move). The winding of
+  each joint is chosen independently (the largest move is a maximum over joints), so no
+  enumeration is needed. A joint without finite limits moves by the wrapped difference.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from derive.algebra.angles import wrap_angle
+
+TWO_PI = 2.0 * np.pi
+LIMIT_SLACK = 1e-12
+
+
+def _limits(limits, dof):
+    lim = np.asarray(limits, dtype=float).reshape(dof, 2)
+    return lim[:, 0], lim[:, 1]
+
+
+def _winding_values(q, lo, hi, revolute):
+    """(..., dof, K) candidate values q + 2 pi k inside the limits (NaN elsewhere), K fixed."""
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    width = np.where(finite, hi - lo, 0.0)
+    kmax = int(np.max(np.ceil(width / TWO_PI))) + 1 if np.any(finite & revolute) else 0
+    ks = np.arange(-kmax, kmax + 1, dtype=float)
+    ks_j = np.where((finite & revolute)[:, None], ks[None, :], np.where(ks[None, :] == 0, 0.0, np.nan))
+    vals = q[..., None] + TWO_PI * ks_j
+    ok = (vals >= lo[:, None] - LIMIT_SLACK) & (vals <= hi[:, None] + LIMIT_SLACK)
+    return np.where(ok, vals, np.nan)
+
+
+def within_limits(sols, counts, limits, revolute, branch=None, singular=None, chunk: int = 128):
+    """(solutions (n, M, dof) NaN-padded, counts (n,), branch (n, M), singular (n, M)): every
+    in-limit representation of every solution, in the order of the solutions and, per solution,
+    of the windings (smallest values first). M is the largest count of the call. ``branch`` and
+    ``singular`` (n, m) are carried along (-1 / False where not given)."""
+    sols = np.asarray(sols, dtype=float)
+    n, m, dof = sols.shape
+    lo, hi = _limits(limits, dof)
+    revolute = np.asarray(revolute, dtype=bool)
+    if branch is None:
+        branch = np.full((n, m), -1)
+    if singular is None:
+        singular = np.zeros((n, m), dtype=bool)
+    rows: list = []
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        vals = _winding_values(sols[s:e], lo, hi, revolute)          # (c, m, dof, K)
+        for i in range(e - s):
+            out = []
+            for k in range(int(counts[s + i])):
+                opts = [v[~np.isnan(v)] for v in vals[i, k]]
+                if any(len(o) == 0 for o in opts):
+                    continue
+                grid = np.stack([g.ravel() for g in np.meshgrid(*opts, indexing="ij")], axis=-1)
+                out.append((grid, branch[s + i, k], singular[s + i, k]))
+            rows.append(out)
+    cnt = np.array([sum(len(g) for g, _, _ in r) for r in rows], dtype=np.int64)
+    big = int(cnt.max()) if n else 0
+    q = np.full((n, big, dof), np.nan)
+    b = np.full((n, big), -1)
+    sg = np.zeros((n, big), dtype=bool)
+    for i, r in enumerate(rows):
+        at = 0
+        for grid, br, si in r:
+            q[i, at:at + len(grid)] = grid
+            b[i, at:at + len(grid)] = br
+            sg[i, at:at + len(grid)] = si
+            at += len(grid)
+    return q, cnt, b, sg
+
+
+@dataclass(frozen=True)
+class Nearest:
+    """Per pose: ``q`` (n, dof) the chosen solution (NaN where none), ``found`` (n,) whether one
+    was found (within ``tol`` of the seed when a tolerance was given), ``max_move`` and
+    ``total_move`` (n,) its largest single-joint and summed moves from the seed (rad or m),
+    ``branch`` (n,) the closed form's branch index (-1: none) and ``singular`` (n,)."""
+
+    q: np.ndarray
+    found: np.ndarray
+    max_move: np.ndarray
+    total_move: np.ndarray
+    branch: np.ndarray
+    singular: np.ndarray
+
+
+def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, tol=None) -> Nearest:
+    """The solution nearest to each seed (module docstring); ``seeds`` (n, dof) or (dof,)."""
+    sols = np.asarray(sols, dtype=float)
+    n, m, dof = sols.shape
+    lo, hi = _limits(limits, dof)
+    revolute = np.asarray(revolute, dtype=bool)
+    seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
+    vals = _winding_values(sols, lo, hi, revolute)                   # (n, m, dof, K)
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    free = ~finite & revolute                                        # wrap: the nearest winding
+    wrapped = seeds[:, None, :] + wrap_angle(sols - seeds[:, None, :])
+    d = np.abs(vals - seeds[:, None, :, None])
+    d = np.where(np.isnan(d), np.inf, d)
+    pick = np.argmin(d, axis=-1)
+    best = np.take_along_axis(vals, pick[..., None], axis=-1)[..., 0]
+    best = np.where(free[None, None, :], wrapped, best)
+    move = np.abs(best - seeds[:, None, :])
+    valid = (np.arange(m)[None, :] < np.asarray(counts)[:, None]) & np.all(np.isfinite(best), axis=-1)
+    mx = np.where(valid, np.max(np.where(np.isnan(move), np.inf, move), axis=-1), np.inf)
+    tot = np.where(valid, np.sum(np.where(np.isnan(move), np.inf, move), axis=-1), np.inf)
+    order = np.lexsort((tot, mx), axis=-1)[:, 0] if m else np.zeros(n, dtype=int)
+    idx = np.arange(n)
+    q = best[idx, order] if m else np.full((n, dof), np.nan)
+    found = np.isfinite(mx[idx, order]) if m else np.zeros(n, dtype=bool)
+    if tol is not None:
+        found &= mx[idx, order] <= tol
+    q = np.where(found[:, None], q, np.nan)
+    br = np.full(n, -1) if branch is None else np.where(found, np.asarray(branch)[idx, order], -1)
+    sg = np.zeros(n, dtype=bool) if singular is None else found & np.asarray(singular)[idx, order]
+    return Nearest(q=q, found=found, max_move=np.where(found, mx[idx, order], np.nan),
+                   total_move=np.where(found, tot[idx, order], np.nan), branch=br, singular=sg)

@@ -1,0 +1,238 @@
+"""Choosing among IK solutions and the low-overhead C path (issue: IK that picks a solution):
+within_limits against a brute-force enumeration, nearest with noisy seeds and along a
+trajectory, branch ids stable along a path, single and batch calls bit for bit, the tool
+offset at run time, pose forms, and the input contract of the C extension."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+import derive
+from derive import InputError, reference
+from derive.codegen.loader import kernels
+from derive.model.robot import robot_from_dict
+
+SEED = 16
+
+
+def _wrapped(a):
+    return np.abs(np.mod(a + math.pi, 2 * math.pi) - math.pi)
+
+
+def _narrow_ur5():
+    data = {"name": "ur5-narrow", "convention": "standard_dh", "units": {"length": "m", "angle": "rad"},
+            "parameters": {"d1": 0.089159, "a2": -0.425, "a3": -0.39225, "d4": 0.10915, "d5": 0.09465,
+                           "d6": 0.0823},
+            "joints": [{"name": f"j{i + 1}", "d": d, "a": a, "alpha": al, "limits": lim}
+                       for i, (d, a, al, lim) in enumerate([
+                           ("d1", 0, "pi/2", [-1.0, 2.0]), (0, "a2", 0, [-3.0, 0.5]),
+                           (0, "a3", 0, [-2.5, 2.5]), ("d4", 0, "pi/2", [-2 * math.pi, 1.0]),
+                           ("d5", 0, "-pi/2", [-1.5, 3.0]), ("d6", 0, 0, [-4 * math.pi, 4 * math.pi])])]}
+    return robot_from_dict(data)
+
+
+def _brute(sols, count, limits):
+    """Every in-limit value q + 2 pi k (|k| <= 3) of each solution, as a sorted set of rows."""
+    out = set()
+    for s in sols[:count]:
+        per = []
+        for j, (lo, hi) in enumerate(limits):
+            vals = [s[j] + 2 * math.pi * k for k in range(-3, 4)]
+            per.append([v for v in vals if lo - 1e-12 <= v <= hi + 1e-12])
+        for combo in itertools.product(*per):
+            out.add(tuple(round(v, 9) for v in combo))
+    return out
+
+
+@pytest.mark.parametrize("robot", ["ur5", "narrow", "irb120"])
+def test_within_limits_equals_brute_force(robot):
+    r = _narrow_ur5() if robot == "narrow" else derive.load_robot(robot)
+    k = kernels(r, "c")
+    rng = np.random.default_rng(SEED)
+    lo, hi = (np.clip(np.array(v), -math.pi, math.pi) for v in zip(*r.limits))
+    q = rng.uniform(lo, hi, size=(1000, 6))
+    poses = reference.fk(r, q)
+    sols, counts = k.ik(poses)
+    wl, wc, wb, ws = k.ik(poses, within_limits=True, details=True)
+    assert wl.shape[0] == 1000 and np.all(np.isnan(wl[np.arange(wl.shape[1])[None] >= wc[:, None]]))
+    for i in range(1000):
+        want = _brute(sols[i], counts[i], r.limits)
+        got = {tuple(round(v, 9) for v in row) for row in wl[i, :wc[i]]}
+        assert got == want, (robot, i)
+        assert np.all(wb[i, :wc[i]] >= 0)
+    if robot == "ur5":            # +-2 pi: two values per joint for almost every angle
+        assert np.median(wc / np.maximum(counts, 1)) == 64
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr6-r900"])
+def test_nearest_returns_the_generating_configuration_from_a_noisy_seed(robot):
+    k = kernels(robot, "c")
+    r = derive.load_robot(robot)
+    rng = np.random.default_rng(SEED + 1)
+    lo, hi = (np.array(v) for v in zip(*r.limits))
+    q = rng.uniform(np.maximum(lo, -math.pi) + 0.06, np.minimum(hi, math.pi) - 0.06, size=(1000, 6))
+    poses = reference.fk(robot, q)
+    seed = q + rng.uniform(-0.05, 0.05, size=q.shape)
+    res = k.nearest(poses, seed)
+    assert np.all(res.found)
+    # where another solution is within 0.1 rad of the generating one (near a singular set) it can
+    # be the nearer to the seed: there "nearest" is the right answer and not the generating one
+    sols, counts = k.ik(poses)
+    gap = np.abs(sols - q[:, None, :]).max(axis=-1)
+    others = np.sort(np.where(np.isnan(gap), np.inf, gap), axis=1)[:, 1]
+    clear = others > 0.1
+    assert clear.sum() >= 950
+    assert np.abs(res.q - q)[clear].max() < 1e-8
+    assert np.all(res.max_move <= np.abs(q - seed).max(axis=1) + 1e-12)
+    assert np.allclose(res.max_move[clear], np.abs(q - seed).max(axis=1)[clear], atol=1e-8)
+    assert np.allclose(res.total_move[clear], np.abs(q - seed).sum(axis=1)[clear], atol=1e-7)
+    tight = k.nearest(poses, seed, tol=0.01)
+    assert np.array_equal(tight.found, res.max_move <= 0.01) and np.all(np.isnan(tight.q[~tight.found]))
+
+
+@pytest.mark.parametrize("robot", ["ur5", "irb120"])
+def test_nearest_along_a_trajectory_keeps_the_generating_branch(robot):
+    """A smooth random trajectory of 1000 steps that stays away from the singular sets (every
+    other solution at least 0.2 rad from the generating one, so the branch is well defined):
+    nearest, seeded with the previous step's choice, follows the generating configuration and
+    its branch index never changes."""
+    k = kernels(robot, "c")
+    r = derive.load_robot(robot)
+    lo, hi = (np.clip(np.array(v), -math.pi, math.pi) for v in zip(*r.limits))
+    rng = np.random.default_rng(SEED + 2)
+    t = np.linspace(0, 1, 1000)[:, None]
+    for _ in range(100):
+        a = rng.uniform(lo + 0.6, hi - 0.6, size=(1, 6))
+        b, c = rng.uniform(-0.4, 0.4, size=(2, 1, 6))
+        q = a + b * np.sin(3 * t) + c * t * t
+        poses = reference.fk(robot, q)
+        sols, counts = k.ik(poses)
+        gap = np.abs(_wrapped(sols - q[:, None, :])).max(axis=-1)
+        others = np.sort(np.where(np.isnan(gap), np.inf, gap), axis=1)[:, 1]
+        if others.min() > 0.2:
+            break
+    else:
+        pytest.fail("no trajectory away from the singular sets")
+    seed = q[0]
+    branches = []
+    for i in range(len(q)):
+        res = k.nearest(poses[i], seed)
+        assert res.found and np.abs(res.q - q[i]).max() < 1e-8, i
+        branches.append(int(res.branch))
+        seed = res.q
+    assert len(set(branches)) == 1
+
+
+@pytest.mark.parametrize("robot", ["ur5", "kr6-r900"])
+def test_single_and_batch_calls_agree_bit_for_bit(robot):
+    k = kernels(robot, "c")
+    rng = np.random.default_rng(SEED + 3)
+    q = rng.uniform(-3, 3, size=(500, 6))
+    poses = reference.fk(robot, q)
+    F = k.fk(q)
+    S, C, B, G = k.ik(poses, details=True)
+    for i in range(500):
+        assert np.array_equal(k.fk(q[i]), F[i])
+        s, c, b, g = k.ik(poses[i], details=True)
+        assert c == C[i] and np.array_equal(s, S[i], equal_nan=True)
+        assert np.array_equal(b, B[i]) and np.array_equal(g, G[i])
+        s2, c2 = k.ik(list(poses[i]))
+        assert c2 == C[i] and np.array_equal(s2, S[i], equal_nan=True)
+
+
+def test_branch_ids_are_stable_and_singular_flags_set():
+    k = kernels("ur5", "c")
+    assert len(k.branch_labels) == 3
+    rng = np.random.default_rng(SEED + 4)
+    q = rng.uniform(-3, 3, size=(200, 6))
+    q[:50, 4] = 0.0
+    poses = reference.fk("ur5", q)
+    S, C, B, G = k.ik(poses, details=True)
+    assert np.all(G[:50].sum(axis=1) >= 1) and not G[50:].any()
+    # the same root, perturbed pose: the same branch index keeps the solution continuous
+    P2 = reference.fk("ur5", q[50:] + 1e-6)
+    S2, C2, B2, _ = k.ik(P2, details=True)
+    for i in range(150):
+        for j in range(C[50 + i]):
+            jj = list(B2[i, :C2[i]]).index(B[50 + i, j])
+            assert _wrapped(S2[i, jj] - S[50 + i, j]).max() < 1e-4
+
+
+def test_tool_offset_at_run_time():
+    tool = derive.dualquat.from_rt(derive.quaternion.from_axis_angle([0, 1, 0], 0.3), [0.01, 0.02, 0.15])
+    for robot, backend in (("ur5", "c"), ("ur5", "numpy"), ("irb120", "c")):
+        k = kernels(robot, backend)
+        kt = k.with_tool(tool)
+        q = np.random.default_rng(SEED + 5).uniform(-3, 3, size=(300, 6))
+        want = derive.dualquat.mul(reference.fk(robot, q), tool)
+        got = kt.fk(q)
+        sign = np.sign(np.sum(got[:, :4] * want[:, :4], axis=1))[:, None]
+        assert np.abs(got * sign - want).max() < 1e-14
+        sols, counts = kt.ik(want)
+        rows, cols = np.nonzero(np.arange(8)[None] < counts[:, None])
+        dp, dr = reference.pose_error(kt.fk(sols[rows, cols]), want[rows])
+        assert dp.max() < 1e-10 and dr.max() < 1e-10
+        assert np.all(counts == k.ik(reference.fk(robot, q))[1])
+    assert np.array_equal(k.with_tool(None).fk(q), k.fk(q))
+
+
+def test_pose_forms_agree():
+    pose = derive.pose
+    q = np.array([0.3, -1.1, 1.4, -0.2, 1.2, 0.5])
+    P = reference.fk("ur5", q)
+    M = reference.fk_matrix("ur5", q)
+    t, qx = pose.to_position_quaternion(P, "xyzw")
+    t2, qw = pose.to_position_quaternion(P, "wxyz")
+    assert np.allclose(qx[[3, 0, 1, 2]], qw) and np.allclose(t, M[:3, 3])
+    forms = [P, M, (M[:3, :3], M[:3, 3]), pose.from_position_quaternion(t, qx, "xyzw"),
+             pose.from_position_quaternion(t2, qw, "wxyz")]
+    scipy = pytest.importorskip("scipy.spatial.transform")
+    rot, tt = pose.to_scipy(P)
+    assert np.allclose(rot.as_matrix(), M[:3, :3])
+    forms += [(rot, tt), pose.from_scipy(scipy.Rotation.from_matrix(M[:3, :3]), M[:3, 3])]
+    k = kernels("ur5", "c")
+    ref = k.ik(P)
+    for f in forms:
+        d = pose.as_pose(f)
+        assert derive.dualquat.equal_pose(d, P)
+        s, c = k.ik(d)
+        assert c == ref[1] and np.allclose(s[:c], ref[0][:c], atol=1e-12)
+    with pytest.raises(InputError, match="order"):
+        pose.from_position_quaternion(t, qx, "zyxw")
+    with pytest.raises(InputError, match="not unit"):
+        pose.from_position_quaternion(t, 2 * qx, "xyzw")
+
+
+def test_c_extension_input_contract():
+    k = kernels("ur5", "c")
+    assert k._ext is not None, "the CPython extension did not build"
+    q = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
+    for bad, msg in ((q[:5] + [True], "bool"), (q[:5] + [1j], "complex"), (q[:5] + ["1"], "str"),
+                     (q[:5] + [1e17], "accuracy range"), (q[:5] + [float("nan")], "NaN"),
+                     (q[:5] + [float("inf")], "inf"), (q[:5], "expected shape"),
+                     (np.array(q, dtype=complex), "dtype")):
+        with pytest.raises(InputError, match=msg):
+            k.fk(bad)
+    P = reference.fk("ur5", q)
+    with pytest.raises(InputError, match="not a unit dual quaternion"):
+        k.ik(0.9 * P)
+    off = P.copy()
+    off[4:] += 0.01 * P[:4]
+    with pytest.raises(InputError, match="<real, dual>"):
+        k.ik(off)
+    s, c = k.ik(P * (1 + 1e-9))           # within 1e-6 of unit: normalised
+    assert c >= 1
+    with pytest.raises(InputError):
+        k.nearest(P, q[:5])
+
+
+def test_docs_example_runs():
+    """docs/examples/select_and_tool.py, the documented example of selection and tool offsets."""
+    import runpy
+    from pathlib import Path
+    path = Path(__file__).resolve().parent.parent / "docs" / "examples" / "select_and_tool.py"
+    runpy.run_path(str(path), run_name="__main__")
