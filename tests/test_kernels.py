@@ -486,14 +486,15 @@ def test_dq_atan2_at_extreme_magnitudes(c_helpers):
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
-def test_batch_loops_vectorise_with_avx2(tmp_path):
+@pytest.mark.parametrize("robot", ["ur5", "irb120"])
+def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
     """The batch FK loop and the main batch IK loop of the shipped ur5 source are branch-free
     (selects through dq_sel, the merge in a scalar pass after them), so gcc vectorises them
     without masked stores: with AVX2, no AVX-512. The loops carry marker comments; the report
     must have a "loop vectorized" line at each of their line numbers."""
     from pathlib import Path
 
-    source = Path(__file__).resolve().parents[1] / "generated" / "ur5" / "ur5_kinematics.c"
+    source = Path(__file__).resolve().parents[1] / "generated" / robot / f"{robot}_kinematics.c"
     lines = source.read_text(encoding="utf-8").splitlines()
     marked = {}
     for marker in ("fk batch", "ik batch"):
@@ -507,6 +508,6 @@ def test_batch_loops_vectorise_with_avx2(tmp_path):
     assert res.returncode == 0, res.stderr
     report = res.stdout + res.stderr
     vectorised = {int(m.group(1)) for m in
-                  re.finditer(r"ur5_kinematics\.c:(\d+):\d+: optimized: loop vectorized", report)}
+                  re.finditer(rf"{robot}_kinematics\.c:(\d+):\d+: optimized: loop vectorized", report)}
     for marker, line in marked.items():
         assert line in vectorised, (marker, line, report)

@@ -14,25 +14,12 @@ import pytest
 import derive
 from derive import InputError, reference
 from derive.codegen.loader import kernels
-from derive.model.robot import robot_from_dict
 
 SEED = 16
 
 
 def _wrapped(a):
     return np.abs(np.mod(a + math.pi, 2 * math.pi) - math.pi)
-
-
-def _narrow_ur5():
-    data = {"name": "ur5-narrow", "convention": "standard_dh", "units": {"length": "m", "angle": "rad"},
-            "parameters": {"d1": 0.089159, "a2": -0.425, "a3": -0.39225, "d4": 0.10915, "d5": 0.09465,
-                           "d6": 0.0823},
-            "joints": [{"name": f"j{i + 1}", "d": d, "a": a, "alpha": al, "limits": lim}
-                       for i, (d, a, al, lim) in enumerate([
-                           ("d1", 0, "pi/2", [-1.0, 2.0]), (0, "a2", 0, [-3.0, 0.5]),
-                           (0, "a3", 0, [-2.5, 2.5]), ("d4", 0, "pi/2", [-2 * math.pi, 1.0]),
-                           ("d5", 0, "-pi/2", [-1.5, 3.0]), ("d6", 0, 0, [-4 * math.pi, 4 * math.pi])])]}
-    return robot_from_dict(data)
 
 
 def _brute(sols, count, limits):
@@ -48,9 +35,11 @@ def _brute(sols, count, limits):
     return out
 
 
-@pytest.mark.parametrize("robot", ["ur5", "narrow", "irb120"])
+@pytest.mark.parametrize("robot", ["ur5", "kr6-r900", "irb120"])
 def test_within_limits_equals_brute_force(robot):
-    r = _narrow_ur5() if robot == "narrow" else derive.load_robot(robot)
+    """ur5 (+-2 pi), kr6-r900 (narrow limits: -190..45 deg on A2, +-120 deg on A5, ...) and
+    irb120 (narrow, but +-400 deg on axis 6)."""
+    r = derive.load_robot(robot)
     k = kernels(r, "c")
     rng = np.random.default_rng(SEED)
     lo, hi = (np.clip(np.array(v), -math.pi, math.pi) for v in zip(*r.limits))

@@ -350,7 +350,21 @@ class Kernels:
             sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
         seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
         seeds = np.broadcast_to(seeds, (len(sols), self.dof))
-        res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
+        if self._ext is not None:
+            q, mx, tot, ix = self._ext.nearest(sols, np.asarray(counts, dtype=np.int64), np.ascontiguousarray(seeds),
+                                               np.asarray(self.robot.limits, dtype=float),
+                                               self._revolute.astype(float))
+            found = ix >= 0
+            if tol is not None:
+                found &= mx <= tol
+            rows = np.arange(len(ix))
+            take = np.where(found, ix, 0)
+            res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
+                                 max_move=np.where(found, mx, np.nan), total_move=np.where(found, tot, np.nan),
+                                 branch=np.where(found, branch[rows, take], -1),
+                                 singular=found & sing[rows, take])
+        else:
+            res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
         if np.any(res.singular):
             at = np.nonzero(res.singular)[0]
             poses, _ = as_pose_batch(P)

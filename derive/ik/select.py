@@ -106,15 +106,18 @@ def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, t
     lo, hi = _limits(limits, dof)
     revolute = np.asarray(revolute, dtype=bool)
     seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
-    vals = _winding_values(sols, lo, hi, revolute)                   # (n, m, dof, K)
-    finite = np.isfinite(lo) & np.isfinite(hi)
-    free = ~finite & revolute                                        # wrap: the nearest winding
-    wrapped = seeds[:, None, :] + wrap_angle(sols - seeds[:, None, :])
-    d = np.abs(vals - seeds[:, None, :, None])
-    d = np.where(np.isnan(d), np.inf, d)
+    # per joint: w = seed + wrap(q - seed), the nearest winding, and w -+ 2 pi; the nearest of them
+    # inside the limits (the C extension's nearest_winding does the same)
+    s = seeds[:, None, :]
+    w = s + wrap_angle(sols - s)
+    cands = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
+    inside = (cands >= lo[:, None] - LIMIT_SLACK) & (cands <= hi[:, None] + LIMIT_SLACK)
+    d = np.where(inside, np.abs(cands - s[..., None]), np.inf)
     pick = np.argmin(d, axis=-1)
-    best = np.take_along_axis(vals, pick[..., None], axis=-1)[..., 0]
-    best = np.where(free[None, None, :], wrapped, best)
+    best = np.take_along_axis(cands, pick[..., None], axis=-1)[..., 0]
+    best = np.where(np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0], best, np.nan)
+    plain = np.where((sols >= lo - LIMIT_SLACK) & (sols <= hi + LIMIT_SLACK), sols, np.nan)
+    best = np.where(revolute[None, None, :], best, plain)
     move = np.abs(best - seeds[:, None, :])
     valid = (np.arange(m)[None, :] < np.asarray(counts)[:, None]) & np.all(np.isfinite(best), axis=-1)
     mx = np.where(valid, np.max(np.where(np.isnan(move), np.inf, move), axis=-1), np.inf)
