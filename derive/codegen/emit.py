@@ -278,8 +278,12 @@ def kernel_manifest(robot) -> dict:
     """What a kernel folder's manifest records besides its files: the robot's identity and
     name, the identifier stem of its functions and whether the kernels include the IK."""
     robot = load_robot(robot)
+    try:
+        labels = list(ik_program(robot).branch_labels)
+    except DeriveError:
+        labels = []
     return {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),
-            "dof": robot.dof, "dq_derive": __version__}
+            "dof": robot.dof, "dq_derive": __version__, "branch_labels": labels}
 
 
 def write_kernels(robot, out_dir, command: str | None = None, force: bool = False) -> list:

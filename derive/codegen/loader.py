@@ -43,12 +43,11 @@ from derive.cache import (
     task,
     user_folder,
 )
-from derive.codegen.emit import FILES, identifier, kernel_manifest, render_kernels
+from derive.codegen.emit import FILES, kernel_manifest, render_kernels
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik.closed_form import ik_batch as reference_ik_batch
-from derive.ik.program import ik_program
 from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
@@ -126,6 +125,8 @@ Q_MAX = 1e6
 
 
 def _extension(robot, source: Path, prefix: str, has_ik: bool):
+    # prefix: the kernels' identifier stem from the manifest (emit.identifier, not called here:
+    # the load path does no code generation)
     """The CPython extension module of a C kernel source (templates/pyext.c.j2: input checks in
     C, single calls as batches of one), compiled once per (source, flags, CPU, Python); None
     when it cannot be built (no Python headers), and the loader uses ctypes instead."""
@@ -138,7 +139,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool):
         unit_tol=repr(UNIT_TOL), module="MODULE")
     digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
-    module = f"_dqk_{identifier(robot.name)}_{digest}"
+    module = f"_dqk_{prefix}_{digest}"
     text = text.replace("MODULE", module)
     lib = build_folder() / f"{module}{sysconfig.get_config_var('EXT_SUFFIX')}"
     if not lib.exists():
@@ -183,6 +184,7 @@ class Kernels:
         self.backend = backend
         self.dof = self.robot.dof
         folder, manifest = kernel_folder(self.robot)
+        self._manifest = manifest
         files = manifest["files"]
         ident = manifest["prefix"]
         self.folder = folder
@@ -191,21 +193,14 @@ class Kernels:
         elif backend == "numpy":
             self._mod = _import(folder / files["numpy"], f"{ident}_kinematics_numpy_{self.robot.id}")
         elif backend == "c":
-            text = (folder / files["c_source"]).read_text(encoding="utf-8")
+            self._c_source, self._ident = folder / files["c_source"], ident
+            text = self._c_source.read_text(encoding="utf-8")
+            self._has_ik_c = "_ik_batch(" in text
             # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
-            if "_ik_batch(" not in text or "_ik_batch_ex(" in text:
-                self._ext = _extension(self.robot, folder / files["c_source"], ident, "_ik_batch(" in text)
-            self.library = _compile(folder / files["c_source"], ident)
-            self._lib = ctypes.CDLL(str(self.library))
-            f = getattr(self._lib, f"{ident}_fk_batch")
-            f.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
-            f.restype = None
-            self._fk_batch = f
-            if hasattr(self._lib, f"{ident}_ik_batch"):
-                g = getattr(self._lib, f"{ident}_ik_batch")
-                g.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
-                g.restype = None
-                self._ik_batch = g
+            if not self._has_ik_c or "_ik_batch_ex(" in text:
+                self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c)
+            if self._ext is None:
+                self._load_ctypes()
         else:
             raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
 
@@ -219,6 +214,30 @@ class Kernels:
 
     _ext = None
     _tool = None
+
+    def _load_ctypes(self):
+        """The kernels' shared library through ctypes: the path without the extension (no Python
+        headers), and :attr:`library` for callers who want the plain C functions."""
+        if "_lib" in self.__dict__:
+            return
+        lib = _compile(self._c_source, self._ident)
+        self.__dict__["library"] = lib
+        self._lib = ctypes.CDLL(str(lib))
+        f = getattr(self._lib, f"{self._ident}_fk_batch")
+        f.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
+        f.restype = None
+        self._fk_batch = f
+        if hasattr(self._lib, f"{self._ident}_ik_batch"):
+            g = getattr(self._lib, f"{self._ident}_ik_batch")
+            g.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            g.restype = None
+            self._ik_batch = g
+
+    @property
+    def library(self) -> Path:
+        """The compiled shared library of the C kernels (compiled on first use)."""
+        self._load_ctypes()
+        return self.__dict__["library"]
 
     def with_tool(self, tool) -> "Kernels":
         """The same kernels for the end frame moved by a fixed tool transform T (any pose form of
@@ -247,7 +266,7 @@ class Kernels:
     @property
     def has_ik(self) -> bool:
         if self.backend == "c":
-            return hasattr(self, "_ik_batch")
+            return self._has_ik_c
         return hasattr(self._mod, "ik")
 
     @property
@@ -387,7 +406,7 @@ class Kernels:
     @property
     def branch_labels(self) -> list:
         """The closed-form steps whose roots the bits of a branch index choose, most significant first."""
-        return list(ik_program(self.robot).branch_labels) if self.has_ik else []
+        return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
 
 
 def kernels(robot, backend: str = "numpy") -> Kernels:
