@@ -206,7 +206,7 @@ def cmd_generate(args) -> int:
               f"{time.perf_counter() - t:.2f} s")
     if not args.robots:
         t = time.perf_counter()
-        sw = [n for n in SW_ROBOTS if n in list_robots()]
+        sw = SW_ROBOTS
         name = sw[0]
         written += write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}", force=True)
         written += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}", force=True)

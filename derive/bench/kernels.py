@@ -38,8 +38,7 @@ from derive.bench.machine import machine
 from derive.codegen.emit import identifier, render_kernels
 from derive.codegen.loader import c_flags, kernels
 from derive.errors import DeriveError
-from derive.ik.closed_form import ur_geometry
-from derive.ik.spherical import sw_geometry
+from derive.ik.closed_form import spherical_class
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 from derive.symbolic.chain import chain_from_robot
@@ -255,7 +254,7 @@ def _ikgeo(robot, mats):
 def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: int = 0,
                   singular: int = 2000) -> dict:
     rng = np.random.default_rng(seed)
-    geo = _spherical(robot)
+    geo = spherical_class(robot)
     q = rng.uniform(-np.pi, np.pi, size=(n, 6))
     poses = reference.fk(robot, q)
     mats = reference.fk_matrix(robot, q)
@@ -306,18 +305,6 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
                                     "approximate_solutions": int((~ok & ~np.isnan(gs["sols"][..., 0])).sum()),
                                     "flagged_ls": gs["flagged_ls"]}
     return out
-
-
-def _spherical(robot):
-    try:
-        ur_geometry(robot)
-        return None
-    except DeriveError:
-        pass
-    try:
-        return sw_geometry(robot)
-    except DeriveError:
-        return None
 
 
 def _spherical_peers(out, robot, geo, poses, mats, spose, smats, m_peer) -> dict:

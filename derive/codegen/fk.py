@@ -33,9 +33,8 @@ from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo, step
 from derive.errors import DeriveError
-from derive.ik.closed_form import ur_geometry
+from derive.ik.closed_form import spherical_class
 from derive.ik.extract import _rot
-from derive.ik.spherical import sw_geometry
 from derive.model.geometry import path_to_end
 from derive.model.robot import load_robot
 from derive.symbolic.equations import derive_equations
@@ -68,19 +67,6 @@ def _fk_symbolic(robot):
     real = hamilton(q, gq)
     dual = tuple(e / 2 for e in hamilton((0, *p), real))
     return chain, tuple(real) + dual
-
-
-def _spherical(robot):
-    """The spherical-wrist geometry of a robot outside the UR family, or None."""
-    try:
-        ur_geometry(robot)
-        return None
-    except DeriveError:
-        pass
-    try:
-        return sw_geometry(robot)
-    except DeriveError:
-        return None
 
 
 def fk_kernel(robot) -> Kernel:
@@ -156,7 +142,7 @@ def _fk_numeric(robot, qs) -> Kernel:
 def _fk_kernel(robot) -> Kernel:
     qs = sp.symbols(f"q0:{robot.dof}", real=True)
     symbolic = None
-    if _spherical(robot) is not None:
+    if spherical_class(robot) is not None:
         # a spherical-wrist arm: the product of its joints' dual quaternions, constants multiplied
         # out (a second; folding the expanded product of the canonical chain gave 20x more code)
         return _fk_numeric(robot, qs)

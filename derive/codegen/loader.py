@@ -269,9 +269,6 @@ class Kernels:
             return self._has_ik_c
         return hasattr(self._mod, "ik")
 
-    @property
-    def _has_ik(self) -> bool:
-        return self.__dict__.setdefault("_has_ik_value", self.has_ik)
 
     def _require_ik(self):
         if not self.has_ik:
@@ -294,7 +291,7 @@ class Kernels:
         (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
         call."""
-        if self._ext is not None and not (details or within_limits) and self._has_ik:
+        if self._ext is not None and not (details or within_limits) and self.has_ik:
             out = self._ext.ik(P, self._tool)          # the fast path: one C call, checks in C
             if out is not NotImplemented:
                 return out

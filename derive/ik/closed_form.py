@@ -36,7 +36,7 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import spherical
+from derive.ik import select, spherical
 from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import _pose_error, fk
@@ -345,10 +345,7 @@ def classify(robot) -> Classification:
     c = geometric_classify(robot)
     if c.closed_form:
         return c
-    try:
-        geo = sw_geometry(robot)
-    except DeriveError:
-        geo = None
+    geo = spherical_class(robot)
     if geo is not None:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
         return dataclasses.replace(c, closed_form=True, notes=notes + [
@@ -380,16 +377,13 @@ def _solve_related(robot, poses, q_ref):
     related to (poses moved into that robot's frames, B^-1 P T^-1, and the solutions' joint
     directions mapped back). ``q_ref`` (n, 6) or None: reference configurations whose free joint
     (theta6 of the UR, q4 of the spherical wrist) is used at the wrist singularity."""
+    geo = spherical_class(robot)
+    if geo is not None:
+        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, 3])
     try:
         return solve(robot, ur_geometry(robot), poses, None if q_ref is None else q_ref[:, 5])
     except DeriveError as exc:
         first = exc
-    try:
-        geo = sw_geometry(robot)
-    except DeriveError:
-        geo = None
-    if geo is not None:
-        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, 3])
     rel = closed_form_relation(robot)
     if rel is None:
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
@@ -400,6 +394,21 @@ def _solve_related(robot, poses, q_ref):
     q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
                                          None if q_ref is None else q_ref[:, 5] * rel.signs[5])
     return wrap_angle(q * rel.signs), counts, singular, reasons
+
+
+def spherical_class(robot) -> SWGeometry | None:
+    """The spherical-wrist geometry of a robot outside the UR family (whose own closed form
+    comes first), or None."""
+    robot = load_robot(robot)
+    try:
+        ur_geometry(robot)
+        return None
+    except DeriveError:
+        pass
+    try:
+        return sw_geometry(robot)
+    except DeriveError:
+        return None
 
 
 def spherical_reason(robot) -> str:
@@ -453,7 +462,10 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     sols, sing = q[0, :k], singular[0, :k]
     reason = reasons[0]
     if within_limits:
-        sols, sing = _expand_within_limits(robot.limits, sols, sing)
+        revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
+        q, cnt, _, sg = select.within_limits(sols[None], np.array([len(sols)]), robot.limits, revolute,
+                                      singular=sing[None])
+        sols, sing = q[0, :cnt[0]], sg[0, :cnt[0]]
         if len(sols) == 0 and not reason:
             reason = f"no solution inside the joint limits ({k} outside)"
     if sort_by is not None and len(sols):
@@ -461,23 +473,3 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
         order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
         sols, sing = sols[order], sing[order]
     return IKSolutions(sols.reshape(-1, robot.dof), sing, reason)
-
-
-def _expand_within_limits(limits, sols, sing):
-    """Every representation q + 2 pi k of each solution that lies inside the limits."""
-    out, out_sing = [], []
-    for q, s in zip(sols, sing):
-        options = []
-        for j, (lo, hi) in enumerate(limits):
-            ks = np.arange(-2, 3)
-            vals = q[j] + 2 * np.pi * ks
-            options.append(vals[(vals >= lo - 1e-12) & (vals <= hi + 1e-12)])
-        if any(len(o) == 0 for o in options):
-            continue
-        grids = np.meshgrid(*options, indexing="ij")
-        combos = np.stack([g.ravel() for g in grids], axis=-1)
-        out.extend(combos)
-        out_sing.extend([s] * len(combos))
-    if not out:
-        return np.zeros((0, len(limits))), np.zeros(0, dtype=bool)
-    return np.array(out), np.array(out_sing)

@@ -37,9 +37,9 @@ from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.closed_form import closed_form_relation, ur_geometry
+from derive.ik.closed_form import closed_form_relation, spherical_class, ur_geometry
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
-from derive.ik.spherical import SWGeometry, canonical_robot, sw_geometry
+from derive.ik.spherical import SWGeometry, canonical_robot
 from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
 from derive.model.robot import load_robot
 from derive.symbolic.chain import runs_quaternion
@@ -189,16 +189,21 @@ def _chain_pose(builder: _Builder, g):
         builder.let(sym, sp.expand(t[i] - sum(R_SYMS[i, k] * gt[k] for k in range(3))))
 
 
-def _s2_data(step, eqs, form, thetas):
-    """(n_s, n_c, d) of an S2 step: cos u = n_c / d, sin u = n_s / d, common factors cancelled."""
-    u = sp.Symbol("u", real=True)
-    (a1, b1, c1), (a2, b2, c2) = (_as_linear_in(eqs[i].lhs - eqs[i].rhs, form, thetas, u)
-                                  for i in step.equations)
+def _s2_pair(eqs, ids, form, thetas, u):
+    """(n_s, n_c, d) of a pair of equations linear in (cos v, sin v) of the compound ``form``:
+    cos v = n_c / d, sin v = n_s / d (common factors cancelled), as :func:`_s2_data`."""
+    (a1, b1, c1), (a2, b2, c2) = (_as_linear_in(eqs[i], form, thetas, u) for i in ids)
     det = sp.expand(a1 * b2 - a2 * b1)
     nc = sp.expand(-c1 * b2 + c2 * b1)
     ns = sp.expand(-a1 * c2 + a2 * c1)
     g = sp.gcd(sp.gcd(nc, ns), det)
     return sp.cancel(ns / g), sp.cancel(nc / g), sp.cancel(det / g)
+
+
+def _s2_data(step, eqs, form, thetas):
+    """(n_s, n_c, d) of an S2 step: cos u = n_c / d, sin u = n_s / d, common factors cancelled."""
+    return _s2_pair({i: eqs[i].lhs - eqs[i].rhs for i in step.equations}, step.equations, form, thetas,
+                    sp.Symbol("u", real=True))
 
 
 def _half_factor(d, u):
@@ -218,13 +223,12 @@ def ik_program(robot) -> IKProgram:
 
 
 def _ik_program(robot) -> IKProgram:
+    geo = spherical_class(robot)
+    if geo is not None:
+        return _spherical_program(robot, geo)
     try:
         ur_geometry(robot)
     except DeriveError:
-        try:
-            return _spherical_program(robot, sw_geometry(robot))
-        except DeriveError:
-            pass
         rel = closed_form_relation(robot)
         if rel is not None:
             return _related_program(robot, rel)
@@ -447,17 +451,6 @@ def _is_acos(step) -> bool:
 # --------------------------------------------------------------------------- #
 # Spherical-wrist class (derive.ik.spherical)
 # --------------------------------------------------------------------------- #
-def _s2_pair(eqs, ids, form, thetas, u):
-    """(n_s, n_c, d) of a pair of equations linear in (cos v, sin v) of the compound ``form``:
-    cos v = n_c / d, sin v = n_s / d (common factors cancelled), as :func:`_s2_data`."""
-    (a1, b1, c1), (a2, b2, c2) = (_as_linear_in(eqs[i], form, thetas, u) for i in ids)
-    det = sp.expand(a1 * b2 - a2 * b1)
-    nc = sp.expand(-c1 * b2 + c2 * b1)
-    ns = sp.expand(-a1 * c2 + a2 * c1)
-    g = sp.gcd(sp.gcd(nc, ns), det)
-    return sp.cancel(ns / g), sp.cancel(nc / g), sp.cancel(det / g)
-
-
 @dataclass
 class SphericalForms:
     """The symbolic pieces of the spherical-wrist closed form, taken from the class's equations

@@ -212,8 +212,6 @@ def _sw_geometry(robot) -> SWGeometry:
     # intersection of lines 4 and 5 (perpendicular): point on 4 nearest to 5
     d45 = pts[4] - pts[3]
     w = pts[3] + h[3] * (d45 @ h[3] - (d45 @ h[4]) * (h[3] @ h[4])) / (1.0 - (h[3] @ h[4]) ** 2)
-    if _line_distance(w, h[3], pts[5], h[5]) > tol and np.linalg.norm(np.cross(w - pts[5], h[5])) > tol:
-        fail("axes 4, 5 and 6 do not meet in one point")
 
     # canonical base frame: z along axis 1, origin at the foot of the base origin on axis 1
     s1 = 1.0 if h[0][2] >= 0 else -1.0
@@ -271,9 +269,7 @@ def _sw_geometry(robot) -> SWGeometry:
     offsets = np.array([_snap(float(wrap_angle(x)), math.pi / 12) for x in offsets]) + 0.0
     vals = {k: round(v, 12) + 0.0 for k, v in zip(PARAMETERS, (a1, a2, b, c1, c2, c3, c4))}
     base = dq.from_rt(quat.from_matrix(frame), oc)
-    geo = SWGeometry(name, **vals, base=base, tool=dq.IDENTITY.copy(), signs=signs,
-                     offsets=offsets, error=0.0)
-    canon = canonical_robot(geo)
+    canon = robot_from_dict(canonical_description(vals, f"{name}-canonical"))
     # T = FK_c(o)^-1 B^-1 FK_robot(0)
     pose0 = fk(robot, np.zeros(6))
     c0 = fk(canon, offsets)

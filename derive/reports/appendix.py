@@ -21,9 +21,8 @@ from derive._version import __version__
 from derive.algebra import dualquat as dq
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
-from derive.errors import DeriveError
-from derive.ik.closed_form import ur_geometry
-from derive.ik.spherical import MAP_TOL, SWGeometry, canonical_robot, sw_geometry
+from derive.ik.closed_form import spherical_class
+from derive.ik.spherical import MAP_TOL, SWGeometry, canonical_robot
 from derive.model.robot import load_robot
 from derive.reports.latex import latex, side
 from derive.symbolic.chain import SymChain
@@ -95,14 +94,7 @@ def equations_of(robot) -> tuple:
     """(chain, sets, class context or None) of a robot's appendix: its own chain's equations,
     or for a spherical-wrist arm (not of the UR family) those of its class's canonical chain."""
     robot = load_robot(robot)
-    try:
-        ur_geometry(robot)
-        geo = None
-    except DeriveError:
-        try:
-            geo = sw_geometry(robot)
-        except DeriveError:
-            geo = None
+    geo = spherical_class(robot)
     if geo is None:
         chain, sets = derive_equations(robot)
         return chain, sets, None

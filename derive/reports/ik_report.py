@@ -17,11 +17,10 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
-from derive.errors import DeriveError
-from derive.ik.closed_form import ur_geometry
+from derive.ik.closed_form import spherical_class
 from derive.ik.extract import R_SYMS, check_numerically, extract
 from derive.ik.program import spherical_forms
-from derive.ik.spherical import canonical_robot, sw_geometry
+from derive.ik.spherical import canonical_robot
 from derive.ik.tolerances import WRIST_SINGULAR
 from derive.kinematics.fk import fk
 from derive.model.robot import load_robot
@@ -135,14 +134,7 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
     robot_name = robot.name
     claim_folder(Path(out_dir) / robot_name, robot.id, robot_name, force)
     command = command or f"dq-derive ik {robot_name}"
-    try:
-        ur_geometry(robot)
-        geo = None
-    except DeriveError:
-        try:
-            geo = sw_geometry(robot)
-        except DeriveError:
-            geo = None
+    geo = spherical_class(robot)
     if geo is None:
         ctx, stem = build_ik_context(robot, command), "ik"
     else:
@@ -229,19 +221,16 @@ def build_sw_ik_context(robot, geo, command: str) -> dict:
     check = _sw_check(geo, chain, sf)
     thetas = [j.theta for j in chain.joints]
     t1, t2, t3, t4, t5, t6 = thetas
-    pm = sp.Symbol(r"\pm")
 
     def eqs(ids):
         return [{"id": i, "lhs": " ".join(side(eq_by_id[i].lhs_terms)),
                  "rhs": " ".join(side(eq_by_id[i].rhs_terms))} for i in ids]
 
-    A, B, C = sp.symbols("A B C", real=True)
     a1, b1, c1 = sf.theta1
     a3, b3, c3 = sf.theta3
     ns2, nc2, d2 = sf.theta2
     hcos, hsin = sf.halves["cos"], sf.halves["sin"]
     sig1, sig2 = sp.Symbol(r"\sigma_1", real=True), sp.Symbol(r"\sigma_2", real=True)
-    x_w, y_w, z_w = POSES["P"][4:]
     steps = [
         {"k": 1, "symbol": latex(t1), "pattern": "S1", "text": PATTERNS["S1"], "check": check["theta1"],
          "equations": eqs(["P.13"]),
@@ -273,7 +262,6 @@ def build_sw_ik_context(robot, geo, command: str) -> dict:
          "check": check["theta6"], "equations": eqs(list(hsin[3])), "coefficients": [],
          "forms": [latex(sp.atan2(hsin[0], hsin[1]))]},
     ]
-    del A, B, C, pm, x_w, y_w, z_w
     return {
         "version": __version__, "command": command, "robot": robot.name, "title": robot.title,
         "sw": class_context(geo, robot), "steps": steps,
