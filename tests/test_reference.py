@@ -107,7 +107,7 @@ def test_pose_error():
     (np.zeros((2, 2, 6)), r"expected shape \(6,\) or \(n, 6\)"),
     ([0, 0, float("nan"), 0, 0, 0], "NaN at index"),
     ([0, 0, 0, float("-inf"), 0, 0], "inf at index"),
-    ("abc", "cannot be read"),
+    ("abc", "expected a real number, got str"),
     (5.0, "at least 1 dimension"),
 ])
 def test_bad_joint_values(q, message):

@@ -1,10 +1,12 @@
-"""Pose input: unit dual quaternions or 4x4 matrices, checked and brought to one form."""
+"""Pose input: unit dual quaternions or 4x4 matrices, checked and brought to one form; poses
+from and to position + quaternion (either order), position + roll pitch yaw, (R, t) and scipy."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
 from derive.errors import InputError, as_finite_array
 
 
@@ -43,6 +45,25 @@ def from_position_quaternion(position, quaternion, order: str) -> np.ndarray:
     if np.any(np.abs(n - 1.0) > 1e-6):
         raise InputError(f"quaternion: not unit (| |q| - 1 | = {float(np.max(np.abs(n - 1))):.3g})")
     return dq.from_rt(q / n, p)
+
+
+def from_position_rpy(position, rpy) -> np.ndarray:
+    """Unit dual quaternions (8,) / (n, 8) from positions (m) and roll, pitch, yaw angles (rad)
+    in the URDF / ROS convention: R = Rz(yaw) Ry(pitch) Rx(roll), fixed axes x, y, z."""
+    p = as_finite_array(position, "position", last_dim=3)
+    a = as_finite_array(rpy, "rpy", last_dim=3)
+    q = quat.from_euler_zyx(a[..., 2], a[..., 1], a[..., 0])
+    return dq.from_rt(q, p)
+
+
+def to_position_rpy(pose) -> tuple:
+    """(positions (..., 3) in m, roll pitch yaw (..., 3) in rad, R = Rz(yaw) Ry(pitch) Rx(roll))
+    of poses; at pitch = +-pi/2 roll is 0 (see :func:`derive.algebra.quaternion.euler_zyx`)."""
+    poses, single = as_pose_batch(pose)
+    yaw, pitch, roll = quat.euler_zyx(poses[:, :4])
+    rpy = np.stack([roll, pitch, yaw], axis=-1)
+    t = dq._translation(poses)
+    return (t[0], rpy[0]) if single else (t, rpy)
 
 
 def to_position_quaternion(pose, order: str) -> tuple:

@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 
 from derive.cache import memo
-from derive.errors import DeriveError, InputError, as_finite_array
+from derive.errors import DeriveError, InputError, as_finite_array, finite_number, whole_number
 from derive.ik.closed_form import (
     closed_form_relation,
     ik_batch,
@@ -351,7 +351,10 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
     pose: unit dual quaternion (8,) or matrix (4, 4) of the end frame. q0: seed(s) (dof,) or
     (k, dof); default the nominal closed-form solutions, or ``starts`` random starts.
     weights: (position, rotation) weights of the error; regularization: lambda >= 0 towards
-    q_ref (default the seed). Returns a :class:`RefineResult`, one :class:`Refined` per seed.
+    q_ref (default the seed); tol: success tolerance > 0 (m and rad); max_iter: iterations per
+    seed, an integer >= 1; starts (>= 1) random starts with the generator seed ``seed`` (>= 0)
+    for arms without a closed form; retry_sigmas: perturbation sizes (rad) > 0 of the retries.
+    Every option is checked (InputError naming it). Returns a :class:`RefineResult`, one :class:`Refined` per seed.
     """
     robot = load_robot(robot)
     n = robot.dof
@@ -360,10 +363,18 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
         raise InputError("pose: refine() takes one pose")
     target = pose_b[0]
     w = as_finite_array(weights, "weights", last_dim=2)
-    if np.any(w <= 0):
-        raise InputError(f"weights: must be positive, got {tuple(w)}")
-    if not (math.isfinite(regularization) and regularization >= 0):
-        raise InputError(f"regularization: must be a finite number >= 0, got {regularization}")
+    if w.shape != (2,) or np.any(w < 0) or not np.any(w > 0):
+        raise InputError("weights: (position, rotation), two finite numbers >= 0, not both 0; got "
+                         + (f"({', '.join(f'{float(x):g}' for x in w)})" if w.shape == (2,) else f"shape {w.shape}"))
+    regularization = finite_number(regularization, "regularization", minimum=0.0)
+    tol = finite_number(tol, "tol", minimum=0.0, strict=True)
+    max_iter = whole_number(max_iter, "max_iter", minimum=1)
+    starts = whole_number(starts, "starts", minimum=1)
+    seed = whole_number(seed, "seed", minimum=0)
+    sig = as_finite_array(retry_sigmas, "retry_sigmas", ndim_min=0).ravel()
+    if np.any(sig <= 0):
+        raise InputError(f"retry_sigmas: must be > 0, got ({', '.join(f'{float(x):g}' for x in sig)})")
+    retry_sigmas = tuple(float(x) for x in sig)
     n_nominal = 0                # leading seeds that are nominal solutions (repaired when they fail)
     if q0 is None:
         seeds, n_nominal = closed_form_seeds(robot, target, with_reach=True)
