@@ -1,0 +1,746 @@
+"""Closed-form inverse kinematics of SRS arms (spherical shoulder, revolute elbow, spherical
+wrist) with the arm angle psi as the free parameter: the KUKA LBR iiwa class.
+
+References: M. Shimizu, H. Kakuya, W.-K. Yoon, K. Kitagaki, K. Kosuge, "Analytical inverse
+kinematic computation for 7-DOF redundant manipulators with joint limits and its application
+to redundancy resolution", IEEE T-RO 24(5), 2008 ("Shimizu" below; sec. III the parameterised
+closed form, sec. IV the joint limits as functions of psi); C. Faria, F. Ferreira, W. Erlhagen,
+S. Monteiro, E. Bicho, "Position-based kinematics for 7-DoF serial manipulators with global
+configuration control, joint limit and singularity avoidance", Mechanism and Machine Theory
+121, 2018 ("Faria" below; sec. 3 the same construction for the iiwa, its configuration flags
+GC2, GC4, GC6).
+
+The class
+---------
+Seven revolute joints. At the zero pose the arm is stretched along one line (direction u):
+axes 1, 3, 5, 7 lie on it; axes 2, 4, 6 are perpendicular to it and parallel to each other and
+cross it at the shoulder S (axes 1, 2, 3 meet), the elbow E and the wrist centre W (axes 5,
+6, 7 meet), with d_se = |SE| > 0 and d_ew = |EW| > 0. :func:`srs_geometry` checks this on the
+robot's axes at the zero pose and finds the **canonical frame**: origin S, z = u, y = axis 2,
+x = y cross z. Every axis is +-z or +-y there, so with theta_i = s_i q_i (s_i = +-1, the axis
+direction)
+
+    rotation      R(theta) = Rz(t1) Ry(t2) Rz(t3) Ry(t4) Rz(t5) Ry(t6) Rz(t7)
+    wrist centre  W(theta) = Rz(t1) Ry(t2) Rz(t3) v(t4),   v(t4) = d_se e_z + d_ew Ry(t4) e_z
+
+and the robot's end frame is B (R, W) T with constant B (the canonical frame in the base) and
+T (the end frame in the wrist frame at zero; the flange offset d_wf and any tool are in T).
+
+The arm angle psi
+-----------------
+For a wrist centre W (x = W - S, not zero) and an elbow angle t4, the **reference
+configuration** is the shoulder rotation with t3 = 0 that carries v(t4) onto x:
+R0 = Rz(a) Ry(b - phi), a = atan2(x_y, x_x), b = atan2(hypot(x_x, x_y), x_z),
+phi = atan2(v_x, v_z) (its other decomposition, a + pi and -b - phi, is the same rotation). With
+t3 = 0 the whole arm lies in the plane spanned by axis 1 and x: the **reference plane**. Every
+shoulder rotation that carries v(t4) onto x is R_s = R_psi R0, R_psi the rotation by psi about
+x/|x| (right hand); psi is the arm angle (Shimizu sec. III-B). Geometrically psi turns the arm
+plane (S, E, W) out of the reference plane about the shoulder-wrist line; psi = 0 is the arm in
+the reference plane with its elbow on the side that t4's sign gives (so the elbow of the other
+elbow branch at psi sits where this branch's elbow sits at psi + pi).
+
+When x lies along axis 1 (the wrist centre on axis 1: x_x = x_y = 0) the reference plane is
+undefined; this module then takes a = 0, the plane of axis 1 and the canonical x axis (for the
+iiwa the base x-z plane), in the solver and in :func:`arm_angle` alike, so psi keeps a meaning
+(there psi and q1 move the arm the same way). x = 0 (the wrist centre at the shoulder, possible
+only when d_se = d_ew with the elbow folded) has no solution here: an empty set with its reason.
+
+The branches
+------------
+Per psi: the elbow t4 = GC4 acos(...) (two roots of the cosine law), then the shoulder
+rotation R_s and the wrist rotation R_w = (R_s Ry(t4))^T R each split into two ZYZ Euler
+decompositions (GC2 = sign of sin t2, GC6 = sign of sin t6). Branch id k = 4 i2 + 2 i4 + i6
+with i = 0 for the + sign, 1 for -. Singular sets: the elbow stretched (t4 = 0: the two elbow
+branches coincide), the shoulder aligned (sin t2 = 0: only t1 + t3 or t1 - t3 is fixed; t1 is
+taken from ``q_ref``, else q1 = 0) and the wrist aligned (sin t6 = 0: q5 from ``q_ref``, else
+0). Such solutions are exact; coinciding branches are returned once.
+
+Feasible intervals
+------------------
+R_s(psi) = A_s sin psi + B_s cos psi + C_s and R_w(psi) = A_w sin psi + B_w cos psi + C_w
+(Shimizu sec. III-C), so each joint is of tangent type, t = atan2(n(psi), d(psi)) with n, d of
+the form a sin psi + b cos psi + c (joints 1, 3, 5, 7), or of cosine type, t = +-acos(a sin psi +
+b cos psi + c) (joints 2, 6); t4 does not depend on psi (Shimizu sec. IV). A joint reaches a
+limit L where n cos L - d sin L = 0 (tangent type) or the cosine equals cos L (cosine type):
+equations a sin psi + b cos psi + c = 0 with closed-form roots. :func:`psi_intervals` takes
+those roots (and the roots of n and d, where a tangent-type joint may jump) as the only places
+where feasibility can change and classifies each arc between them by the closed form at its
+midpoint.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import memo
+from derive.errors import DeriveError, InputError, as_finite_array
+from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
+from derive.kinematics.fk import _pose_error, fk
+from derive.model.geometry import numeric_chain
+from derive.model.robot import load_robot
+
+#: Geometric properties of the class must hold within this (rad for angles, m for distances).
+CLASS_TOL = 1e-10
+#: The relation FK_robot = B (R, W) T must hold within this (m, rad).
+MAP_TOL = 1e-10
+#: The wrist centre counts as on axis 1 when it is closer than this to it (m).
+AXIS_TOL = 1e-12
+
+REASON_REACH = ("unreachable: the shoulder-wrist distance is outside [|d_se - d_ew|, d_se + d_ew]")
+REASON_FOLDED = ("the wrist centre is at the shoulder point (d_se = d_ew, elbow folded): the "
+                 "shoulder rotation is free in three dimensions; no arm angle")
+REASON_JOINT = ("unreachable with the given joint value: the shoulder cannot carry the forearm "
+                "onto the shoulder-wrist line")
+REASON_ACCEPT = "no candidate reproduces the pose within ACCEPT_TOL"
+
+#: Shoulder, elbow and wrist signs (GC2, GC4, GC6) of branch k = 4 i2 + 2 i4 + i6.
+BRANCH_SIGNS = np.array([[1 - 2 * ((k >> 2) & 1), 1 - 2 * ((k >> 1) & 1), 1 - 2 * (k & 1)]
+                         for k in range(8)], dtype=float)
+
+
+@dataclass(frozen=True)
+class SRSGeometry:
+    """An SRS arm in its canonical frame (module docstring): FK(q) = B (R(s q), W(s q)) T."""
+
+    robot: str
+    d_bs: float             # base origin -> shoulder S (m), for the record
+    d_se: float             # shoulder -> elbow
+    d_ew: float             # elbow -> wrist centre
+    d_wf: float             # wrist centre -> end-frame origin along the arm line at zero
+    frame: np.ndarray       # (3, 3) canonical axes (columns) in base coordinates
+    shoulder: np.ndarray    # (3,) S in base coordinates
+    tool_rotation: np.ndarray     # (3, 3) end frame in the canonical wrist frame at zero
+    tool_translation: np.ndarray  # (3,)
+    signs: np.ndarray       # (7,) +-1: theta = signs * q
+    limits: np.ndarray      # (7, 2) joint limits of q (rad)
+    error: float            # largest mismatch of the relation on the check configurations
+
+
+class SRSSolutions(NamedTuple):
+    """All solutions of n poses: ``q`` (n, 8, 7) NaN-padded (valid rows first, in branch
+    order), ``count`` (n,), ``branch`` (n, 8) branch ids (-1 for padding), ``singular`` (n, 8)
+    (the row lies on a singular set: a joint was taken from q_ref or set to 0), ``reason`` (n,)
+    why a pose has no solution ('' when it has)."""
+
+    q: np.ndarray
+    count: np.ndarray
+    branch: np.ndarray
+    singular: np.ndarray
+    reason: np.ndarray
+
+
+class SRSSweep(NamedTuple):
+    """:func:`ik_sweep`: ``psi`` (n, m) the arm angles evaluated (NaN where a pose has no
+    feasible arm angle), ``q`` (n, m, 8, 7) the solutions within limits, NaN-padded, ``count``
+    (n, m), ``branch`` (n, m, 8)."""
+
+    psi: np.ndarray
+    q: np.ndarray
+    count: np.ndarray
+    branch: np.ndarray
+
+
+# --------------------------------------------------------------------------- #
+# Class test and canonical frame
+# --------------------------------------------------------------------------- #
+def srs_geometry(robot) -> SRSGeometry:
+    """The canonical form of an SRS arm (module docstring), cached per robot identity; raises
+    InputError naming the property a robot lacks."""
+    robot = load_robot(robot)
+    return memo("srs-geometry", robot.id, lambda: _srs_geometry(robot))
+
+
+def is_srs(robot) -> bool:
+    try:
+        srs_geometry(robot)
+        return True
+    except DeriveError:
+        return False
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _nearest_on(p1, h1, p2, h2):
+    """The point of line (p1, h1) nearest to line (p2, h2), h1 and h2 unit and not parallel."""
+    c = h1 @ h2
+    d = p2 - p1
+    t = (d @ h1 - (d @ h2) * c) / (1.0 - c * c)
+    return p1 + t * h1
+
+
+def _off_line(p, s, u) -> float:
+    """Distance of point p from the line through s along unit u."""
+    d = p - s
+    return float(np.linalg.norm(d - (d @ u) * u))
+
+
+def _srs_geometry(robot) -> SRSGeometry:
+    def fail(why):
+        raise InputError(f"{robot.name}: not an SRS arm (spherical shoulder, revolute elbow, "
+                         f"spherical wrist, stretched at the zero pose): {why}")
+
+    if robot.dof != 7:
+        fail(f"{robot.dof} joints, the class has 7")
+    try:
+        chain = numeric_chain(robot)
+    except DeriveError as exc:
+        fail(str(exc))
+    if chain.n != 7 or any(t != "revolute" for t in chain.types):
+        fail("the path to the end has a prismatic joint or not 7 joints")
+    h = np.array([_unit(a) for a in chain.axes])
+    pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:7]
+    tol = CLASS_TOL
+    for i, j in ((0, 1), (4, 5)):
+        if abs(h[i] @ h[j]) > tol:
+            fail(f"axis {j + 1} is not perpendicular to axis {i + 1}")
+    for i in (3, 5):
+        if np.linalg.norm(np.cross(h[1], h[i])) > tol:
+            fail(f"axis {i + 1} is not parallel to axis 2 at the zero pose")
+    s = _nearest_on(pts[1], h[1], pts[0], h[0])          # shoulder: axis 2 meets axis 1
+    w = _nearest_on(pts[5], h[5], pts[4], h[4])          # wrist centre: axis 6 meets axis 5
+    if np.linalg.norm(w - s) < tol:
+        fail("shoulder and wrist centre coincide")
+    u = _unit(w - s)
+    for i, p in ((0, s), (2, s), (4, w), (6, w)):
+        if np.linalg.norm(np.cross(h[i], u)) > tol or _off_line(pts[i], p, u) > tol:
+            fail(f"axis {i + 1} does not lie on the shoulder-wrist line at the zero pose")
+    if abs(h[1] @ u) > tol or abs(h[3] @ u) > tol or abs(h[5] @ u) > tol:
+        fail("axes 2, 4, 6 are not perpendicular to the shoulder-wrist line at the zero pose")
+    if _off_line(s, pts[1], h[1]) > tol or _off_line(w, pts[5], h[5]) > tol:
+        fail("axes 2 and 6 do not cross the shoulder-wrist line")
+    e = _nearest_on(pts[3], h[3], s, u)
+    if _off_line(e, pts[3], h[3]) > tol:
+        fail("axis 4 does not cross the shoulder-wrist line (elbow offset)")
+    d_se, d_ew = float((e - s) @ u), float((w - e) @ u)
+    if d_se <= tol or d_ew <= tol:
+        fail("the elbow axis does not cross the shoulder-wrist line between shoulder and wrist")
+    y = h[1]
+    frame = np.column_stack([np.cross(y, u), y, u])
+    signs = np.array([float(np.sign(h[i] @ (u if i % 2 == 0 else y))) for i in range(7)])
+    # end frame at zero, in the canonical wrist frame (orientation `frame`, origin w)
+    pose0 = fk(robot, np.zeros(7))
+    r0 = quat._to_matrix(pose0[None, :4])[0]
+    p0 = dq._translation(pose0[None])[0]
+    t_rot = frame.T @ r0
+    t_tr = frame.T @ (p0 - w)
+    lim = robot.limits
+    geo = SRSGeometry(robot.name, float(np.linalg.norm(s)), d_se, d_ew, float(t_tr[2]), frame,
+                      s, t_rot, t_tr, signs, lim, 0.0)
+    rng = np.random.default_rng(17)
+    q = rng.uniform(-math.pi, math.pi, size=(24, 7))
+    r, p = _canonical_fk(geo, q * signs)
+    via = dq.from_rt(quat.from_matrix(frame @ r @ t_rot),
+                     s + (frame @ (p + r @ t_tr)[..., None])[..., 0])
+    dp, dr = _pose_error(fk(robot, q), via)
+    err = float(max(dp.max(), dr.max()))
+    if not err <= MAP_TOL:
+        fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
+    return SRSGeometry(robot.name, geo.d_bs, d_se, d_ew, geo.d_wf, frame, s, t_rot, t_tr,
+                       signs, lim, err)
+
+
+# --------------------------------------------------------------------------- #
+# Rotations (batches)
+# --------------------------------------------------------------------------- #
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def _ry(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
+def _skew(x):
+    z = np.zeros_like(x[..., 0])
+    return np.stack([np.stack([z, -x[..., 2], x[..., 1]], -1),
+                     np.stack([x[..., 2], z, -x[..., 0]], -1),
+                     np.stack([-x[..., 1], x[..., 0], z], -1)], -2)
+
+
+def _t(m):
+    return np.swapaxes(m, -1, -2)
+
+
+def _forearm(geo: SRSGeometry, t4):
+    """v(t4) = d_se e_z + d_ew Ry(t4) e_z: shoulder -> wrist centre with the shoulder at zero."""
+    z = np.zeros_like(t4)
+    return np.stack([geo.d_ew * np.sin(t4), z, geo.d_se + geo.d_ew * np.cos(t4)], -1)
+
+
+def _canonical_fk(geo: SRSGeometry, theta):
+    """(R, W) of the canonical chain for angles theta (..., 7): the module docstring's product."""
+    t = [theta[..., i] for i in range(7)]
+    rs = _rz(t[0]) @ _ry(t[1]) @ _rz(t[2])
+    w = (rs @ _forearm(geo, t[3])[..., None])[..., 0]
+    r = rs @ _ry(t[3]) @ _rz(t[4]) @ _ry(t[5]) @ _rz(t[6])
+    return r, w
+
+
+# --------------------------------------------------------------------------- #
+# Input
+# --------------------------------------------------------------------------- #
+def _poses(poses) -> tuple[np.ndarray, bool]:
+    arr = as_finite_array(poses, "poses", last_dim=8)
+    if arr.ndim > 2:
+        raise InputError(f"poses: expected shape (8,) or (n, 8), got {arr.shape}")
+    single = arr.ndim == 1
+    return dq.check_unit(arr.reshape(-1, 8), "poses"), single
+
+
+def _per_pose(value, name: str, n: int) -> np.ndarray:
+    arr = as_finite_array(value, name, ndim_min=0)
+    if arr.ndim == 0 or arr.shape == (1,):
+        return np.full(n, float(arr.reshape(-1)[0]))
+    if arr.shape != (n,):
+        raise InputError(f"{name}: expected a number or shape ({n},) (one per pose), got {arr.shape}")
+    return arr
+
+
+def _q_ref(q_ref, n: int) -> np.ndarray | None:
+    if q_ref is None:
+        return None
+    arr = as_finite_array(q_ref, "q_ref", last_dim=7)
+    if arr.ndim == 1:
+        return np.broadcast_to(arr, (n, 7))
+    if arr.shape != (n, 7):
+        raise InputError(f"q_ref: expected shape (7,) or ({n}, 7), got {arr.shape}")
+    return arr
+
+
+def _into_canonical(geo: SRSGeometry, poses: np.ndarray):
+    """Step 0, the wrist centre (Shimizu sec. III-A): the pose's rotation and wrist centre in
+    the canonical frame, R_c = C^T R T_R^T and W = C^T (p - S) - R_c t_T."""
+    r = quat._to_matrix(poses[:, :4])
+    p = dq._translation(poses)
+    rc = geo.frame.T @ r @ geo.tool_rotation.T
+    w = (geo.frame.T @ (p - geo.shoulder)[..., None])[..., 0] - rc @ geo.tool_translation
+    return rc, w
+
+
+# --------------------------------------------------------------------------- #
+# The named closed-form steps
+# --------------------------------------------------------------------------- #
+def elbow_cosine(geo: SRSGeometry, w):
+    """Step 1, the elbow (Shimizu sec. III-A, Faria eq. for theta4): the triangle S, E, W gives
+    cos t4 = (|W|^2 - d_se^2 - d_ew^2) / (2 d_se d_ew), independent of psi."""
+    return (np.sum(w * w, -1) - geo.d_se ** 2 - geo.d_ew ** 2) / (2.0 * geo.d_se * geo.d_ew)
+
+
+def reference_shoulder(geo: SRSGeometry, w, t4):
+    """Step 2, the reference configuration (Shimizu sec. III-B, t3 = 0): R0 = Rz(a) Ry(b - phi)
+    with a = atan2(W_y, W_x) (a = 0 when W is on axis 1), b = atan2(hypot(W_x, W_y), W_z),
+    phi = atan2(v_x, v_z), v = v(t4); R0 v(t4) = W."""
+    rho = np.hypot(w[..., 0], w[..., 1])
+    a = np.where(rho > AXIS_TOL, np.arctan2(w[..., 1], w[..., 0]), 0.0)
+    b = np.arctan2(rho, w[..., 2])
+    v = _forearm(geo, t4)
+    return _rz(a) @ _ry(b - np.arctan2(v[..., 0], v[..., 2]))
+
+
+def arm_angle_matrices(w, r0):
+    """Step 3, the shoulder as a function of psi (Shimizu sec. III-C): with x = W/|W| and
+    R_psi = I + sin psi [x]x + (1 - cos psi) [x]x^2 (Rodrigues),
+    R_s = R_psi R0 = A_s sin psi + B_s cos psi + C_s,
+    A_s = [x]x R0, B_s = -[x]x^2 R0, C_s = x x^T R0."""
+    x = w / np.linalg.norm(w, axis=-1, keepdims=True)
+    k = _skew(x)
+    a = k @ r0
+    b = -(k @ (k @ r0))
+    c = x[..., :, None] * x[..., None, :] @ r0
+    return a, b, c
+
+
+def _zyz(m, sign, free):
+    """ZYZ Euler angles of m = Rz(a) Ry(b) Rz(c) for the branch sign(sin b) = ``sign``
+    (Shimizu sec. III-C, Faria sec. 3): b = atan2(sign hypot(m02, m12), m22),
+    a = atan2(sign m12, sign m02), and c from Rz(c) = Ry(b)^T Rz(a)^T m (equal to
+    atan2(sign m21, -sign m20), but consistent with the rounded a and b, which keeps the
+    product exact near sin b = 0). Where |sin b| < WRIST_SINGULAR only a + c (b = 0) or a - c
+    (b = pi) is fixed: a = ``free``. Returns a, b, c, singular."""
+    sb = np.hypot(m[..., 0, 2], m[..., 1, 2])
+    sing = sb < WRIST_SINGULAR
+    b = np.where(sing, np.where(m[..., 2, 2] >= 0, 0.0, np.pi), np.arctan2(sign * sb, m[..., 2, 2]))
+    a = np.where(sing, free, np.arctan2(sign * m[..., 1, 2], sign * m[..., 0, 2]))
+    rest = _t(_rz(a) @ _ry(b)) @ m
+    c = np.arctan2(rest[..., 1, 0], rest[..., 0, 0])
+    return a, b, c, sing
+
+
+def _free_angles(geo: SRSGeometry, q_ref, n):
+    """Canonical t1 and t5 used where the shoulder / wrist is aligned: s q_ref, else 0."""
+    if q_ref is None:
+        return np.zeros(n), np.zeros(n)
+    return geo.signs[0] * q_ref[:, 0], geo.signs[4] * q_ref[:, 4]
+
+
+def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
+    """The 8 branches (n, 8, 7) in robot joint values (wrapped), singular (n, 8), reason (n,)
+    (empty where the pose has solutions); unreachable poses give NaN rows here (the public
+    functions drop them)."""
+    n = len(w)
+    out = np.full((n, 8, 7), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    reason = np.full(n, "", dtype=object)
+    c4 = elbow_cosine(geo, w)
+    folded = np.linalg.norm(w, axis=-1) < CLASS_TOL
+    bad = np.abs(c4) > 1.0 + REACH_TOL
+    reason[bad] = REASON_REACH
+    reason[folded] = REASON_FOLDED
+    ok = ~(bad | folded)
+    if not np.any(ok):
+        return out, singular, reason
+    c4 = np.clip(c4[ok], -1.0, 1.0)
+    rc, w, psi = rc[ok], w[ok], psi[ok]
+    free1, free5 = _free_angles(geo, None if q_ref is None else q_ref[ok], int(ok.sum()))
+    sp, cp = np.sin(psi)[:, None, None], np.cos(psi)[:, None, None]
+    sub = np.full((len(w), 8, 7), np.nan)
+    sub_sing = np.zeros((len(w), 8), dtype=bool)
+    for i4, g4 in enumerate((1.0, -1.0)):
+        t4 = g4 * np.arccos(c4)
+        r0 = reference_shoulder(geo, w, t4)
+        a_s, b_s, c_s = arm_angle_matrices(w, r0)
+        rs = a_s * sp + b_s * cp + c_s                       # step 3: R_s(psi)
+        for i2, g2 in enumerate((1.0, -1.0)):
+            t1, t2, t3, sing_s = _zyz(rs, g2, free1)          # step 4: shoulder joints
+            # step 5: the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R (from the
+            # rounded shoulder angles, so that the wrist absorbs their rounding)
+            rw = _t(_rz(t1) @ _ry(t2) @ _rz(t3) @ _ry(t4)) @ rc
+            for i6, g6 in enumerate((1.0, -1.0)):
+                t5, t6, t7, sing_w = _zyz(rw, g6, free5)      # step 6: wrist joints
+                k = 4 * i2 + 2 * i4 + i6
+                theta = np.stack([t1, t2, t3, t4, t5, t6, t7], -1)
+                sub[:, k] = wrap_angle(theta * geo.signs)
+                sub_sing[:, k] = sing_s | sing_w | (np.abs(np.sin(t4)) < WRIST_SINGULAR)
+    out[ok] = sub
+    singular[ok] = sub_sing
+    return out, singular, reason
+
+
+def _finish(geo: SRSGeometry, rc, w, cand, singular, reason) -> SRSSolutions:
+    """Check every candidate by the canonical FK (ACCEPT_TOL), drop branches that repeat an
+    earlier one (within MERGE_TOL: the coinciding branches of the singular sets), and compact."""
+    n = len(w)
+    finite = np.all(np.isfinite(cand), -1)
+    r, p = _canonical_fk(geo, np.where(finite[..., None], cand, 0.0) * geo.signs)
+    dp = np.linalg.norm(p - w[:, None], axis=-1)
+    dr = np.linalg.norm(r - rc[:, None], axis=(-2, -1))   # Frobenius, ~ rotation angle * sqrt 2
+    good = finite & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
+    diff = np.abs(wrap_angle(cand[:, :, None, :] - cand[:, None, :, :]))
+    same = np.all(diff < MERGE_TOL, -1) & good[:, None, :]          # [i, j]: j valid and equal to i
+    earlier = np.tril(np.ones((8, 8), dtype=bool), -1)
+    dup = np.any(same & earlier[None], -1)
+    keep = good & ~dup
+    order = np.argsort(~keep, axis=1, kind="stable")
+    q = np.take_along_axis(cand, order[..., None], 1)
+    kept = np.take_along_axis(keep, order, 1)
+    q[~kept] = np.nan
+    branch = np.where(kept, order, -1)
+    sing = np.take_along_axis(singular, order, 1) & kept
+    count = kept.sum(1)
+    reason = reason.copy()
+    reason[(count == 0) & (reason == "")] = REASON_ACCEPT
+    return SRSSolutions(q, count, branch, sing, reason)
+
+
+def _single(res, single: bool):
+    return type(res)(*(x[0] for x in res)) if single else res
+
+
+# --------------------------------------------------------------------------- #
+# Public API
+# --------------------------------------------------------------------------- #
+def ik_psi(robot, poses, psi, *, q_ref=None) -> SRSSolutions:
+    """All solutions (up to 8: GC2, GC4, GC6) of poses (8,) or (n, 8) of the robot's end frame
+    at arm angle ``psi`` (a number or one per pose, rad; module docstring for its definition).
+
+    The steps: wrist centre (:func:`_into_canonical`), elbow (:func:`elbow_cosine`), reference
+    configuration (:func:`reference_shoulder`), shoulder as a function of psi
+    (:func:`arm_angle_matrices`), shoulder and wrist joints by ZYZ decomposition
+    (:func:`_zyz`). ``q_ref`` (7,) or (n, 7) supplies q1 (shoulder aligned) and q5 (wrist
+    aligned) on the singular sets, else they are 0. Joint values are wrapped to (-pi, pi];
+    limits are not applied (see :func:`psi_intervals`, :func:`within_limits`). Returns
+    :class:`SRSSolutions` (one pose: its rows without the leading axis)."""
+    geo = srs_geometry(robot)
+    P, single = _poses(poses)
+    n = len(P)
+    psi = _per_pose(psi, "psi", n)
+    qr = _q_ref(q_ref, n)
+    rc, w = _into_canonical(geo, P)
+    cand, singular, reason = _solve_psi(geo, rc, w, psi, qr)
+    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+
+
+def arm_angle(robot, q) -> np.ndarray:
+    """The arm angle psi (rad, in (-pi, pi]) of configurations q (7,) or (n, 7): with R_s the
+    configuration's shoulder rotation and R0 the reference configuration for its W and t4,
+    R_s R0^T is the rotation by psi about x = W/|W|; psi = atan2(x . (n x m), n . m) with
+    n = R0 e_y, m = R_s e_y (both perpendicular to x, since v(t4) lies in the x-z plane).
+    A configuration with its wrist centre at the shoulder has no arm angle (InputError)."""
+    geo = srs_geometry(robot)
+    arr = as_finite_array(q, "q", last_dim=7)
+    if arr.ndim > 2:
+        raise InputError(f"q: expected shape (7,) or (n, 7), got {arr.shape}")
+    theta = arr.reshape(-1, 7) * geo.signs
+    rs = _rz(theta[:, 0]) @ _ry(theta[:, 1]) @ _rz(theta[:, 2])
+    w = (rs @ _forearm(geo, theta[:, 3])[..., None])[..., 0]
+    norm = np.linalg.norm(w, axis=-1)
+    if np.any(norm < CLASS_TOL):
+        raise InputError(f"q: row {int(np.argmax(norm < CLASS_TOL))} has its wrist centre at the "
+                         "shoulder point; the arm angle is undefined there")
+    x = w / norm[:, None]
+    r0 = reference_shoulder(geo, w, theta[:, 3])
+    nn, mm = r0[:, :, 1], rs[:, :, 1]
+    psi = np.arctan2(np.sum(x * np.cross(nn, mm), -1), np.sum(nn * mm, -1))
+    out = wrap_angle(psi)
+    return out[0] if arr.ndim == 1 else out
+
+
+def within_limits(robot, q) -> np.ndarray:
+    """(...,) bool: every joint of q (..., 7) has a winding q + 2 pi k within its limits
+    (1e-12 rad slack); NaN rows are False."""
+    geo = srs_geometry(robot)
+    return _within(geo.limits, np.asarray(q, dtype=float))
+
+
+def _within(limits, q):
+    lo, hi = limits[:, 0], limits[:, 1]
+    with np.errstate(invalid="ignore"):
+        k = np.ceil((lo - 1e-12 - q) / (2 * math.pi))
+        k = np.where(np.isfinite(lo), k, 0.0)
+        qq = q + 2 * math.pi * k
+        ok = (qq >= lo - 1e-12) & (qq <= hi + 1e-12)
+    return np.all(ok, -1)
+
+
+# --------------------------------------------------------------------------- #
+# One joint given instead of psi
+# --------------------------------------------------------------------------- #
+JOINTS_GIVEN = (1, 3)
+
+
+def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
+    """All solutions (up to 8) of poses (8,) or (n, 8) with joint ``joint`` (1-based; 1 or 3)
+    held at ``value`` (rad, a number or one per pose): the remaining 6R problem in closed form.
+
+    Steps: the wrist centre and the elbow as in :func:`ik_psi`; then the shoulder carries
+    v(t4) onto W with the given joint (Paden-Kahan subproblem 2 about two of the axes z, y, z):
+    - q3 given: Rz(t1) Ry(t2) w = W with w = Rz(t3) v(t4): t2 = +-acos(W_z / r) - atan2(w_x, w_z),
+      r = hypot(w_x, w_z), then t1 = atan2(W_y, W_x) - atan2(u_y, u_x), u = Ry(t2) w (t1 from
+      q_ref or 0 where W lies on axis 1);
+    - q1 given: Ry(t2) Rz(t3) v = y with y = Rz(t1)^T W: sin t3 = y_y / v_x (two roots), then
+      t2 = atan2(v_z, cos t3 v_x) - atan2(y_z, y_x) (t3 from q_ref or 0 where the elbow is
+      stretched, v_x = 0);
+    and the wrist joints by the ZYZ decomposition of (R_s Ry(t4))^T R. Branch id
+    k = 4 i + 2 i4 + i6, i the index of the subproblem's root (+ first)."""
+    geo = srs_geometry(robot)
+    if isinstance(joint, bool) or not isinstance(joint, (int, np.integer)) or joint not in JOINTS_GIVEN:
+        raise InputError(f"joint: ik_joint solves with joint 1 or 3 given (1-based), got {joint!r}")
+    P, single = _poses(poses)
+    n = len(P)
+    val = _per_pose(value, "value", n)
+    qr = _q_ref(q_ref, n)
+    rc, w = _into_canonical(geo, P)
+    cand = np.full((n, 8, 7), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    reason = np.full(n, "", dtype=object)
+    c4 = elbow_cosine(geo, w)
+    bad = np.abs(c4) > 1.0 + REACH_TOL
+    reason[bad] = REASON_REACH
+    c4 = np.clip(c4, -1.0, 1.0)
+    tg = geo.signs[joint - 1] * val
+    free1, free5 = _free_angles(geo, qr, n)
+    free3 = np.zeros(n) if qr is None else geo.signs[2] * qr[:, 2]
+    any_root = np.zeros(n, dtype=bool)
+    for i4, g4 in enumerate((1.0, -1.0)):
+        t4 = g4 * np.arccos(c4)
+        v = _forearm(geo, t4)
+        if joint == 3:
+            t3 = tg
+            wv = (_rz(t3) @ v[..., None])[..., 0]
+            r = np.hypot(wv[:, 0], wv[:, 2])
+            cz = w[:, 2] / np.where(r > 0, r, 1.0)
+            reach = (np.abs(cz) <= 1.0 + REACH_TOL) & (r > 0)
+            phi = np.arctan2(wv[:, 0], wv[:, 2])
+            roots = [np.arccos(np.clip(cz, -1, 1)) - phi, -np.arccos(np.clip(cz, -1, 1)) - phi]
+        else:
+            t1 = tg
+            yv = (_t(_rz(t1)) @ w[..., None])[..., 0]
+            stretched = np.abs(v[:, 0]) < WRIST_SINGULAR * max(geo.d_ew, 1.0)
+            s3 = yv[:, 1] / np.where(stretched, 1.0, v[:, 0])
+            reach = np.where(stretched, np.abs(yv[:, 1]) <= REACH_TOL, np.abs(s3) <= 1.0 + REACH_TOL)
+            a3 = np.arcsin(np.clip(s3, -1, 1))
+            roots = [np.where(stretched, free3, a3), np.where(stretched, free3, math.pi - a3)]
+        for i, root in enumerate(roots):
+            if joint == 3:
+                t2 = root
+                u = (_ry(t2) @ wv[..., None])[..., 0]
+                on_axis = np.hypot(u[:, 0], u[:, 1]) < AXIS_TOL
+                t1 = np.where(on_axis, free1, np.arctan2(w[:, 1], w[:, 0]) - np.arctan2(u[:, 1], u[:, 0]))
+                sing_s = on_axis
+            else:
+                t3 = root
+                t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
+                sing_s = stretched
+            rs = _rz(t1) @ _ry(t2) @ _rz(t3)
+            rw = _t(rs @ _ry(t4)) @ rc
+            for i6, g6 in enumerate((1.0, -1.0)):
+                t5, t6, t7, sing_w = _zyz(rw, g6, free5)
+                k = 4 * i + 2 * i4 + i6
+                theta = np.stack([t1, t2, t3, t4, t5, t6, t7], -1)
+                rows = reach & ~bad
+                cand[rows, k] = wrap_angle(theta * geo.signs)[rows]
+                singular[:, k] = rows & (sing_s | sing_w)
+            any_root |= reach & ~bad
+    reason[~any_root & (reason == "")] = REASON_JOINT
+    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+
+
+# --------------------------------------------------------------------------- #
+# Feasible arm angles under the joint limits (Shimizu sec. IV)
+# --------------------------------------------------------------------------- #
+def _trig_roots(a, b, c) -> list[float]:
+    """Roots psi in (-pi, pi] of a sin psi + b cos psi + c = 0: with r = hypot(a, b),
+    r cos(psi - atan2(a, b)) = -c."""
+    r = math.hypot(a, b)
+    if r < 1e-14 or abs(c) > r:
+        return []
+    base = math.atan2(a, b)
+    d = math.acos(max(-1.0, min(1.0, -c / r)))
+    return [float(wrap_angle(base + d)), float(wrap_angle(base - d))]
+
+
+def _breakpoints(geo: SRSGeometry, coeffs, limits) -> list[float]:
+    """Arm angles where a joint of one elbow branch can meet a limit or jump.
+
+    ``coeffs`` maps (matrix index, row, col) to (a, b, c) of that entry as a sin + b cos + c.
+    Tangent-type joints (numerator, denominator entries): roots of n cos L - d sin L and of n
+    and d; cosine-type: roots of m - cos L."""
+    out = []
+    tangent = {0: ((0, 1, 2), (0, 0, 2)), 2: ((0, 2, 1), (0, 2, 0)),
+               4: ((1, 1, 2), (1, 0, 2)), 6: ((1, 2, 1), (1, 2, 0))}
+    cosine = {1: (0, 2, 2), 5: (1, 2, 2)}
+    for j, (num, den) in tangent.items():
+        an, ad = np.array(coeffs[num]), np.array(coeffs[den])
+        out += _trig_roots(*an) + _trig_roots(*ad)
+        for lim in limits[j]:
+            if np.isfinite(lim):
+                L = geo.signs[j] * lim
+                out += _trig_roots(*(an * math.cos(L) - ad * math.sin(L)))
+    for j, ent in cosine.items():
+        a = np.array(coeffs[ent])
+        for lim in limits[j]:
+            if np.isfinite(lim):
+                out += _trig_roots(a[0], a[1], a[2] - math.cos(lim))
+    return out
+
+
+def psi_intervals(robot, pose) -> list[np.ndarray]:
+    """The arm angles at which each branch k (0-7, as in :func:`ik_psi`) of one pose (8,) has
+    every joint within its limits: a list of 8 arrays (m, 2) of closed intervals [lo, hi] in
+    [-pi, pi], sorted (an interval across pi appears as [b, pi] and [-pi, a]); empty arrays for
+    a branch (or a pose) with no feasible arm angle.
+
+    The boundaries are the closed-form roots of the module docstring ("Feasible intervals");
+    each arc between consecutive roots is feasible or not as a whole, decided at its midpoint by
+    :func:`ik_psi`'s closed form."""
+    geo = srs_geometry(robot)
+    P, single = _poses(pose)
+    if not single:
+        raise InputError(f"pose: psi_intervals takes one pose (8,), got shape {P.shape}")
+    rc, w = _into_canonical(geo, P)
+    c4 = elbow_cosine(geo, w)[0]
+    empty = [np.zeros((0, 2)) for _ in range(8)]
+    if abs(c4) > 1.0 + REACH_TOL or np.linalg.norm(w) < CLASS_TOL:
+        return empty
+    c4 = min(1.0, max(-1.0, c4))
+    points = [-math.pi, math.pi]
+    for g4 in (1.0, -1.0):
+        t4 = np.array([g4 * math.acos(c4)])
+        r0 = reference_shoulder(geo, w, t4)
+        a_s, b_s, c_s = (m[0] for m in arm_angle_matrices(w, r0))
+        r4 = _ry(t4)[0]
+        a_w, b_w, c_w = (_t(m @ r4) @ rc[0] for m in (a_s, b_s, c_s))
+        coeffs = {}
+        for mi, (a, b, c) in enumerate(((a_s, b_s, c_s), (a_w, b_w, c_w))):
+            for r in range(3):
+                for cc in range(3):
+                    coeffs[(mi, r, cc)] = (a[r, cc], b[r, cc], c[r, cc])
+        points += _breakpoints(geo, coeffs, geo.limits)
+    pts = np.unique(np.clip(points, -math.pi, math.pi))
+    pts = pts[np.concatenate([[True], np.diff(pts) > 1e-13])]
+    mids = 0.5 * (pts[:-1] + pts[1:])
+    m = len(mids)
+    cand, _, _ = _solve_psi(geo, np.repeat(rc, m, 0), np.repeat(w, m, 0), mids, None)
+    feasible = _within(geo.limits, cand)            # (m, 8); NaN rows are False
+    out = []
+    for k in range(8):
+        iv = []
+        for i in np.flatnonzero(feasible[:, k]):
+            lo, hi = float(pts[i]), float(pts[i + 1])
+            if iv and abs(iv[-1][1] - lo) <= 1e-13:
+                iv[-1][1] = hi
+            else:
+                iv.append([lo, hi])
+        out.append(np.array(iv, dtype=float).reshape(-1, 2))
+    return out
+
+
+def ik_sweep(robot, poses, n: int) -> SRSSweep:
+    """``n`` arm angles per pose spread evenly over the union of the branches' feasible
+    intervals (:func:`psi_intervals`; the midpoints of n equal parts of its total length), and
+    at each the solutions within the joint limits. Poses without a feasible arm angle get psi =
+    NaN and count 0."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InputError(f"n: expected a positive integer, got {n!r}")
+    geo = srs_geometry(robot)
+    P, single = _poses(poses)
+    m = len(P)
+    psi = np.full((m, n), np.nan)
+    for i in range(m):
+        iv = np.concatenate(psi_intervals(robot, P[i]))
+        if len(iv) == 0:
+            continue
+        iv = iv[np.argsort(iv[:, 0])]
+        merged = [list(iv[0])]
+        for lo, hi in iv[1:]:
+            if lo <= merged[-1][1] + 1e-13:
+                merged[-1][1] = max(merged[-1][1], hi)
+            else:
+                merged.append([lo, hi])
+        merged = np.array(merged)
+        lengths = merged[:, 1] - merged[:, 0]
+        total = lengths.sum()
+        s = (np.arange(n) + 0.5) / n * total
+        edges = np.concatenate([[0.0], np.cumsum(lengths)])
+        j = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(merged) - 1)
+        psi[i] = merged[j, 0] + (s - edges[j])
+    q = np.full((m, n, 8, 7), np.nan)
+    count = np.zeros((m, n), dtype=int)
+    branch = np.full((m, n, 8), -1)
+    have = np.isfinite(psi[:, 0])
+    if np.any(have):
+        rows = np.repeat(np.flatnonzero(have), n)
+        res = ik_psi(robot, P[rows], psi[have].reshape(-1))
+        inside = _within(geo.limits, res.q)
+        order = np.argsort(~inside, axis=1, kind="stable")
+        qq = np.take_along_axis(res.q, order[..., None], 1)
+        kept = np.take_along_axis(inside, order, 1)
+        qq[~kept] = np.nan
+        q[have] = qq.reshape(-1, n, 8, 7)
+        count[have] = kept.sum(1).reshape(-1, n)
+        branch[have] = np.where(kept, np.take_along_axis(res.branch, order, 1), -1).reshape(-1, n, 8)
+    out = SRSSweep(psi, q, count, branch)
+    return type(out)(*(x[0] for x in out)) if single else out
