@@ -1,0 +1,527 @@
+"""Closed-form inverse kinematics of the Franka Emika Panda class with q7 as the free parameter.
+
+The class: the Panda / FR3 chain, Franka's modified-DH table (Craig, T_i = Rx(alpha_(i-1))
+Tx(a_(i-1)) Rz(theta_i) Tz(d_i)) with seven lengths, the **canonical chain**
+(:func:`canonical_description`):
+
+=====  ============  ===========  ===========
+joint  alpha_(i-1)   a_(i-1)      d_i
+=====  ============  ===========  ===========
+1      0             0            d1
+2      -pi/2         0            0
+3      pi/2          0            d3
+4      pi/2          a3           0
+5      -pi/2         a4           d5
+6      pi/2          0            0
+7      pi/2          a6           0
+end    0             0            d7 (flange)
+=====  ============  ===========  ===========
+
+Axes 1, 2, 3 meet in the shoulder S = (0, 0, d1) (a spherical shoulder); the elbow offsets a3,
+a4 and the wrist offset a6 make the arm non-spherical at the wrist, so a pose leaves a
+one-parameter self-motion. With q7 given the rest is in closed form, with up to 8 solutions.
+A robot of the class is related to the canonical chain by constant transforms,
+
+    FK_robot(q) = B  FK_canonical(q)  T,
+
+found by :func:`panda_geometry` from the robot's axes at the zero pose (same joint values,
+same zero pose; another base frame or end frame, such as a hand's TCP, goes into B and T).
+
+The construction (our own; it follows the geometry of He & Liu, "Analytical inverse
+kinematics for Franka Emika Panda - a geometric solver for 7-DOF manipulators with
+unconventional design", ICCCR 2021: fix q7, locate the point O6, the elbow angle from the
+shoulder-O6 distance, then q6, q5 and the shoulder), as named steps on the canonical flange
+pose (R7, p):
+
+1. ``frame6``: O7 = p - d7 z7; R6 = R7 Rz(-q7) Rx(-pi/2) (eq. F7: T7 = T6 Rx(pi/2) Tx(a6)
+   Rz(q7)); O6 = O7 - a6 x6. O6 is also the origin of frame 5 (a5 = d6 = 0).
+2. ``shoulder_in_6``: v = R6^T (S - O6), the shoulder in frame 6.
+3. ``elbow`` (q4): the shoulder in frame 5 seen from the arm side is (X c5, -X s5, Z) with
+   X = -(a3 c4 + d3 s4 + a4), Z = a3 s4 - d3 c4 - d5 (eq. E1), so |v|^2 = X^2 + Z^2 gives
+   A c4 + B s4 = K, A = a3 a4 + d3 d5, B = a4 d3 - a3 d5,
+   K = (|v|^2 - a3^2 - d3^2 - a4^2 - d5^2) / 2 (eq. E2); q4 = atan2(B, A) +- acos(K / hypot(A, B)).
+   |K| > hypot(A, B): O6 is outside the elbow's range (unreachable).
+4. ``wrist6`` (q6): the same point from the wrist side is Rx(pi/2) Rz(q6) v =
+   (vx c6 - vy s6, -vz, vx s6 + vy c6) (eq. W1); its third row, vx s6 + vy c6 = Z(q4)
+   (eq. W2), gives q6 = atan2(vx, vy) +- acos(Z / hypot(vx, vy)).
+5. ``wrist5`` (q5): rows 1 and 2 of E1 = W1: X c5 = vx c6 - vy s6, X s5 = vz (eq. W3),
+   q5 = atan2(sgn(X) vz, sgn(X) (vx c6 - vy s6)).
+6. ``shoulder`` (q1, q2, q3): R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
+   (eq. S1), and R3 = Rz(q1) Ry(q2) Rz(q3) (eq. S2: Rx(-pi/2) Rz(q2) Rx(pi/2) = Ry(q2)), a ZYZ
+   Euler decomposition: q2 = atan2(+-hypot(M13, M23), M33), q1 = atan2(+-M23, +-M13),
+   q3 = atan2(+-M32, -+M31).
+
+Branch id b = 4 i4 + 2 i6 + i2, with i = 0 for the + root and 1 for the - root of steps 3,
+4 and 6. Singular sets (the construction's, each a real singularity of the arm with q7 fixed):
+
+* ``elbow stretched / folded``: |K| = hypot(A, B), the two q4 roots coincide (q4 = atan2(B, A)
+  or + pi); the pairs merge, 4 solutions;
+* ``S on axis 5`` (X = 0: q4 = 0 or q4 = 2 atan2(d3, a3) on the Panda): axes 3 and 5 are one
+  line through S, q5 is free and q3 absorbs it; q5 is taken from ``q_ref`` (else 0), the
+  solution is marked singular;
+* ``S on axis 6`` (vx = vy = 0, needs Z(q4) = 0; impossible on the Panda, |Z| >= d5 - hypot(a3, d3)
+  > 0): q6 free, taken from ``q_ref`` (else 0), marked singular;
+* ``q6 double root``: |Z| = hypot(vx, vy), i.e. c5 = 0 (q5 = +-pi/2): the two q6 roots merge;
+* ``axes 1 and 3 aligned`` (sin q2 = 0): only q1 + q3 (q2 = 0) or q1 - q3 (q2 = pi) is
+  determined; q1 is taken from ``q_ref`` (else 0), marked singular.
+
+The wrist centre on axis 1 (O6 on the z axis) is not singular here: q1 comes from the
+orientation of frame 3 (step 6), not from the position of O6 as in He & Liu's q1 step.
+
+Every candidate is checked by the reference FK (:func:`derive.kinematics.fk.fk`) and dropped
+beyond :data:`~derive.ik.tolerances.ACCEPT_TOL`; near-duplicates (:data:`MERGE_TOL` in every joint)
+are merged. Returned angles q1..q6 are wrapped to (-pi, pi]; q7 is the given value.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import memo
+from derive.errors import DeriveError, InputError, as_finite_array
+from derive.ik import select
+from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL
+from derive.kinematics.fk import _pose_error, fk
+from derive.kinematics.pose import as_pose_batch
+from derive.model.geometry import numeric_chain
+from derive.model.robot import load_robot, robot_from_dict
+
+#: Geometric properties of the class must hold within this (rad for directions, m for lengths).
+CLASS_TOL = 1e-10
+#: FK_robot = B FK_canonical T must hold within this (m, rad) on random configurations.
+MAP_TOL = 1e-10
+#: A free joint (q5 at X = 0, q6 at S on axis 6, q1 at sin q2 = 0) is declared below this (m, or
+#: |sin q2|).
+SINGULAR_TOL = 1e-11
+
+PARAMETERS = ("d1", "d3", "a3", "a4", "d5", "a6", "d7")
+
+TWO_PI = 2.0 * math.pi
+
+#: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
+BRANCHES = 8
+
+REASON_OK = ""
+REASON_ELBOW = ("unreachable: the distance from the shoulder to the point O6 (fixed by the pose "
+                "and q7) is outside the range the elbow can span")
+REASON_WRIST = ("unreachable for this q7: no q6 turns the wrist so that the shoulder lies at the "
+                "height Z(q4) along axis 5 that the elbow needs")
+REASON_NO_CANDIDATE = "unreachable: no candidate reproduces the pose"
+REASON_FREE_Q6 = ("unreachable for this q7: the shoulder lies on axis 6 but not at the height "
+                  "the elbow needs")
+
+# reason codes per candidate
+_OK, _CODE_ELBOW, _CODE_WRIST = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class PandaGeometry:
+    """The canonical lengths (m) of a Panda-class arm and FK_robot(q) = base FK_canonical(q) tool."""
+
+    robot: str
+    d1: float
+    d3: float
+    a3: float
+    a4: float
+    d5: float
+    a6: float
+    d7: float
+    base: np.ndarray        # (8,) unit dual quaternion B
+    tool: np.ndarray        # (8,) unit dual quaternion T
+    q7_limits: tuple        # (lower, upper) of joint 7, +-inf without limits
+    error: float            # largest mismatch of the relation on the check configurations
+
+    @property
+    def values(self) -> dict:
+        return {k: getattr(self, k) for k in PARAMETERS}
+
+    def into_canonical(self, poses: np.ndarray) -> np.ndarray:
+        """Poses (n, 8) of the robot's end frame as flange poses of the canonical chain: B^-1 P T^-1."""
+        return dq._mul(dq._mul(dq.conj_quaternion(self.base)[None], poses),
+                       dq.conj_quaternion(self.tool)[None])
+
+
+class PandaSolutions(NamedTuple):
+    """Solutions of :func:`ik_q7`, per pose i:
+
+    ``q`` (n, 8, 7): the solutions, rows ``0 .. counts[i] - 1`` finite, the rest NaN;
+    ``counts`` (n,); ``branches`` (n, 8): the branch id 4 i4 + 2 i6 + i2 of each solution
+    (module docstring), -1 in the padding; ``singular`` (n, 8): the solution has a free joint
+    (q1, q5 or q6) set from ``q_ref``; ``reasons``: a list of n strings, "" where there is a
+    solution, else why not."""
+
+    q: np.ndarray
+    counts: np.ndarray
+    branches: np.ndarray
+    singular: np.ndarray
+    reasons: list
+
+
+def canonical_description(values: dict, name: str = "panda-class") -> dict:
+    """The canonical chain (module docstring) as a robot description with the given lengths (m)."""
+    rows = [(0, 0, "d1"), ("-pi/2", 0, 0), ("pi/2", 0, "d3"), ("pi/2", "a3", 0),
+            ("-pi/2", "a4", "d5"), ("pi/2", 0, 0), ("pi/2", "a6", 0)]
+    return {
+        "name": name,
+        "title": "Franka Panda class, canonical chain",
+        "source": "Franka's modified DH table with lengths d1, d3, a3, a4, d5, a6, d7",
+        "convention": "modified_dh",
+        "parameters": {k: float(values[k]) for k in PARAMETERS},
+        "joints": [{"name": f"j{i + 1}", "alpha": al, "a": a, "theta": 0, "d": d}
+                   for i, (al, a, d) in enumerate(rows)],
+        "ends": {"flange": {"parent": "j7", "translation": [0, 0, "d7"]}},
+    }
+
+
+def panda_geometry(robot) -> PandaGeometry:
+    """The canonical form of a Panda-class arm (module docstring), or InputError naming what
+    differs; cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("panda-geometry", robot.id, lambda: _panda_geometry(robot))
+
+
+def is_panda_class(robot) -> bool:
+    try:
+        panda_geometry(robot)
+        return True
+    except DeriveError:
+        return False
+
+
+#: Directions of the axes at the zero pose in the canonical base frame (x, y, z).
+_AXES = np.array([[0, 0, 1], [0, 1, 0], [0, 0, 1], [0, -1, 0], [0, 0, 1], [0, -1, 0], [0, 0, -1]], float)
+
+
+def _panda_geometry(robot) -> PandaGeometry:
+    name = robot.name
+
+    def fail(why):
+        raise InputError(f"{name}: not of the Franka Panda class (derive.ik.panda): {why}")
+
+    if robot.dof != 7:
+        fail(f"{robot.dof} joints, the class has 7")
+    try:
+        chain = numeric_chain(robot)
+    except DeriveError as exc:
+        fail(str(exc))
+    if chain.n != 7 or any(t != "revolute" for t in chain.types) or chain.variables != tuple(range(7)):
+        fail("the path to the end is not 7 revolute joints driven by q1 .. q7 in order")
+    h = chain.axes / np.linalg.norm(chain.axes, axis=1, keepdims=True)
+    pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:7]
+    tol = CLASS_TOL
+    if abs(h[0] @ h[1]) > tol:
+        fail("axis 2 is not perpendicular to axis 1")
+    # canonical base frame: z = axis 1, y = axis 2 (as the joints turn), origin on axis 1 at the
+    # foot of the robot's base origin
+    zc, yc = h[0], h[1]
+    xc = np.cross(yc, zc)
+    frame = np.column_stack([xc, yc, zc])
+    origin = pts[0] - (pts[0] @ zc) * zc
+    loc_h = h @ frame
+    loc_p = (pts - origin) @ frame
+    for i in range(2, 7):
+        if np.abs(loc_h[i] - _AXES[i]).max() > tol:
+            fail(f"at the zero pose axis {i + 1} is {np.round(loc_h[i], 6).tolist()} in the frame "
+                 f"of axes 1 and 2 (x = y2 x z1, y = y2, z = z1); the class has {_AXES[i].tolist()}"
+                 " (Franka's zero pose, no joint offsets or reversed joints)")
+
+    def across(i, k):
+        """coordinate k of axis i (constant along the axis, which is along another coordinate)"""
+        return float(loc_p[i][k])
+
+    # axis 2 (along y) meets axis 1: x = 0; axis 3 (along z) passes through S: x = y = 0
+    if abs(across(1, 0)) > tol:
+        fail("axis 2 does not meet axis 1")
+    d1 = across(1, 2)
+    if abs(across(2, 0)) > tol or abs(across(2, 1)) > tol:
+        fail("axis 3 does not pass through the point where axes 1 and 2 meet (no spherical shoulder)")
+    a3, z4 = across(3, 0), across(3, 2)
+    d3 = z4 - d1
+    if abs(across(4, 1)) > tol:
+        fail("axis 5 is not in the plane of axes 1 and 4 at the zero pose")
+    x5 = across(4, 0)
+    a4 = x5 - a3
+    if abs(across(5, 0) - x5) > tol:
+        fail("axes 5 and 6 do not meet")
+    d5 = across(5, 2) - z4
+    if abs(across(6, 1)) > tol:
+        fail("axis 7 is not in the plane of axes 1 and 4 at the zero pose")
+    a6 = across(6, 0) - x5
+    # the canonical flange: on axis 7 at the height of the robot's end frame at zero
+    pose0 = fk(robot, np.zeros(7))
+    end0 = (dq._translation(pose0[None])[0] - origin) @ frame
+    d7 = across(5, 2) - float(end0[2])
+    vals = {k: round(v, 12) + 0.0 for k, v in zip(PARAMETERS, (d1, d3, a3, a4, d5, a6, d7))}
+    if math.hypot(vals["a3"] * vals["a4"] + vals["d3"] * vals["d5"],
+                  vals["a4"] * vals["d3"] - vals["a3"] * vals["d5"]) < 1e-9:
+        fail("the elbow cannot change the shoulder-wrist distance (a3 = d3 = 0 or a4 = d5 = 0)")
+    canon = robot_from_dict(canonical_description(vals, f"{name}-canonical"))
+    base = _tidy(dq.from_rt(quat.from_matrix(frame), origin))
+    tool = _tidy(dq._mul(dq.conj_quaternion(fk(canon, np.zeros(7)))[None],
+                         dq._mul(dq.conj_quaternion(base)[None], pose0[None]))[0])
+    rng = np.random.default_rng(17)
+    q = rng.uniform(-math.pi, math.pi, size=(32, 7))
+    via = dq._mul(dq._mul(np.broadcast_to(base, (32, 8)), fk(canon, q)), np.broadcast_to(tool, (32, 8)))
+    dp, dr = _pose_error(fk(robot, q), via)
+    err = float(max(dp.max(), dr.max()))
+    if not err <= MAP_TOL:
+        fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
+    lim = robot.limits[6]
+    return PandaGeometry(name, **vals, base=base, tool=tool, q7_limits=(float(lim[0]), float(lim[1])),
+                         error=err)
+
+
+def _tidy(d: np.ndarray) -> np.ndarray:
+    """A unit dual quaternion with rotation and translation rounded to 1e-13 (noise of the
+    construction), the real part's first non-zero entry positive."""
+    r, t = dq.to_rt(d)
+    r = np.round(r, 13)
+    r = r / np.linalg.norm(r)
+    lead = r[np.argmax(np.abs(r) > 0)]
+    return dq.from_rt(r if lead > 0 else -r, np.round(t, 13) + 0.0)
+
+
+# --------------------------------------------------------------------------- #
+# The named steps (module docstring), vectorised over poses
+# --------------------------------------------------------------------------- #
+def _rz(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+#: Rx(pi/2) and Rx(-pi/2)
+_RX_P = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+_RX_M = _RX_P.T
+
+
+def frame6(geo: PandaGeometry, r7, p, q7):
+    """Step 1 (eq. F7): rotation R6 (n, 3, 3) and origin O6 (n, 3) from the canonical flange
+    pose (R7, p) and q7."""
+    o7 = p - geo.d7 * r7[:, :, 2]
+    r6 = r7 @ _rz(-q7) @ _RX_M
+    return r6, o7 - geo.a6 * r6[:, :, 0]
+
+
+def shoulder_in_6(geo: PandaGeometry, r6, o6):
+    """Step 2: v = R6^T (S - O6) (n, 3), S = (0, 0, d1)."""
+    s = np.array([0.0, 0.0, geo.d1])
+    return np.einsum("nji,nj->ni", r6, s - o6)
+
+
+def elbow(geo: PandaGeometry, v):
+    """Step 3 (eq. E2): the two roots q4 (n, 2) of A c4 + B s4 = K and the unreachable flag (n,)."""
+    a = geo.a3 * geo.a4 + geo.d3 * geo.d5
+    b = geo.a4 * geo.d3 - geo.a3 * geo.d5
+    k = 0.5 * (np.einsum("ni,ni->n", v, v) - geo.a3 ** 2 - geo.d3 ** 2 - geo.a4 ** 2 - geo.d5 ** 2)
+    r = math.hypot(a, b)
+    c = k / r
+    bad = np.abs(c) > 1.0 + REACH_TOL
+    ang = np.arccos(np.clip(c, -1.0, 1.0))
+    phi = math.atan2(b, a)
+    return np.stack([phi + ang, phi - ang], -1), bad
+
+
+def xz(geo: PandaGeometry, q4):
+    """X(q4), Z(q4) of eq. E1: the shoulder in frame 5 is (X c5, -X s5, Z)."""
+    c4, s4 = np.cos(q4), np.sin(q4)
+    return -(geo.a3 * c4 + geo.d3 * s4 + geo.a4), geo.a3 * s4 - geo.d3 * c4 - geo.d5
+
+
+def wrist6(v, z, q6_free):
+    """Step 4 (eq. W2): the two roots q6 (n, 2) of vx s6 + vy c6 = Z, the unreachable flag (n,)
+    and the singular flag (n,) (S on axis 6: q6 free, ``q6_free`` where |Z| allows it)."""
+    rho = np.hypot(v[:, 0], v[:, 1])
+    free = rho < SINGULAR_TOL
+    c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
+    bad = np.where(free, np.abs(z) > SINGULAR_TOL, np.abs(c) > 1.0 + REACH_TOL)
+    ang = np.arccos(np.clip(c, -1.0, 1.0))
+    psi = np.arctan2(v[:, 0], v[:, 1])
+    roots = np.stack([psi + ang, psi - ang], -1)
+    roots = np.where(free[:, None], q6_free[:, None], roots)
+    return roots, bad, free
+
+
+def wrist5(v, x, q6, q5_free):
+    """Step 5 (eq. W3): q5 from X c5 = vx c6 - vy s6, X s5 = vz; where |X| < SINGULAR_TOL
+    (S on axis 5) q5 is free: ``q5_free``. Returns q5 (n,) and the singular flag (n,)."""
+    free = np.abs(x) < SINGULAR_TOL
+    sg = np.where(x < 0, -1.0, 1.0)
+    q5 = np.arctan2(sg * v[:, 2], sg * (v[:, 0] * np.cos(q6) - v[:, 1] * np.sin(q6)))
+    return np.where(free, q5_free, q5), free
+
+
+def frame3(r6, q4, q5, q6):
+    """Step 6, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)."""
+    return r6 @ _rz(-q6) @ _RX_M @ _rz(-q5) @ _RX_P @ _rz(-q4) @ _RX_M
+
+
+def shoulder(m, sign2, q1_free):
+    """Step 6, eq. S2: R3 = Rz(q1) Ry(q2) Rz(q3) (ZYZ) with sin q2 of sign ``sign2``; where
+    |sin q2| < SINGULAR_TOL q1 is ``q1_free`` and q3 takes the rest. Returns q1, q2, q3, singular."""
+    s2abs = np.hypot(m[:, 0, 2], m[:, 1, 2])
+    free = s2abs < SINGULAR_TOL
+    q2 = np.where(free, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), np.arctan2(sign2 * s2abs, m[:, 2, 2]))
+    q1 = np.where(free, q1_free, np.arctan2(sign2 * m[:, 1, 2], sign2 * m[:, 0, 2]))
+    # Rz(q3) = Ry(q2)^T Rz(q1)^T R3: exact also where q1 was chosen
+    c1, s1, c2, s2 = np.cos(q1), np.sin(q1), np.cos(q2), np.sin(q2)
+    # rows 1, 2 of Rz(q1)^T R3, then row 1 of Ry(q2)^T applied: x-row = c2 (row1) - s2 (row3)
+    row_x = c2[:, None] * (c1[:, None] * m[:, 0] + s1[:, None] * m[:, 1]) - s2[:, None] * m[:, 2]
+    row_y = -s1[:, None] * m[:, 0] + c1[:, None] * m[:, 1]
+    q3 = np.arctan2(row_y[:, 0], row_x[:, 0])
+    return q1, q2, q3, free
+
+
+def candidates(geo: PandaGeometry, poses: np.ndarray, q7: np.ndarray, q_free: np.ndarray):
+    """All 8 branches for n poses of the robot's end frame: (q (n, 8, 7), singular (n, 8),
+    codes (n, 8): 0 ok, 1 elbow unreachable, 2 wrist unreachable). Not yet checked by FK;
+    unreachable branches are NaN. ``q_free`` (n, 7): values of the free joints at singular sets."""
+    n = poses.shape[0]
+    c = geo.into_canonical(poses)
+    r7 = quat._to_matrix(c[:, :4])
+    p = dq._translation(c)
+    r6, o6 = frame6(geo, r7, p, q7)
+    v = shoulder_in_6(geo, r6, o6)
+    q4s, bad4 = elbow(geo, v)
+    out = np.full((n, BRANCHES, 7), np.nan)
+    singular = np.zeros((n, BRANCHES), dtype=bool)
+    code = np.zeros((n, BRANCHES), dtype=np.int8)
+    for i4 in range(2):
+        q4 = q4s[:, i4]
+        x, z = xz(geo, q4)
+        q6s, bad6, free6 = wrist6(v, z, q_free[:, 5])
+        for i6 in range(2):
+            q6 = q6s[:, i6]
+            q5, free5 = wrist5(v, x, q6, q_free[:, 4])
+            m = frame3(r6, q4, q5, q6)
+            for i2, sign2 in enumerate((1.0, -1.0)):
+                q1, q2, q3, free1 = shoulder(m, sign2, q_free[:, 0])
+                b = 4 * i4 + 2 * i6 + i2
+                out[:, b] = np.stack([q1, q2, q3, q4, q5, q6, q7], -1)
+                singular[:, b] = free1 | free5 | free6
+                code[:, b] = np.where(bad4, _CODE_ELBOW, np.where(bad6, _CODE_WRIST, _OK))
+    out[..., :6] = wrap_angle(out[..., :6])
+    out[code > 0] = np.nan
+    return out, singular, code
+
+
+# --------------------------------------------------------------------------- #
+# Public API
+# --------------------------------------------------------------------------- #
+def q7_interval(robot) -> tuple[float, float]:
+    """(lower, upper) limits of joint 7 (rad), the range of the free parameter."""
+    return panda_geometry(load_robot(robot)).q7_limits
+
+
+def _check_q7(q7, n: int) -> np.ndarray:
+    arr = as_finite_array(q7, "q7", ndim_min=0)
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.ndim != 1 or arr.shape[0] != n:
+        raise InputError(f"q7: expected a number or an array of shape ({n},) (one per pose), got "
+                         f"shape {arr.shape}")
+    return arr.copy()
+
+
+def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 20000) -> PandaSolutions:
+    """Every closed-form IK solution of a Panda-class arm with joint 7 at ``q7`` (module docstring).
+
+    ``poses``: unit dual quaternions (8,) / (n, 8) or matrices (4, 4) / (n, 4, 4) of the robot's
+    end frame; ``q7``: a number or (n,) array (rad), kept as given in the solutions; ``q_ref``
+    (7,) or (n, 7): its q1, q5, q6 are used where that joint is free (singular sets; default 0).
+    Up to 8 solutions per pose, not filtered by joint limits (:func:`within_limits`), q1..q6
+    wrapped to (-pi, pi]. ``check``: keep only candidates whose reference FK reproduces the
+    pose within ACCEPT_TOL (most of the run time; without it every branch that the steps
+    reach is returned, for callers that check themselves). Returns :class:`PandaSolutions` (q (n, 8, 7), counts, branches,
+    singular, reasons); one pose (8,) gives n = 1.
+    """
+    robot = load_robot(robot)
+    geo = panda_geometry(robot)
+    poses, _ = as_pose_batch(poses)
+    n = poses.shape[0]
+    q7 = _check_q7(q7, n)
+    q_free = np.zeros((n, 7))
+    if q_ref is not None:
+        qr = as_finite_array(q_ref, "q_ref", last_dim=7)
+        if qr.ndim > 2 or (qr.ndim == 2 and qr.shape[0] not in (1, n)):
+            raise InputError(f"q_ref: expected shape (7,) or ({n}, 7), got {qr.shape}")
+        q_free = np.broadcast_to(qr.reshape(-1, 7), (n, 7)).astype(float)
+    q_all = np.full((n, BRANCHES, 7), np.nan)
+    br_all = np.full((n, BRANCHES), -1, dtype=np.int64)
+    sing_all = np.zeros((n, BRANCHES), dtype=bool)
+    counts = np.zeros(n, dtype=np.int64)
+    reasons = [REASON_OK] * n
+    earlier = np.tril(np.ones((BRANCHES, BRANCHES), dtype=bool), -1)
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        m = e - s
+        cand, sing, code = candidates(geo, poses[s:e], q7[s:e], q_free[s:e])
+        flat = cand.reshape(-1, 7)
+        valid = ~np.isnan(flat[:, 0])
+        ok = np.zeros(m * BRANCHES, dtype=bool)
+        if not check:
+            ok = valid.copy()
+        elif np.any(valid):
+            rep = np.repeat(poses[s:e], BRANCHES, axis=0)[valid]
+            dpos, drot = _pose_error(fk(robot, flat[valid]), rep)
+            ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
+        ok = ok.reshape(m, BRANCHES)
+        cand = np.where(ok[..., None], cand, np.nan)
+        diff = cand[:, :, None, :] - cand[:, None, :, :]
+        diff = np.abs(diff - TWO_PI * np.round(diff / TWO_PI))          # modulo 2 pi
+        dup = np.any(np.all(diff < MERGE_TOL, axis=-1) & earlier[None], axis=-1)
+        keep = ok & ~dup
+        order = np.argsort(~keep, axis=1, kind="stable")
+        kept = np.take_along_axis(keep, order, axis=1)
+        cand = np.take_along_axis(cand, order[..., None], axis=1)
+        cand[~kept] = np.nan
+        q_all[s:e] = cand
+        br_all[s:e] = np.where(kept, order, -1)
+        sing_all[s:e] = np.take_along_axis(sing, order, axis=1) & kept
+        counts[s:e] = kept.sum(axis=1)
+        for k in np.nonzero(counts[s:e] == 0)[0]:
+            codes = code[k]
+            reasons[s + k] = (REASON_ELBOW if np.all(codes == _CODE_ELBOW) else
+                              REASON_WRIST if np.all(codes > 0) else REASON_NO_CANDIDATE)
+    return PandaSolutions(q_all, counts, br_all, sing_all, reasons)
+
+
+def within_limits(robot, sols: PandaSolutions):
+    """The solutions inside the robot's joint limits, every 2 pi winding included
+    (:func:`derive.ik.select.within_limits`): (q (n, M, 7), counts (n,), branches (n, M),
+    singular (n, M))."""
+    robot = load_robot(robot)
+    return select.within_limits(sols.q, sols.counts, robot.limits, [True] * 7,
+                                branch=sols.branches, singular=sols.singular)
+
+
+def ik_sweep(robot, poses, n: int, *, q_ref=None):
+    """:func:`ik_q7` at ``n`` values of q7 evenly spaced over joint 7's limits (both ends
+    included; [-pi, pi) without limits). Returns (q7 values (n,), PandaSolutions with q
+    (P, n, 8, 7), counts (P, n), branches (P, n, 8), singular (P, n, 8), reasons (P lists of n))."""
+    robot = load_robot(robot)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InputError(f"n: a positive number of q7 values, got {n!r}")
+    lo, hi = q7_interval(robot)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = -math.pi, math.pi
+        values = lo + (hi - lo) * np.arange(n) / n
+    else:
+        values = np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)])
+    poses, _ = as_pose_batch(poses)
+    p = poses.shape[0]
+    if q_ref is not None:
+        qr = as_finite_array(q_ref, "q_ref", last_dim=7)
+        q_ref = np.repeat(np.broadcast_to(qr.reshape(-1, 7), (p, 7)), n, axis=0)
+    res = ik_q7(robot, np.repeat(poses, n, axis=0), np.tile(values, p), q_ref=q_ref)
+    reasons = [res.reasons[i * n:(i + 1) * n] for i in range(p)]
+    return values, PandaSolutions(res.q.reshape(p, n, BRANCHES, 7), res.counts.reshape(p, n),
+                                  res.branches.reshape(p, n, BRANCHES),
+                                  res.singular.reshape(p, n, BRANCHES), reasons)
