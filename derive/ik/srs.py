@@ -90,6 +90,8 @@ from derive.model.robot import load_robot
 CLASS_TOL = 1e-10
 #: The relation FK_robot = B (R, W) T must hold within this (m, rad).
 MAP_TOL = 1e-10
+#: |cos t4| within this of 1 is the elbow's full stretch (or full fold).
+STRETCH_TOL = 1e-14
 #: The wrist centre counts as on axis 1 when it is closer than this to it (m).
 AXIS_TOL = 1e-12
 
@@ -339,6 +341,15 @@ def elbow_cosine(geo: SRSGeometry, w):
     return (np.sum(w * w, -1) - geo.d_se ** 2 - geo.d_ew ** 2) / (2.0 * geo.d_se * geo.d_ew)
 
 
+def elbow_angle(c4):
+    """|t4| from its cosine; within STRETCH_TOL of +-1 the arm is taken as stretched (t4 = 0)
+    or folded (t4 = pi), so that the two elbow branches coincide exactly there (a rounding of
+    1e-16 in the cosine would otherwise split them by 1e-8 rad; the pose moves by ~1e-15 m)."""
+    c4 = np.clip(c4, -1.0, 1.0)
+    return np.where(c4 >= 1.0 - STRETCH_TOL, 0.0,
+                    np.where(c4 <= -1.0 + STRETCH_TOL, np.pi, np.arccos(c4)))
+
+
 def reference_shoulder(geo: SRSGeometry, w, t4):
     """Step 2, the reference configuration (Shimizu sec. III-B, t3 = 0): R0 = Rz(a) Ry(b - phi)
     with a = atan2(W_y, W_x) (a = 0 when W is on axis 1), b = atan2(hypot(W_x, W_y), W_z),
@@ -402,14 +413,14 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     ok = ~(bad | folded)
     if not np.any(ok):
         return out, singular, reason
-    c4 = np.clip(c4[ok], -1.0, 1.0)
+    t4abs = elbow_angle(c4[ok])
     rc, w, psi = rc[ok], w[ok], psi[ok]
     free1, free5 = _free_angles(geo, None if q_ref is None else q_ref[ok], int(ok.sum()))
     sp, cp = np.sin(psi)[:, None, None], np.cos(psi)[:, None, None]
     sub = np.full((len(w), 8, 7), np.nan)
     sub_sing = np.zeros((len(w), 8), dtype=bool)
     for i4, g4 in enumerate((1.0, -1.0)):
-        t4 = g4 * np.arccos(c4)
+        t4 = g4 * t4abs
         r0 = reference_shoulder(geo, w, t4)
         a_s, b_s, c_s = arm_angle_matrices(w, r0)
         rs = a_s * sp + b_s * cp + c_s                       # step 3: R_s(psi)
@@ -559,13 +570,13 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
     c4 = elbow_cosine(geo, w)
     bad = np.abs(c4) > 1.0 + REACH_TOL
     reason[bad] = REASON_REACH
-    c4 = np.clip(c4, -1.0, 1.0)
+    t4abs = elbow_angle(c4)
     tg = geo.signs[joint - 1] * val
     free1, free5 = _free_angles(geo, qr, n)
     free3 = np.zeros(n) if qr is None else geo.signs[2] * qr[:, 2]
     any_root = np.zeros(n, dtype=bool)
     for i4, g4 in enumerate((1.0, -1.0)):
-        t4 = g4 * np.arccos(c4)
+        t4 = g4 * t4abs
         v = _forearm(geo, t4)
         if joint == 3:
             t3 = tg
@@ -574,7 +585,9 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
             cz = w[:, 2] / np.where(r > 0, r, 1.0)
             reach = (np.abs(cz) <= 1.0 + REACH_TOL) & (r > 0)
             phi = np.arctan2(wv[:, 0], wv[:, 2])
-            roots = [np.arccos(np.clip(cz, -1, 1)) - phi, -np.arccos(np.clip(cz, -1, 1)) - phi]
+            acz = elbow_angle(cz)                 # the same snapping at the double root
+            roots = [acz - phi, -acz - phi]
+            on_axis = np.hypot(w[:, 0], w[:, 1]) < AXIS_TOL
         else:
             t1 = tg
             yv = (_t(_rz(t1)) @ w[..., None])[..., 0]
@@ -587,7 +600,6 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
             if joint == 3:
                 t2 = root
                 u = (_ry(t2) @ wv[..., None])[..., 0]
-                on_axis = np.hypot(u[:, 0], u[:, 1]) < AXIS_TOL
                 t1 = np.where(on_axis, free1, np.arctan2(w[:, 1], w[:, 0]) - np.arctan2(u[:, 1], u[:, 0]))
                 sing_s = on_axis
             else:
@@ -665,10 +677,10 @@ def psi_intervals(robot, pose) -> list[np.ndarray]:
     empty = [np.zeros((0, 2)) for _ in range(8)]
     if abs(c4) > 1.0 + REACH_TOL or np.linalg.norm(w) < CLASS_TOL:
         return empty
-    c4 = min(1.0, max(-1.0, c4))
+    t4abs = elbow_angle(np.array([c4]))
     points = [-math.pi, math.pi]
     for g4 in (1.0, -1.0):
-        t4 = np.array([g4 * math.acos(c4)])
+        t4 = g4 * t4abs
         r0 = reference_shoulder(geo, w, t4)
         a_s, b_s, c_s = (m[0] for m in arm_angle_matrices(w, r0))
         r4 = _ry(t4)[0]
