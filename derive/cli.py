@@ -1,4 +1,27 @@
-"""The ``dq-derive`` command line."""
+"""The dq-derive command line: forward and inverse kinematics, numerical refinement, generated
+equations and kernels, and figures, for the robots of the library or a YAML / URDF file.
+
+Arguments have the same names in every subcommand:
+  --q Q [Q ...]        joint values, in joint order: radians for revolute joints, metres for
+                       prismatic ones (with --deg: revolute joints in degrees)
+  --xyz X Y Z          a Cartesian target: the end frame's position in metres, with its
+                       orientation given by one of
+  --rpy R P Y          roll, pitch, yaw about the fixed x, y, z axes, R = Rz(Y) Ry(P) Rx(R)
+                       (radians; with --deg: degrees)
+  --quat A B C D       a unit quaternion in the order given by --quat-order xyzw (scipy, ROS)
+                       or wxyz (scalar first, as dq-derive); --quat-order is required
+  --dq W X Y Z W X Y Z a unit dual quaternion [real w x y z | dual w x y z], dual = 1/2 t real
+  --deg                every angle in and out in degrees: revolute joint values (prismatic
+                       joints stay in metres) and rpy
+  --json               the results as one JSON object on stdout: numbers, joint names, units
+
+Exit codes:
+  0  success
+  1  no solution: the target is not reachable (ik), or refine found no exact solution
+  2  usage or input error: unknown option or robot, malformed number, wrong count of joint
+     values, non-unit quaternion, file that cannot be read or written; one line on stderr,
+     never a traceback
+"""
 
 from __future__ import annotations
 
@@ -13,18 +36,21 @@ import numpy as np
 from derive import reference
 from derive._version import __version__
 from derive.algebra import dualquat as dq
-from derive.algebra import quaternion as quat
 from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
+from derive.cache import find_artifact
 from derive.codegen.emit import write_kernels
 from derive.codegen.loader import kernels
-from derive.errors import DeriveError
-from derive.ik.closed_form import classify
+from derive.errors import DeriveError, InputError
+from derive.ik.closed_form import classify, spherical_class
+from derive.kinematics.pose import from_position_quaternion, from_position_rpy, to_position_rpy
 from derive.model import export
+from derive.model.classify import classify as geometric_classify
 from derive.model.robot import list_robots, load_robot
 from derive.refinement.functions import write_casadi
 from derive.refinement.solver import refine
 from derive.reports.appendix import write_appendix
+from derive.reports.figures import arm_figure, ik_figure
 from derive.reports.ik_report import write_ik
 
 #: Robots ``dq-derive generate`` (and so ``make generate``) works on by default.
@@ -37,157 +63,416 @@ UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
 #: Every other robot of the class gets them on request (``dq-derive kernels ROBOT`` ...).
 SW_ROBOTS = ("irb120", "kr6-r900")
 
+#: Exit codes (documented in the module docstring, the --help epilog and docs/cli.md).
+EXIT_OK, EXIT_NO_SOLUTION, EXIT_INPUT = 0, 1, 2
 
+_DESCRIPTION, _EPILOG = __doc__.split("\n\n", 1)
+_EXIT_EPILOG = "Exit codes:" + __doc__.split("Exit codes:", 1)[1]
+
+
+# --------------------------------------------------------------------------- #
+# Numbers, joints and units
+# --------------------------------------------------------------------------- #
+def _clean(x: float, prec: int) -> float:
+    """x rounded to ``prec`` decimals, with -0.0 turned into 0.0 (never prints "-0.000")."""
+    return round(float(x), prec) + 0.0
+
+
+def _fmt(values, width=10, prec=6) -> str:
+    return " ".join(f"{_clean(v, prec):{width}.{prec}f}" for v in np.asarray(values, dtype=float).ravel())
+
+
+def _jnum(x) -> float:
+    """A float for JSON: -0.0 becomes 0.0."""
+    return float(x) + 0.0
+
+
+def _jlist(values) -> list:
+    return [_jnum(v) for v in np.asarray(values, dtype=float).ravel()]
+
+
+def _variables(robot):
+    """The joints that carry a joint variable (mimic joints excluded), in q order."""
+    return [j for j in robot.joints if not j.is_mimic]
+
+
+def _units(robot, deg: bool) -> list[str]:
+    return ["m" if j.type == "prismatic" else ("deg" if deg else "rad") for j in _variables(robot)]
+
+
+def _angle_unit(deg: bool) -> str:
+    return "deg" if deg else "rad"
+
+
+def _joints_in(robot, values, name: str, deg: bool) -> np.ndarray:
+    """Joint values from the command line (revolute joints in degrees with --deg) in rad and m."""
+    q = np.asarray(values, dtype=float)
+    if q.size != robot.dof:
+        raise InputError(f"{name}: robot {robot.name!r} has {robot.dof} joint variables "
+                         f"({', '.join(robot.variable_names)}), got {q.size} value(s)")
+    if deg:
+        revolute = np.array([j.type == "revolute" for j in _variables(robot)])
+        q = np.where(revolute, np.radians(q), q)
+    return q
+
+
+def _joints_out(robot, q, deg: bool) -> np.ndarray:
+    """Joint values in rad and m as printed: revolute joints in degrees with --deg."""
+    q = np.asarray(q, dtype=float)
+    if not deg:
+        return q
+    revolute = np.array([j.type == "revolute" for j in _variables(robot)])
+    return np.where(revolute, np.degrees(q), q)
+
+
+def _joint_meta(robot, deg: bool) -> list[dict]:
+    return [{"name": j.name, "type": j.type, "unit": u} for j, u in zip(_variables(robot), _units(robot, deg))]
+
+
+def _table(robot, rows, deg: bool, lead: list[tuple[str, str, int]], prec: int = 5) -> list[str]:
+    """A table with one column per joint, headed by the joint's name and, below it, its unit.
+
+    ``lead``: the columns before the joints as (title, second title line, width); ``rows``:
+    (values of the lead columns as strings, joint values in rad and m, trailing note)."""
+    names, units = robot.variable_names, _units(robot, deg)
+    widths = [max(len(n), len(u) + 2, prec + 6) for n, u in zip(names, units)]
+    head1 = " ".join(f"{t:>{w}}" for t, _, w in lead) + "  " + " ".join(f"{n:>{w}}" for n, w in zip(names, widths))
+    head2 = " ".join(f"{t:>{w}}" for _, t, w in lead) + "  " + " ".join(f"{'(' + u + ')':>{w}}"
+                                                                         for u, w in zip(units, widths))
+    out = [head1.rstrip(), head2.rstrip()]
+    for cells, q, note in rows:
+        vals = _joints_out(robot, q, deg)
+        line = (" ".join(f"{c:>{w}}" for c, (_, _, w) in zip(cells, lead)) + "  "
+                + " ".join(f"{_clean(v, prec):{w}.{prec}f}" for v, w in zip(vals, widths)))
+        out.append(line + (f"  {note}" if note else ""))
+    return out
+
+
+def _print_json(data) -> None:
+    print(json.dumps(data, indent=2, allow_nan=False))
+
+
+# --------------------------------------------------------------------------- #
+# Targets: --q, --xyz with --rpy or --quat, --dq
+# --------------------------------------------------------------------------- #
 def _robot(args):
     """The robot of a subcommand: a library name, a YAML file or a URDF (--base, --tip)."""
     return load_robot(args.robot, base=args.base, tip=args.tip)
 
 
-def _fmt(values, width=10, prec=6) -> str:
-    return " ".join(f"{v:{width}.{prec}f}" for v in np.asarray(values, dtype=float).ravel())
+def _target(robot, args, what: str):
+    """(pose (8,), joint values (rad, m) or None, JSON description) of the target options.
+
+    Exactly one of --q, --xyz (with exactly one of --rpy and --quat) and --dq."""
+    given = [o for o, v in (("--q", args.q), ("--xyz", args.xyz), ("--dq", args.dq)) if v is not None]
+    if len(given) != 1:
+        raise InputError(f"{what}: give exactly one target: --q (joint values whose pose is the "
+                         "target), --xyz with --rpy or --quat, or --dq"
+                         + (f" (got {' and '.join(given)})" if given else ""))
+    if args.xyz is None and (args.rpy is not None or args.quat is not None):
+        raise InputError(f"{what}: --rpy and --quat give the orientation of an --xyz target")
+    if args.quat is None and args.quat_order is not None:
+        raise InputError(f"{what}: --quat-order belongs with --quat")
+    if args.q is not None:
+        q = _joints_in(robot, args.q, "--q", args.deg)
+        pose = reference.fk(robot, q)
+        return pose, q, {"q": _jlist(_joints_out(robot, q, args.deg))}
+    if args.dq is not None:
+        pose = dq.check_unit(np.array(args.dq, dtype=float), "--dq")
+        return pose, None, {"dq": _jlist(pose)}
+    if (args.rpy is None) == (args.quat is None):
+        raise InputError(f"{what}: --xyz needs its orientation: exactly one of --rpy R P Y or --quat A B C D")
+    if args.rpy is not None:
+        rpy = np.radians(args.rpy) if args.deg else np.array(args.rpy, dtype=float)
+        pose = from_position_rpy(np.array(args.xyz, dtype=float), rpy)
+        return pose, None, {"xyz": _jlist(args.xyz), "rpy": _jlist(args.rpy)}
+    if args.quat_order is None:
+        raise InputError(f"{what}: --quat needs --quat-order xyzw (scipy, ROS) or wxyz (scalar first)")
+    pose = from_position_quaternion(np.array(args.xyz, dtype=float), np.array(args.quat, dtype=float),
+                                    args.quat_order)
+    return pose, None, {"xyz": _jlist(args.xyz), "quat": _jlist(args.quat), "quat_order": args.quat_order}
+
+
+def _pose_dict(pose, deg: bool) -> dict:
+    t, rpy = to_position_rpy(pose)
+    rpy = np.degrees(rpy) if deg else rpy
+    return {"position": {"value": _jlist(t), "unit": "m"},
+            "rpy": {"value": _jlist(rpy), "unit": _angle_unit(deg),
+                    "convention": "R = Rz(yaw) Ry(pitch) Rx(roll)"},
+            "quaternion_wxyz": _jlist(pose[:4]),
+            "dual_quaternion": _jlist(pose)}
+
+
+def _pose_lines(pose, deg: bool) -> list[str]:
+    t, rpy = to_position_rpy(pose)
+    unit = _angle_unit(deg)
+    rpy = np.degrees(rpy) if deg else rpy
+    return [
+        f"  position (m):                        {_fmt(t, 9, 5)}",
+        f"  roll pitch yaw ({unit}):               {_fmt(rpy, 9, 3 if deg else 5)}",
+        f"  quaternion (w x y z):                {_fmt(pose[:4], 9, 5)}",
+        f"  dual quaternion [w x y z | w x y z]: {_fmt(pose, 9, 5)}",
+    ]
+
+
+def _target_text(robot, pose, q, deg: bool) -> str:
+    t, rpy = to_position_rpy(pose)
+    rpy = np.degrees(rpy) if deg else rpy
+    text = f"position {_fmt(t, 0, 5).strip()} m, rpy {_fmt(rpy, 0, 3).strip()} {_angle_unit(deg)}"
+    if q is not None:
+        text += f" (the pose of q = {_fmt(_joints_out(robot, q, deg), 0, 4).strip()})"
+    return text
+
+
+# --------------------------------------------------------------------------- #
+# Subcommands
+# --------------------------------------------------------------------------- #
+def _robot_row(name: str) -> dict:
+    """Class and availability of one library robot (no search for related robots: fast)."""
+    r = load_robot(name)
+    c = geometric_classify(r)
+    closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else "")
+    cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
+    ik = closed or (f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
+    shipped_k = find_artifact(r.id, "c_source") is not None
+    shipped_c = find_artifact(r.id, "casadi/fk") is not None
+    return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
+            "types": [j.type for j in _variables(r)], "class": cls, "closed_form_ik": closed or None,
+            "ik": ik,
+            "kernels": ("FK+IK" if closed else "FK") + (", shipped" if shipped_k else ", on demand"),
+            "casadi": ("fk, residual, ik" if closed else "fk, residual")
+                      + (", shipped" if shipped_c else ", on demand"),
+            "convention": r.convention, "title": r.title}
+
+
+def _robots_table(rows) -> list[str]:
+    cols = [("name", "name", "<"), ("dof", "dof", ">"), ("class", "class", "<"),
+            ("closed-form IK", "ik", "<"), ("kernels (C, numpy, Python)", "kernels", "<"),
+            ("CasADi functions", "casadi", "<"), ("title", "title", "<")]
+    widths = [max(len(h), *(len(str(r[k])) for r in rows)) for h, k, _ in cols]
+    out = ["  ".join(f"{h:{a}{w}}" for (h, _, a), w in zip(cols, widths)).rstrip()]
+    for r in rows:
+        out.append("  ".join(f"{str(r[k]):{a}{w}}" for (_, k, a), w in zip(cols, widths)).rstrip())
+    return out
 
 
 def cmd_robots(args) -> int:
-    print(f"{'name':<12} {'dof':>3}  {'convention':<12} {'ends':<28} title")
-    for name in list_robots():
-        r = load_robot(name)
-        ends = ",".join(r.ends)
-        print(f"{name:<12} {r.dof:>3}  {r.convention:<12} {ends:<28} {r.title}")
-    return 0
-
-
-def _pose_lines(robot, q, end=None) -> list[str]:
-    Q = reference.fk(robot, q, end)
-    t = dq._translation(Q)
-    yaw, pitch, roll = quat.euler_zyx(Q[:4])
-    return [
-        f"  dual quaternion [w x y z | w x y z]: {_fmt(Q, 9, 5)}",
-        f"  position (m):                        {_fmt(t, 9, 5)}",
-        f"  rotation (w x y z):                  {_fmt(Q[:4], 9, 5)}",
-        f"  ZYX yaw pitch roll (deg):            "
-        f"{_fmt(np.degrees([yaw, pitch, roll]), 9, 3)}",
-    ]
+    rows = [_robot_row(name) for name in list_robots()]
+    if args.json:
+        _print_json({"robots": rows})
+        return EXIT_OK
+    for line in _robots_table(rows):
+        print(line)
+    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class; kernels and CasADi "
+          "functions: shipped in the package, or derived on first use and cached")
+    return EXIT_OK
 
 
 def cmd_fk(args) -> int:
     robot = _robot(args)
-    q = np.array(args.q, dtype=float)
-    if args.deg:
-        revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
-        if len(revolute) == q.size:
-            q = np.where(revolute, np.radians(q), q)
-    lines = _pose_lines(robot, q, args.end)
-    print(f"{robot.name}: end frame {args.end or robot.default_end!r}, q = {_fmt(q, 8, 4)}")
-    for line in lines:
+    if args.q is not None and args.q_positional:
+        raise InputError("fk: give the joint values once, as --q (or, deprecated, positionally)")
+    values = args.q if args.q is not None else args.q_positional
+    if not values:
+        raise InputError("fk: give the joint values with --q")
+    q = _joints_in(robot, values, "--q", args.deg)
+    end = args.end or robot.default_end
+    pose = reference.fk(robot, q, args.end)
+    if args.json:
+        data = {"robot": robot.name, "end": end, "joints": _joint_meta(robot, args.deg),
+                "q": _jlist(_joints_out(robot, q, args.deg)), **_pose_dict(pose, args.deg)}
+        if args.matrix:
+            data["matrix"] = [_jlist(row) for row in reference.fk_matrix(robot, q, args.end)]
+        _print_json(data)
+        return EXIT_OK
+    print(f"{robot.name}: end frame {end!r} at")
+    for line in _table(robot, [([], q, "")], args.deg, [], prec=4):
+        print("  " + line)
+    for line in _pose_lines(pose, args.deg):
         print(line)
     if args.matrix:
-        print("  4x4 matrix (independent matrix product):")
+        print("  4x4 matrix (independent matrix product; rotation, translation in m):")
         for row in reference.fk_matrix(robot, q, args.end):
             print("   ", _fmt(row, 10, 6))
-    return 0
+    return EXIT_OK
 
 
 def cmd_classify(args) -> int:
     """Kinematic class of a robot: consecutive axes, spherical wrist, UR / OPW / SRS."""
     c = classify(_robot(args))
     print(json.dumps(c.to_dict(), indent=2) if args.json else c.report())
-    return 0
+    return EXIT_OK
 
 
-def _report(paths, t0=None) -> int:
+def _report(paths, t0=None, as_json=False) -> int:
+    if as_json:
+        _print_json({"written": [str(p) for p in paths]})
+        return EXIT_OK
     for p in paths:
         print(f"wrote {p}")
     if t0 is not None:
         print(f"took {time.perf_counter() - t0:.2f} s")
-    return 0
+    return EXIT_OK
 
 
 def cmd_appendix(args) -> int:
     t0 = time.perf_counter()
-    return _report(write_appendix(_robot(args), args.out, progress=not args.quiet), t0)
+    return _report(write_appendix(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
+
+
+def _deprecated(args, old: str, new: str, attr_old: str, attr_new: str) -> None:
+    """Move a deprecated option's value to its new name (error if both are given)."""
+    if getattr(args, attr_old, None) is None:
+        return
+    if getattr(args, attr_new) is not None:
+        raise InputError(f"{old} is the deprecated spelling of {new}: give only {new}")
+    print(f"dq-derive: note: {old} is deprecated, use {new}", file=sys.stderr)
+    setattr(args, attr_new, getattr(args, attr_old))
 
 
 def cmd_ik(args) -> int:
-    t0 = time.perf_counter()
-    if args.pose is not None:
-        q = np.array(args.pose, dtype=float)
-        robot = _robot(args)
-        if args.deg:
-            q = np.radians(q)
-        pose = reference.fk(robot, q)
-        if args.seed is not None or args.within_limits:
-            return _ik_select(robot, pose, q, args)
-        sols = reference.ik(robot, pose, q_ref=q)
-        print(f"{robot.name}: pose of q = {_fmt(q, 8, 4)} has {len(sols)} solution(s){sols.reason}")
-        for s, sing in zip(sols, sols.singular):
-            print("   ", _fmt(s, 9, 5), "(singular: the free wrist joint from q)" if sing else "")
-        return 0
-    return _report(write_ik(_robot(args), args.out, progress=not args.quiet), t0)
-
-
-def _ik_select(robot, pose, q, args) -> int:
-    """ik --pose Q with --within-limits and/or --seed: the C kernels' selection."""
-    k = kernels(robot, "c")
-    conv = np.degrees if args.deg else (lambda x: x)
-    unit = "deg" if args.deg else "rad"
+    _deprecated(args, "ik --pose", "--q", "pose_old", "q")
+    if args.q is None and args.xyz is None and args.dq is None:
+        if args.seed is not None or args.within_limits or args.rpy is not None or args.quat is not None:
+            raise InputError("ik: --seed, --within-limits, --rpy and --quat need a target "
+                             "(--q, --xyz or --dq)")
+        t0 = time.perf_counter()
+        return _report(write_ik(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
+    robot = _robot(args)
+    pose, q, target = _target(robot, args, "ik")
+    deg = args.deg
+    head = {"robot": robot.name, "target": {"given": target, **_pose_dict(pose, deg)},
+            "joints": _joint_meta(robot, deg)}
     if args.seed is not None:
-        seed = np.radians(args.seed) if args.deg else np.array(args.seed, dtype=float)
-        res = k.nearest(pose, seed)
+        seed = _joints_in(robot, args.seed, "--seed", deg)
+        res = kernels(robot, "c").nearest(pose, seed)
         if not res.found:
-            print(f"{robot.name}: no solution inside the joint limits")
-            return 0
-        print(f"{robot.name}: solution nearest to the seed (largest joint move "
-              f"{conv(res.max_move):.5g} {unit}, summed {conv(res.total_move):.5g} {unit}, branch "
-              f"{int(res.branch)}{', singular' if res.singular else ''}):")
-        print("   ", _fmt(conv(res.q), 9, 5), f"({unit})")
-        return 0
-    sols, count, branch, sing = k.ik(pose, within_limits=True, details=True)
-    print(f"{robot.name}: {count} solution(s) inside the joint limits, every 2 pi winding ({unit}):")
-    for s, b, g in zip(sols[:count], branch[:count], sing[:count]):
-        print("   ", _fmt(conv(s), 9, 5), f"branch {int(b)}" + (", singular" if g else ""))
-    return 0
+            return _no_solution(robot, args, head, "no solution inside the joint limits")
+        conv = np.degrees if deg else (lambda x: x)
+        sol = {"q": _jlist(_joints_out(robot, res.q, deg)), "branch": int(res.branch),
+               "singular": bool(res.singular)}
+        if args.json:
+            _print_json({**head, "count": 1, "selection": "nearest to the seed, within the limits",
+                         "largest_move": _jnum(conv(res.max_move)), "summed_move": _jnum(conv(res.total_move)),
+                         "move_unit": _angle_unit(deg), "solutions": [sol], "reason": ""})
+            return EXIT_OK
+        print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+        print(f"the solution nearest to the seed, within the joint limits (largest joint move "
+              f"{_clean(conv(res.max_move), 5):g} {_angle_unit(deg)}, summed "
+              f"{_clean(conv(res.total_move), 5):g} {_angle_unit(deg)}):")
+        note = f"branch {int(res.branch)}" + (", singular" if res.singular else "")
+        for line in _table(robot, [(["1"], res.q, note)], deg, [("#", "", 3)]):
+            print(line)
+        return EXIT_OK
+    if args.within_limits:
+        sols, count, branch, sing = kernels(robot, "c").ik(pose, within_limits=True, details=True)
+        rows = [(s, f"branch {int(b)}" + (", singular" if g else ""), {"branch": int(b), "singular": bool(g)})
+                for s, b, g in zip(sols[:count], branch[:count], sing[:count])]
+        reason = "" if count else "no solution inside the joint limits"
+        what = "inside the joint limits, every 2 pi winding"
+    else:
+        sols = reference.ik(robot, pose, q_ref=q)
+        rows = [(s, "singular: the free wrist joint from --q" if g and q is not None else
+                 ("singular: the free wrist joint chosen" if g else ""), {"singular": bool(g)})
+                for s, g in zip(sols, sols.singular)]
+        reason = sols.reason
+        what = "closed form"
+    if not rows:
+        return _no_solution(robot, args, head, reason or "no solution")
+    if args.json:
+        _print_json({**head, "count": len(rows), "selection": what, "reason": "",
+                     "solutions": [{"q": _jlist(_joints_out(robot, s, deg)), **extra} for s, _, extra in rows]})
+        return EXIT_OK
+    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+    print(f"{len(rows)} solution(s) ({what}):")
+    for line in _table(robot, [([str(i + 1)], s, note) for i, (s, note, _) in enumerate(rows)], deg,
+                       [("#", "", 3)]):
+        print(line)
+    return EXIT_OK
+
+
+def _no_solution(robot, args, head, reason: str) -> int:
+    reason = reason.strip().lstrip(":").strip()
+    if args.json:
+        _print_json({**head, "count": 0, "solutions": [], "reason": reason})
+    else:
+        print(f"{robot.name}: no solution: {reason}")
+    return EXIT_NO_SOLUTION
 
 
 def cmd_refine(args) -> int:
-    """Refine IK solutions on the robot's model: the pose from --q (FK) or --pose (dual quaternion)."""
+    """Refine IK solutions on the robot's model; the target from --q, --xyz or --dq."""
+    _deprecated(args, "refine --pose", "--dq", "pose_old", "dq")
     robot = _robot(args)
-    if (args.q is None) == (args.pose is None):
-        raise DeriveError("refine: give exactly one of --q (joint values whose FK is the pose) "
-                          "or --pose (8 numbers, a unit dual quaternion)")
-    if args.q is not None:
-        q = np.array(args.q, dtype=float)
-        pose = reference.fk(robot, np.radians(q) if args.deg else q)
-    else:
-        pose = np.array(args.pose, dtype=float)
+    pose, q, target = _target(robot, args, "refine")
     t0 = time.perf_counter()
     res = refine(robot, pose, weights=(args.w_pos, args.w_rot), regularization=args.reg,
                  tol=args.tol, max_iter=args.max_iter)
     dt = time.perf_counter() - t0
-    print(f"{robot.name}: {len(res)} seed(s), {len(res.solutions)} distinct exact solution(s) "
-          f"in {dt * 1e3:.1f} ms")
-    print(f"{'seed':>4} {'ok':>3} {'iter':>4} {'|dp| (m)':>9} {'angle (rad)':>11}  solver          q (rad)")
-    for r in res:
-        print(f"{r.seed:4d} {'yes' if r.success else 'no':>3} {r.iterations:4d} {r.position_error:9.1e} "
-              f"{r.rotation_error:11.1e}  {r.solver:<15} {_fmt(r.q, 9, 5)}")
+    deg = args.deg
+    if args.json:
+        _print_json({"robot": robot.name, "target": {"given": target, **_pose_dict(pose, deg)},
+                     "joints": _joint_meta(robot, deg), "success": bool(res.success),
+                     "distinct_solutions": len(res.solutions),
+                     "results": [{"seed": r.seed, "success": bool(r.success), "iterations": int(r.iterations),
+                                  "position_error": {"value": _jnum(r.position_error), "unit": "m"},
+                                  "rotation_error": {"value": _jnum(r.rotation_error), "unit": "rad"},
+                                  "solver": r.solver, "q": _jlist(_joints_out(robot, r.q, deg)),
+                                  "note": r.note} for r in res]})
+        return EXIT_OK if res.success else EXIT_NO_SOLUTION
+    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+    print(f"{len(res)} seed(s), {len(res.solutions)} distinct exact solution(s) in {dt * 1e3:.1f} ms")
+    lead = [("seed", "", 4), ("ok", "", 3), ("iter", "", 4), ("|dp|", "(m)", 8), ("angle", "(rad)", 8),
+            ("solver", "", 13)]
+    rows = [([str(r.seed), "yes" if r.success else "no", str(r.iterations), f"{r.position_error:.1e}",
+              f"{r.rotation_error:.1e}", r.solver], r.q, "") for r in res]
+    for line in _table(robot, rows, deg, lead):
+        print(line)
     for r in res:
         if r.note:
             print(f"seed {r.seed}: {r.note}")
     if not res.success:
         print(f"no exact solution: best residual {res.best.position_error:.3e} m, "
               f"{res.best.rotation_error:.3e} rad")
-    return 0 if res.success else 1
+    return EXIT_OK if res.success else EXIT_NO_SOLUTION
 
 
 def cmd_export(args) -> int:
     """Write the robot as a kinematic URDF and/or as our YAML (convention urdf)."""
     robot = _robot(args)
     if args.urdf is None and args.yaml is None:
-        raise DeriveError("export: give --urdf FILE and/or --yaml FILE")
-    return _report(export.write(robot, args.urdf, args.yaml))
+        raise InputError("export: give --urdf FILE and/or --yaml FILE")
+    return _report(export.write(robot, args.urdf, args.yaml), as_json=args.json)
 
 
 def cmd_kernels(args) -> int:
-    return _report(write_kernels(_robot(args), args.out))
+    return _report(write_kernels(_robot(args), args.out), as_json=args.json)
+
+
+def cmd_plot(args) -> int:
+    """The arm at --q, or every IK solution of the pose of --ik-of, as a PNG."""
+    robot = _robot(args)
+    if (args.q is None) == (args.ik_of is None):
+        raise InputError("plot: give exactly one of --q (draw the arm) and --ik-of (draw every IK "
+                         "solution of the pose of these joint values)")
+    q = _joints_in(robot, args.q if args.q is not None else args.ik_of,
+                   "--q" if args.q is not None else "--ik-of", args.deg)
+    data = {"robot": robot.name, "out": str(args.out), "joints": _joint_meta(robot, args.deg),
+            "q": _jlist(_joints_out(robot, q, args.deg)), "frames": list(robot.frame_names)}
+    if args.q is not None:
+        pos = arm_figure(robot, q, args.out, deg=args.deg)
+        data["frame_origins"] = {"value": [_jlist(p) for p in pos], "unit": "m"}
+        text = f"wrote {args.out}: {robot.name} at q = {_fmt(_joints_out(robot, q, args.deg), 0, 4).strip()}"
+    else:
+        sols, _ = ik_figure(robot, q, args.out, deg=args.deg)
+        data["solutions"] = [_jlist(_joints_out(robot, s, args.deg)) for s in sols]
+        text = f"wrote {args.out}: the {len(sols)} IK solution(s) of the pose of {robot.name} at q = " \
+               f"{_fmt(_joints_out(robot, q, args.deg), 0, 4).strip()}"
+    if args.json:
+        _print_json(data)
+    else:
+        print(text)
+    return EXIT_OK
 
 
 def cmd_generate(args) -> int:
@@ -219,7 +504,8 @@ def cmd_generate(args) -> int:
             written += write_casadi(name, args.out, force=True)
         print(f"FK/IK kernels and CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, "
               f"residual, ik) of {', '.join(UR_ROBOTS + tuple(sw))} written in {time.perf_counter() - t:.2f} s")
-    cmd_robots(args)
+    for line in _robots_table([_robot_row(name) for name in list_robots()]):
+        print(line)
     print()
     print("Forward kinematics at reference configurations (dual-quaternion product;"
           " max |DQ - matrix| is the gap to the independent 4x4 path):")
@@ -230,94 +516,12 @@ def cmd_generate(args) -> int:
                    "random": rng.uniform(-math.pi, math.pi, robot.dof)}
         for label, q in samples.items():
             gap = np.max(np.abs(dq.to_matrix(reference.fk(robot, q)) - reference.fk_matrix(robot, q)))
-            print(f"{name} q={label} ({_fmt(q, 7, 3)}), max |DQ - matrix| = {gap:.1e}")
-            for line in _pose_lines(robot, q):
+            print(f"{name} q={label} ({_fmt(q, 7, 3)} rad), max |DQ - matrix| = {gap:.1e}")
+            for line in _pose_lines(reference.fk(robot, q), deg=False):
                 print(line)
     _report(written)
     print(f"generate took {time.perf_counter() - t0:.2f} s")
-    return 0
-
-
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="dq-derive", description=__doc__)
-    p.add_argument("--version", action="version", version=f"dq-derive {__version__}")
-    sub = p.add_subparsers(dest="command", required=True)
-
-    s = sub.add_parser("robots", help="list the robots of the library")
-    s.set_defaults(func=cmd_robots)
-
-    def robot_argument(s):
-        s.add_argument("robot", help="library name, or path to a description file (.yaml) or URDF (.urdf)")
-        s.add_argument("--base", default=None, help="URDF: the base link of the chain (default: the root link)")
-        s.add_argument("--tip", default=None, help="URDF: the tip link of the chain (default: the single leaf link)")
-
-    s = sub.add_parser("fk", help="forward kinematics of one configuration")
-    robot_argument(s)
-    s.add_argument("q", nargs="+", type=float, help="joint values (rad and m unless --deg)")
-    s.add_argument("--deg", action="store_true", help="revolute joint values in degrees")
-    s.add_argument("--end", default=None, help="end frame (default: the robot's default end)")
-    s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix")
-    s.set_defaults(func=cmd_fk)
-
-    s = sub.add_parser("classify", help="kinematic class: parallel / intersecting axes, spherical "
-                                        "wrist, UR / OPW / SRS, near misses")
-    robot_argument(s)
-    s.add_argument("--json", action="store_true", help="print the classification as JSON")
-    s.set_defaults(func=cmd_classify)
-
-    def emitter(name, help_text, func, quiet=True):
-        """A subcommand that writes files for one robot into --out."""
-        s = sub.add_parser(name, help=help_text)
-        robot_argument(s)
-        s.add_argument("--out", default="generated", help="output folder (default: generated)")
-        if quiet:
-            s.add_argument("--quiet", action="store_true", help="no progress output")
-        s.set_defaults(func=func)
-        return s
-
-    emitter("appendix", "derive, verify and typeset the M_i = N_i equations", cmd_appendix)
-    s = sub.add_parser("refine", help="refine IK solutions numerically with CasADi (calibrated or "
-                                      "general arms), from the nominal closed form or random starts")
-    robot_argument(s)
-    s.add_argument("--q", nargs="+", type=float, default=None, help="joint values whose FK is the pose")
-    s.add_argument("--pose", nargs=8, type=float, default=None, help="the pose as a unit dual quaternion")
-    s.add_argument("--deg", action="store_true", help="--q revolute values in degrees")
-    s.add_argument("--w-pos", type=float, default=1.0, help="weight of the position error")
-    s.add_argument("--w-rot", type=float, default=1.0, help="weight of the rotation error")
-    s.add_argument("--reg", type=float, default=0.0, help="regularisation towards the seed")
-    s.add_argument("--tol", type=float, default=1e-10, help="success tolerance (m and rad)")
-    s.add_argument("--max-iter", type=int, default=50)
-    s.set_defaults(func=cmd_refine)
-    s = emitter("ik", "extract and typeset the closed-form IK (UR family), or solve the pose of --pose q",
-                cmd_ik)
-    s.add_argument("--pose", nargs=6, type=float, default=None, metavar="Q",
-                   help="instead of typesetting: solve the pose of this configuration")
-    s.add_argument("--deg", action="store_true", help="--pose and --seed values (and the output) in degrees")
-    s.add_argument("--within-limits", action="store_true",
-                   help="with --pose: every solution inside the joint limits, 2 pi windings included (C kernels)")
-    s.add_argument("--seed", nargs="+", type=float, default=None, metavar="Q",
-                   help="with --pose: only the solution nearest to these joint values (C kernels)")
-    emitter("kernels", "emit the FK kernels (pure Python, numpy, C99)", cmd_kernels, quiet=False)
-
-    s = sub.add_parser("export", help="write a robot (library, YAML or URDF) as a kinematic URDF or our YAML")
-    robot_argument(s)
-    s.add_argument("--urdf", default=None, metavar="FILE", help="write a kinematic URDF here")
-    s.add_argument("--yaml", default=None, metavar="FILE", help="write a description file (convention urdf) here")
-    s.set_defaults(func=cmd_export)
-
-    s = sub.add_parser("generate", help="regenerate the outputs of the default robots")
-    s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)})")
-    s.add_argument("--out", default="generated", help="output folder (default: generated)")
-    s.set_defaults(func=cmd_generate)
-
-    s = sub.add_parser("bench", help="speed measurements (see docs/benchmarks.md)")
-    s.add_argument("what", nargs="?", default="derivation", choices=BENCHES)
-    s.add_argument("--robot", default=None)
-    s.add_argument("--repeats", type=int, default=5)
-    s.add_argument("--json", default=None, help="also write the results as JSON to this file")
-    s.add_argument("--plot", default=None, help="chain: write the figure to this file (PNG)")
-    s.set_defaults(func=cmd_bench)
-    return p
+    return EXIT_OK
 
 
 def cmd_bench(args) -> int:
@@ -326,14 +530,169 @@ def cmd_bench(args) -> int:
     return bench_main(argv)
 
 
+# --------------------------------------------------------------------------- #
+# The parser
+# --------------------------------------------------------------------------- #
+class _Formatter(argparse.RawDescriptionHelpFormatter):
+    """Descriptions and epilogs as written; an option's default shown where it has a value."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in text \
+                and (action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE)):
+            text += " (default: %(default)s)"
+        return text
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dq-derive", description=_DESCRIPTION, epilog=_EPILOG,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"dq-derive {__version__}",
+                   help="print the version and exit")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                           help="one of the subcommands below; dq-derive COMMAND --help for its options")
+
+    def command(name, help_text, func, description=None):
+        s = sub.add_parser(name, help=help_text, description=description or help_text[:1].upper() + help_text[1:] + ".",
+                           epilog=_EXIT_EPILOG, formatter_class=_Formatter)
+        s.set_defaults(func=func)
+        return s
+
+    def robot_argument(s):
+        s.add_argument("robot", help="library name (dq-derive robots lists them), or path to a description "
+                                     "file (.yaml) or a URDF (.urdf)")
+        s.add_argument("--base", default=None, help="URDF: the base link of the chain (default: the root link)")
+        s.add_argument("--tip", default=None, help="URDF: the tip link of the chain (default: the single leaf link)")
+
+    def json_option(s, what="the results"):
+        s.add_argument("--json", action="store_true", help=f"print {what} as JSON (numbers, names, units)")
+
+    def deg_option(s, what="revolute joint values and rpy angles, in and out"):
+        s.add_argument("--deg", action="store_true", help=f"degrees instead of radians: {what}")
+
+    def q_option(s, help_text="joint values in joint order (rad, prismatic joints m; --deg: revolute in degrees)",
+                 required=False):
+        s.add_argument("--q", nargs="+", type=float, default=None, metavar="Q", required=required, help=help_text)
+
+    def target_options(s, with_json=True):
+        q_option(s, "target: the pose of these joint values (rad, prismatic joints m; --deg: revolute in degrees)")
+        s.add_argument("--xyz", nargs=3, type=float, default=None, metavar=("X", "Y", "Z"),
+                       help="target: the end frame's position (m); its orientation from --rpy or --quat")
+        s.add_argument("--rpy", nargs=3, type=float, default=None, metavar=("R", "P", "Y"),
+                       help="orientation of --xyz: roll, pitch, yaw about the fixed x, y, z axes, "
+                            "R = Rz(Y) Ry(P) Rx(R) (rad; --deg: degrees)")
+        s.add_argument("--quat", nargs=4, type=float, default=None, metavar=("A", "B", "C", "D"),
+                       help="orientation of --xyz: a unit quaternion in the order of --quat-order")
+        s.add_argument("--quat-order", choices=("xyzw", "wxyz"), default=None,
+                       help="the order of --quat: xyzw (scipy, ROS) or wxyz (scalar first, as dq-derive); "
+                            "required with --quat")
+        s.add_argument("--dq", nargs=8, type=float, default=None, metavar="D",
+                       help="target: a unit dual quaternion [real w x y z | dual w x y z], dual = 1/2 t real")
+        deg_option(s, "revolute joint values (target, seed and output) and rpy angles")
+        if with_json:
+            json_option(s)
+
+    s = command("robots", "list the robots of the library: kinematic class, closed-form IK, kernels "
+                          "and CasADi functions", cmd_robots)
+    json_option(s, "the list")
+
+    s = command("fk", "forward kinematics of one configuration: position, rpy, quaternion, dual "
+                      "quaternion (and 4x4 matrix) of the end frame", cmd_fk)
+    robot_argument(s)
+    q_option(s)
+    s.add_argument("q_positional", nargs="*", type=float, metavar="Q",
+                   help="deprecated: the joint values as positional arguments; use --q")
+    deg_option(s)
+    s.add_argument("--end", default=None, help="end frame (default: the robot's default end)")
+    s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix (independent matrix product)")
+    json_option(s)
+
+    s = command("classify", "kinematic class: parallel / intersecting axes, spherical wrist, UR / OPW / "
+                            "SRS, near misses", cmd_classify)
+    robot_argument(s)
+    json_option(s, "the classification")
+
+    def emitter(name, help_text, func, quiet=True):
+        """A subcommand that writes files for one robot into --out."""
+        s = command(name, help_text, func)
+        robot_argument(s)
+        s.add_argument("--out", default="generated", help="output folder")
+        if quiet:
+            s.add_argument("--quiet", action="store_true", help="no progress output")
+        json_option(s, "the results (ik with a target: the solutions; otherwise the written files)"
+                    if name == "ik" else "the written files")
+        return s
+
+    emitter("appendix", "derive, verify and typeset the M_i = N_i equations (appendix.md, .tex, "
+                        "equations.json)", cmd_appendix)
+
+    s = emitter("ik", "inverse kinematics: solve a target (--q, --xyz with --rpy or --quat, --dq) "
+                      "in closed form; without a target, extract and typeset the closed-form IK (ik.md, ik.tex)",
+                cmd_ik)
+    target_options(s, with_json=False)
+    s.add_argument("--within-limits", action="store_true",
+                   help="every solution inside the joint limits, 2 pi windings included (C kernels)")
+    s.add_argument("--seed", nargs="+", type=float, default=None, metavar="Q",
+                   help="only the solution nearest to these joint values, within the limits (C kernels; "
+                        "--deg: revolute in degrees)")
+    s.add_argument("--pose", nargs="+", type=float, default=None, metavar="Q", dest="pose_old",
+                   help="deprecated spelling of --q")
+
+    s = command("refine", "refine IK solutions numerically with CasADi (calibrated or general arms), "
+                          "from the nominal closed form or random starts", cmd_refine)
+    robot_argument(s)
+    target_options(s)
+    s.add_argument("--pose", nargs=8, type=float, default=None, metavar="D", dest="pose_old",
+                   help="deprecated spelling of --dq")
+    s.add_argument("--w-pos", type=float, default=1.0, help="weight of the position error (>= 0)")
+    s.add_argument("--w-rot", type=float, default=1.0, help="weight of the rotation error (>= 0)")
+    s.add_argument("--reg", type=float, default=0.0, help="regularisation towards the seed (>= 0)")
+    s.add_argument("--tol", type=float, default=1e-10, help="success tolerance on both errors (m and rad, > 0)")
+    s.add_argument("--max-iter", type=int, default=50, help="iterations per seed (an integer >= 1)")
+
+    emitter("kernels", "emit the FK and IK kernels (pure Python, numpy, C99 header and source; IK for "
+                       "robots with a closed form)", cmd_kernels, quiet=False)
+
+    s = command("export", "write a robot (library, YAML or URDF) as a kinematic URDF or our YAML", cmd_export)
+    robot_argument(s)
+    s.add_argument("--urdf", default=None, metavar="FILE", help="write a kinematic URDF here")
+    s.add_argument("--yaml", default=None, metavar="FILE", help="write a description file (convention urdf) here")
+    json_option(s, "the written files")
+
+    s = command("plot", "draw the arm at --q (stick figure, joint axes, frames), or every IK solution of "
+                        "the pose of --ik-of side by side, as a PNG", cmd_plot)
+    robot_argument(s)
+    q_option(s, "draw the arm at these joint values (rad, prismatic joints m; --deg: revolute in degrees)")
+    s.add_argument("--ik-of", nargs="+", type=float, default=None, metavar="Q",
+                   help="draw every closed-form IK solution of the pose of these joint values")
+    s.add_argument("--out", required=True, metavar="FILE", help="the PNG file to write")
+    deg_option(s, "revolute joint values, in and in the figure's labels")
+    json_option(s, "the drawn frame origins or solutions")
+
+    s = command("generate", "regenerate the outputs of the default robots", cmd_generate)
+    s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)}, then the "
+                                             "spherical-wrist reports and every shipped kernel)")
+    s.add_argument("--out", default="generated", help="output folder")
+
+    s = command("bench", "speed measurements (see docs/benchmarks.md)", cmd_bench)
+    s.add_argument("what", nargs="?", default="derivation", choices=BENCHES,
+                   help="what to measure: derivation time, reference IK and FK, generated kernels against "
+                        "other libraries, the quaternion-vs-matrix chain, refine, load latency")
+    s.add_argument("--robot", default=None, help="the robot to measure (default: the bench's own choice)")
+    s.add_argument("--repeats", type=int, default=5, help="repetitions of each measurement")
+    s.add_argument("--json", default=None, metavar="FILE", help="also write the results as JSON to this file")
+    s.add_argument("--plot", default=None, metavar="FILE", help="chain: write the figure to this file (PNG)")
+    return p
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)         # a usage error exits with 2 (argparse)
     try:
         return args.func(args)
     except DeriveError as exc:
         print(f"dq-derive: error: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
     except OSError as exc:                 # an output folder or file that cannot be written
         print(f"dq-derive: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+        return EXIT_INPUT
