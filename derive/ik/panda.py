@@ -105,6 +105,11 @@ PARAMETERS = ("d1", "d3", "a3", "a4", "d5", "a6", "d7")
 
 TWO_PI = 2.0 * math.pi
 
+#: |cos| within this of 1 in the elbow (eq. E2) or wrist (eq. W2) step is a double root: the two
+#: roots are made equal (acos of rounding noise would split them by up to ~1e-7, and the joints
+#: after them by ~100 times more, too far apart to merge).
+DOUBLE_ROOT = 1e-13
+
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
 
@@ -324,7 +329,7 @@ def elbow(geo: PandaGeometry, v):
     r = math.hypot(a, b)
     c = k / r
     bad = np.abs(c) > 1.0 + REACH_TOL
-    ang = np.arccos(np.clip(c, -1.0, 1.0))
+    ang = np.where(np.abs(c) > 1.0 - DOUBLE_ROOT, np.where(c > 0, 0.0, np.pi), np.arccos(np.clip(c, -1.0, 1.0)))
     phi = math.atan2(b, a)
     return np.stack([phi + ang, phi - ang], -1), bad
 
@@ -342,7 +347,7 @@ def wrist6(v, z, q6_free):
     free = rho < SINGULAR_TOL
     c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
     bad = np.where(free, np.abs(z) > SINGULAR_TOL, np.abs(c) > 1.0 + REACH_TOL)
-    ang = np.arccos(np.clip(c, -1.0, 1.0))
+    ang = np.where(np.abs(c) > 1.0 - DOUBLE_ROOT, np.where(c > 0, 0.0, np.pi), np.arccos(np.clip(c, -1.0, 1.0)))
     psi = np.arctan2(v[:, 0], v[:, 1])
     roots = np.stack([psi + ang, psi - ang], -1)
     roots = np.where(free[:, None], q6_free[:, None], roots)
