@@ -254,15 +254,35 @@ def _srs_geometry(robot) -> SRSGeometry:
 # Rotations (batches)
 # --------------------------------------------------------------------------- #
 def _rz(t):
+    t = np.asarray(t, dtype=float)
     c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    m = np.zeros(t.shape + (3, 3))
+    m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1], m[..., 2, 2] = c, -s, s, c, 1.0
+    return m
 
 
 def _ry(t):
+    t = np.asarray(t, dtype=float)
     c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    m = np.zeros(t.shape + (3, 3))
+    m[..., 0, 0], m[..., 0, 2], m[..., 2, 0], m[..., 2, 2], m[..., 1, 1] = c, s, -s, c, 1.0
+    return m
+
+
+def _zyz_matrix(a, b, c):
+    """Rz(a) Ry(b) Rz(c), written out."""
+    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
+    m = np.empty(np.shape(a) + (3, 3))
+    m[..., 0, 0] = ca * cb * cc - sa * sc
+    m[..., 0, 1] = -ca * cb * sc - sa * cc
+    m[..., 0, 2] = ca * sb
+    m[..., 1, 0] = sa * cb * cc + ca * sc
+    m[..., 1, 1] = -sa * cb * sc + ca * cc
+    m[..., 1, 2] = sa * sb
+    m[..., 2, 0] = -sb * cc
+    m[..., 2, 1] = sb * sc
+    m[..., 2, 2] = cb
+    return m
 
 
 def _skew(x):
@@ -285,9 +305,9 @@ def _forearm(geo: SRSGeometry, t4):
 def _canonical_fk(geo: SRSGeometry, theta):
     """(R, W) of the canonical chain for angles theta (..., 7): the module docstring's product."""
     t = [theta[..., i] for i in range(7)]
-    rs = _rz(t[0]) @ _ry(t[1]) @ _rz(t[2])
+    rs = _zyz_matrix(t[0], t[1], t[2])
     w = (rs @ _forearm(geo, t[3])[..., None])[..., 0]
-    r = rs @ _ry(t[3]) @ _rz(t[4]) @ _ry(t[5]) @ _rz(t[6])
+    r = rs @ _ry(t[3]) @ _zyz_matrix(t[4], t[5], t[6])
     return r, w
 
 
@@ -385,9 +405,11 @@ def _zyz(m, sign, free):
     sing = sb < WRIST_SINGULAR
     b = np.where(sing, np.where(m[..., 2, 2] >= 0, 0.0, np.pi), np.arctan2(sign * sb, m[..., 2, 2]))
     a = np.where(sing, free, np.arctan2(sign * m[..., 1, 2], sign * m[..., 0, 2]))
-    rest = _t(_rz(a) @ _ry(b)) @ m
-    c = np.arctan2(rest[..., 1, 0], rest[..., 0, 0])
-    return a, b, c, sing
+    ca, sa = np.cos(a), np.sin(a)
+    # rows 1 and 0 of Ry(b)^T Rz(a)^T, applied to column 0 of m
+    c = np.arctan2(ca * m[..., 1, 0] - sa * m[..., 0, 0],
+                   np.cos(b) * (ca * m[..., 0, 0] + sa * m[..., 1, 0]) - np.sin(b) * m[..., 2, 0])
+    return a, b, c, np.broadcast_to(sing, np.shape(c))
 
 
 def _free_angles(geo: SRSGeometry, q_ref, n):
@@ -416,43 +438,47 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     t4abs = elbow_angle(c4[ok])
     rc, w, psi = rc[ok], w[ok], psi[ok]
     free1, free5 = _free_angles(geo, None if q_ref is None else q_ref[ok], int(ok.sum()))
-    sp, cp = np.sin(psi)[:, None, None], np.cos(psi)[:, None, None]
-    sub = np.full((len(w), 8, 7), np.nan)
-    sub_sing = np.zeros((len(w), 8), dtype=bool)
-    for i4, g4 in enumerate((1.0, -1.0)):
-        t4 = g4 * t4abs
-        r0 = reference_shoulder(geo, w, t4)
-        a_s, b_s, c_s = arm_angle_matrices(w, r0)
-        rs = a_s * sp + b_s * cp + c_s                       # step 3: R_s(psi)
-        for i2, g2 in enumerate((1.0, -1.0)):
-            t1, t2, t3, sing_s = _zyz(rs, g2, free1)          # step 4: shoulder joints
-            # step 5: the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R (from the
-            # rounded shoulder angles, so that the wrist absorbs their rounding)
-            rw = _t(_rz(t1) @ _ry(t2) @ _rz(t3) @ _ry(t4)) @ rc
-            for i6, g6 in enumerate((1.0, -1.0)):
-                t5, t6, t7, sing_w = _zyz(rw, g6, free5)      # step 6: wrist joints
-                k = 4 * i2 + 2 * i4 + i6
-                theta = np.stack([t1, t2, t3, t4, t5, t6, t7], -1)
-                sub[:, k] = wrap_angle(theta * geo.signs)
-                sub_sing[:, k] = sing_s | sing_w | (np.abs(np.sin(t4)) < WRIST_SINGULAR)
+    sign = np.array([1.0, -1.0])
+    # axes after the pose: elbow i4, shoulder i2, wrist i6 (signs +, -)
+    t4 = t4abs[:, None] * sign                                   # (m, 2): step 1
+    r0 = reference_shoulder(geo, w[:, None], t4)                 # step 2
+    a_s, b_s, c_s = arm_angle_matrices(w[:, None], r0)
+    rs = (a_s * np.sin(psi)[:, None, None, None] + b_s * np.cos(psi)[:, None, None, None]
+          + c_s)                                                 # step 3: R_s(psi), (m, 2, 3, 3)
+    t1, t2, t3, sing_s = _zyz(rs[:, :, None], sign, free1[:, None, None])     # step 4, (m, 2, 2)
+    # step 5: the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R (from the rounded
+    # shoulder angles, so that the wrist absorbs their rounding)
+    rw = _t(_zyz_matrix(t1, t2, t3) @ _ry(t4)[:, :, None]) @ rc[:, None, None]
+    t5, t6, t7, sing_w = _zyz(rw[:, :, :, None], sign, free5[:, None, None, None])  # step 6
+    shape = t5.shape                                             # (m, 2, 2, 2): i4, i2, i6
+    theta = np.stack([np.broadcast_to(t[..., None], shape) for t in (t1, t2, t3)]
+                     + [np.broadcast_to(t4[:, :, None, None], shape), t5, t6, t7], -1)
+    sing = (sing_s[..., None] | sing_w
+            | (np.abs(np.sin(t4)) < WRIST_SINGULAR)[:, :, None, None])
+    # branch k = 4 i2 + 2 i4 + i6
+    sub = wrap_angle(theta * geo.signs).transpose(0, 2, 1, 3, 4).reshape(-1, 8, 7)
+    sub_sing = sing.transpose(0, 2, 1, 3).reshape(-1, 8)
     out[ok] = sub
     singular[ok] = sub_sing
     return out, singular, reason
 
 
 def _finish(geo: SRSGeometry, rc, w, cand, singular, reason) -> SRSSolutions:
-    """Check every candidate by the canonical FK (ACCEPT_TOL), drop branches that repeat an
-    earlier one (within MERGE_TOL: the coinciding branches of the singular sets), and compact."""
+    """Check every candidate by the canonical FK (ACCEPT_TOL), drop a branch that repeats the
+    branch with one sign flipped to + (within MERGE_TOL: the coinciding branches of the
+    singular sets), and compact."""
     n = len(w)
     finite = np.all(np.isfinite(cand), -1)
     r, p = _canonical_fk(geo, np.where(finite[..., None], cand, 0.0) * geo.signs)
     dp = np.linalg.norm(p - w[:, None], axis=-1)
     dr = np.linalg.norm(r - rc[:, None], axis=(-2, -1))   # Frobenius, ~ rotation angle * sqrt 2
     good = finite & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
-    diff = np.abs(wrap_angle(cand[:, :, None, :] - cand[:, None, :, :]))
-    same = np.all(diff < MERGE_TOL, -1) & good[:, None, :]          # [i, j]: j valid and equal to i
-    earlier = np.tril(np.ones((8, 8), dtype=bool), -1)
-    dup = np.any(same & earlier[None], -1)
+    # branches coincide on a singular set by one sign: compare k with k - bit for each bit of k
+    dup = np.zeros_like(good)
+    for bit in (4, 2, 1):
+        hi = np.array([k for k in range(8) if k & bit])
+        d = np.abs(wrap_angle(cand[:, hi] - cand[:, hi - bit]))
+        dup[:, hi] |= np.all(d < MERGE_TOL, -1) & good[:, hi - bit]
     keep = good & ~dup
     order = np.argsort(~keep, axis=1, kind="stable")
     q = np.take_along_axis(cand, order[..., None], 1)
@@ -505,7 +531,7 @@ def arm_angle(robot, q) -> np.ndarray:
     if arr.ndim > 2:
         raise InputError(f"q: expected shape (7,) or (n, 7), got {arr.shape}")
     theta = arr.reshape(-1, 7) * geo.signs
-    rs = _rz(theta[:, 0]) @ _ry(theta[:, 1]) @ _rz(theta[:, 2])
+    rs = _zyz_matrix(theta[:, 0], theta[:, 1], theta[:, 2])
     w = (rs @ _forearm(geo, theta[:, 3])[..., None])[..., 0]
     norm = np.linalg.norm(w, axis=-1)
     if np.any(norm < CLASS_TOL):
@@ -606,7 +632,7 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
                 t3 = root
                 t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
                 sing_s = stretched
-            rs = _rz(t1) @ _ry(t2) @ _rz(t3)
+            rs = _zyz_matrix(t1, t2, t3)
             rw = _t(rs @ _ry(t4)) @ rc
             for i6, g6 in enumerate((1.0, -1.0)):
                 t5, t6, t7, sing_w = _zyz(rw, g6, free5)
