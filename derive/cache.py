@@ -136,21 +136,44 @@ def read_manifest(folder: Path) -> dict:
 
 
 def write_manifest(folder: Path, data: dict) -> Path:
-    """Merge ``data`` into the folder's manifest (sorted keys, so the bytes are stable)."""
+    """Merge ``data`` into the folder's manifest (sorted keys, so the bytes are stable). Safe
+    when several processes write the same folder: the read-merge-write holds a lock on the
+    folder, and the file is replaced atomically from a temporary file of this process."""
     path = Path(folder) / MANIFEST
-    old = read_manifest(folder)
-    if old.get("id") not in (None, data.get("id")):
-        old = {}
-    merged = {**old, **data}
-    for k in ("files",):
-        if k in old and k in data:
-            merged[k] = {**old[k], **data[k]}
-    text = json.dumps(merged, indent=2, sort_keys=True) + "\n"
-    if not path.exists() or path.read_text(encoding="utf-8") != text:
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
+    with _folder_lock(folder):
+        old = read_manifest(folder)
+        if old.get("id") not in (None, data.get("id")):
+            old = {}
+        merged = {**old, **data}
+        for k in ("files",):
+            if k in old and k in data:
+                merged[k] = {**old[k], **data[k]}
+        text = json.dumps(merged, indent=2, sort_keys=True) + "\n"
+        if not path.exists() or path.read_text(encoding="utf-8") != text:
+            tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+            tmp.write_text(text, encoding="utf-8")
+            os.replace(tmp, path)
     return path
+
+
+@contextmanager
+def _folder_lock(folder):
+    """An exclusive advisory lock (flock) on the folder itself, so no lock file is left in it;
+    no lock where flock is not available."""
+    try:
+        import fcntl
+        fd = os.open(folder, os.O_RDONLY)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+    finally:
+        os.close(fd)          # closing the descriptor releases the lock
 
 
 def claim_folder(folder, robot_id: str, name: str, force: bool = False) -> None:

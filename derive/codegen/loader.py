@@ -147,12 +147,16 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool):
         if compiler is None:
             return None
         lib.parent.mkdir(parents=True, exist_ok=True)
+        # this process's own source and output names, renamed into place when built: another
+        # process building the same module at the same time never sees a partial file
         src = lib.with_suffix(".c")
-        src.write_text(text, encoding="utf-8")
+        src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
+        src_tmp.write_text(text, encoding="utf-8")
         tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
         res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
-                              f"-I{np.get_include()}", "-o", str(tmp), str(src), "-lm"],
+                              f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],
                              capture_output=True, text=True)
+        os.replace(src_tmp, src)
         if res.returncode != 0:
             step(f"the CPython extension of the C kernels did not build (ctypes instead):\n{res.stderr[-800:]}")
             return None
