@@ -444,8 +444,8 @@ def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 2000
     Up to 8 solutions per pose, not filtered by joint limits (:func:`within_limits`), q1..q6
     wrapped to (-pi, pi]. ``check``: keep only candidates whose reference FK reproduces the
     pose within ACCEPT_TOL (most of the run time; without it every branch that the steps
-    reach is returned, for callers that check themselves). Returns :class:`PandaSolutions` (q (n, 8, 7), counts, branches,
-    singular, reasons); one pose (8,) gives n = 1.
+    reach is returned, for callers that check themselves). Returns :class:`PandaSolutions`
+    (q (n, 8, 7), counts, branches, singular, reasons); one pose (8,) gives n = 1.
     """
     robot = load_robot(robot)
     geo = panda_geometry(robot)
