@@ -176,7 +176,7 @@ def _target(robot, args, what: str):
     if args.q is not None:
         q = _joints_in(robot, args.q, "--q", args.deg)
         pose = reference.fk(robot, q)
-        return pose, q, {"q": _jlist(_joints_out(robot, q, args.deg))}
+        return pose, q, {"q": _jlist(args.q)}
     if args.dq is not None:
         pose = dq.check_unit(np.array(args.dq, dtype=float), "--dq")
         return pose, None, {"dq": _jlist(pose)}
@@ -280,7 +280,7 @@ def cmd_fk(args) -> int:
     pose = reference.fk(robot, q, args.end)
     if args.json:
         data = {"robot": robot.name, "end": end, "joints": _joint_meta(robot, args.deg),
-                "q": _jlist(_joints_out(robot, q, args.deg)), **_pose_dict(pose, args.deg)}
+                "q": _jlist(values), **_pose_dict(pose, args.deg)}          # q as given
         if args.matrix:
             data["matrix"] = [_jlist(row) for row in reference.fk_matrix(robot, q, args.end)]
         _print_json(data)
@@ -416,16 +416,19 @@ def cmd_refine(args) -> int:
                      "distinct_solutions": len(res.solutions),
                      "results": [{"seed": r.seed, "success": bool(r.success), "iterations": int(r.iterations),
                                   "position_error": {"value": _jnum(r.position_error), "unit": "m"},
-                                  "rotation_error": {"value": _jnum(r.rotation_error), "unit": "rad"},
+                                  "rotation_error": {"value": _jnum(math.degrees(r.rotation_error) if deg
+                                                                    else r.rotation_error),
+                                                     "unit": _angle_unit(deg)},
                                   "solver": r.solver, "q": _jlist(_joints_out(robot, r.q, deg)),
                                   "note": r.note} for r in res]})
         return EXIT_OK if res.success else EXIT_NO_SOLUTION
     print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
     print(f"{len(res)} seed(s), {len(res.solutions)} distinct exact solution(s) in {dt * 1e3:.1f} ms")
-    lead = [("seed", "", 4), ("ok", "", 3), ("iter", "", 4), ("|dp|", "(m)", 8), ("angle", "(rad)", 8),
-            ("solver", "", 13)]
+    rot = math.degrees if deg else float
+    lead = [("seed", "", 4), ("ok", "", 3), ("iter", "", 4), ("|dp|", "(m)", 8),
+            ("angle", f"({_angle_unit(deg)})", 8), ("solver", "", 13)]
     rows = [([str(r.seed), "yes" if r.success else "no", str(r.iterations), f"{r.position_error:.1e}",
-              f"{r.rotation_error:.1e}", r.solver], r.q, "") for r in res]
+              f"{rot(r.rotation_error):.1e}", r.solver], r.q, "") for r in res]
     for line in _table(robot, rows, deg, lead):
         print(line)
     for r in res:
@@ -433,7 +436,7 @@ def cmd_refine(args) -> int:
             print(f"seed {r.seed}: {r.note}")
     if not res.success:
         print(f"no exact solution: best residual {res.best.position_error:.3e} m, "
-              f"{res.best.rotation_error:.3e} rad")
+              f"{rot(res.best.rotation_error):.3e} {_angle_unit(deg)}")
     return EXIT_OK if res.success else EXIT_NO_SOLUTION
 
 
@@ -458,7 +461,7 @@ def cmd_plot(args) -> int:
     q = _joints_in(robot, args.q if args.q is not None else args.ik_of,
                    "--q" if args.q is not None else "--ik-of", args.deg)
     data = {"robot": robot.name, "out": str(args.out), "joints": _joint_meta(robot, args.deg),
-            "q": _jlist(_joints_out(robot, q, args.deg)), "frames": list(robot.frame_names)}
+            "q": _jlist(args.q if args.q is not None else args.ik_of), "frames": list(robot.frame_names)}
     if args.q is not None:
         pos = arm_figure(robot, q, args.out, deg=args.deg)
         data["frame_origins"] = {"value": [_jlist(p) for p in pos], "unit": "m"}

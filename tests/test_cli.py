@@ -289,3 +289,15 @@ def test_joint_axes_are_the_motion_axes(tmp_path):
         after = reference.fk_matrix("ur5", q + dq_)[:3, 3]
         expected = 1e-6 * np.cross(dirs[i], before - points[i])
         assert np.allclose(after - before, expected, atol=1e-11)
+
+
+def test_refine_unreachable_exits_1(capsys):
+    argv = ["refine", "ur5", "--xyz", "3", "0", "0", "--rpy", "0", "0", "0", "--max-iter", "5"]
+    assert main(argv) == 1
+    out = capsys.readouterr().out
+    assert "0 distinct exact solution(s)" in out and "no exact solution: best residual" in out
+    assert main(argv + ["--json"]) == 1
+    data = json.loads(capsys.readouterr().out)
+    # 3 m is beyond ur5's reach (a2 + a3 + d4 + d6 < 1.1 m): every residual over 1.5 m
+    assert data["success"] is False and data["distinct_solutions"] == 0
+    assert all(r["position_error"]["value"] > 1.5 for r in data["results"])
