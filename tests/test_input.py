@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from derive import reference
+from derive.codegen.loader import kernels
 from derive.errors import InputError, as_finite_array, finite_number, whole_number
 from derive.kinematics import pose as P
 from derive.refinement.solver import refine
@@ -128,3 +129,21 @@ def test_refine_checks_every_option(options, message):
 def test_refine_checks_the_pose():
     with pytest.raises(InputError, match="^pose: expected real numbers, got an array of dtype complex"):
         refine("ur5", POSE.astype(complex))
+
+
+@pytest.mark.parametrize("backend", ["python", "numpy", "c"])
+@pytest.mark.parametrize("value, message", [
+    ([0.1, True, 0, 0, 0, 0], "Q: expected a real number, got bool"),
+    ([0.1, 1j, 0, 0, 0, 0], "Q: expected a real number, got complex"),
+    (["0.1"] * 6, "Q: expected a real number, got str"),
+    (np.ones(6, dtype=bool), "Q: expected real numbers, got an array of dtype"),
+])
+def test_kernel_backends_refuse_alike(backend, value, message):
+    """The Python and numpy kernels refuse what the C extension refuses, with the same message."""
+    k = kernels("ur5", backend)
+    with pytest.raises(InputError) as info:
+        k.fk(value)
+    assert str(info.value).startswith(message)
+    with pytest.raises(InputError) as info:
+        k.ik(np.array(POSE, dtype=complex))
+    assert str(info.value).startswith("pose: expected real numbers, got an array of dtype")
