@@ -183,6 +183,17 @@ def test_round_trip_10k_configurations(name):
     assert np.all(cl <= part.counts)         # every limit range is narrower than 2 pi
 
 
+def test_unchecked_candidates_are_the_checked_solutions_on_regular_poses(rng):
+    """check=False skips the FK filter; away from the singular sets nothing is filtered, so the
+    results are the same."""
+    robot = derive.load_robot("panda")
+    q = _configs("panda", 500, rng)
+    poses = reference.fk(robot, q)
+    a, b = P.ik_q7(robot, poses, q[:, 6]), P.ik_q7(robot, poses, q[:, 6], check=False)
+    assert np.array_equal(a.q, b.q, equal_nan=True) and np.array_equal(a.counts, b.counts)
+    assert np.array_equal(a.branches, b.branches)
+
+
 def test_a_urdf_of_the_panda_with_the_hand_frame_has_the_closed_form(rng):
     """Another end frame (the hand, Rz(-pi/4) after the flange) goes into the tool transform."""
     robot = derive.load_robot(_erd_panda(), base="panda_link0", tip="panda_hand")

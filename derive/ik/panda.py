@@ -47,7 +47,8 @@ pose (R7, p):
 5. ``wrist5`` (q5): rows 1 and 2 of E1 = W1: X c5 = vx c6 - vy s6, X s5 = vz (eq. W3),
    q5 = atan2(sgn(X) vz, sgn(X) (vx c6 - vy s6)).
 6. ``shoulder`` (q1, q2, q3): R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
-   (eq. S1), and R3 = Rz(q1) Ry(q2) Rz(q3) (eq. S2: Rx(-pi/2) Rz(q2) Rx(pi/2) = Ry(q2)), a ZYZ
+   = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (eq. S1), and R3 = Rz(q1) Ry(q2) Rz(q3) (eq. S2; both
+   by Rx(-pi/2) Rz(t) Rx(pi/2) = Ry(t)), a ZYZ
    Euler decomposition: q2 = atan2(+-hypot(M13, M23), M33), q1 = atan2(+-M23, +-M13),
    q3 = atan2(+-M32, -+M31).
 
@@ -112,6 +113,8 @@ DOUBLE_ROOT = 1e-13
 
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
+_PAIR_I, _PAIR_J = np.triu_indices(BRANCHES, 1)
+_LATER = np.eye(BRANCHES, dtype=np.int8)[_PAIR_J]           # (28, 8): pair -> its later branch
 
 REASON_OK = ""
 REASON_ELBOW = ("unreachable: the distance from the shoulder to the point O6 (fixed by the pose "
@@ -302,9 +305,8 @@ def _rz(t):
     return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
 
 
-#: Rx(pi/2) and Rx(-pi/2)
-_RX_P = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
-_RX_M = _RX_P.T
+#: Rx(-pi/2)
+_RX_M = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
 
 def frame6(geo: PandaGeometry, r7, p, q7):
@@ -363,9 +365,16 @@ def wrist5(v, x, q6, q5_free):
     return np.where(free, q5_free, q5), free
 
 
+def _ry(t):
+    c, s = np.cos(t), np.sin(t)
+    z, o = np.zeros_like(t), np.ones_like(t)
+    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+
+
 def frame3(r6, q4, q5, q6):
-    """Step 6, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)."""
-    return r6 @ _rz(-q6) @ _RX_M @ _rz(-q5) @ _RX_P @ _rz(-q4) @ _RX_M
+    """Step 6, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
+    = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (Rx(-pi/2) Rz(t) Rx(pi/2) = Ry(t))."""
+    return r6 @ (_rz(-q6) @ _ry(-q5) @ _rz(-q4)) @ _RX_M
 
 
 def shoulder(m, sign2, q1_free):
@@ -463,7 +472,6 @@ def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 2000
     sing_all = np.zeros((n, BRANCHES), dtype=bool)
     counts = np.zeros(n, dtype=np.int64)
     reasons = [REASON_OK] * n
-    earlier = np.tril(np.ones((BRANCHES, BRANCHES), dtype=bool), -1)
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
         m = e - s
@@ -479,9 +487,10 @@ def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 2000
             ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
         ok = ok.reshape(m, BRANCHES)
         cand = np.where(ok[..., None], cand, np.nan)
-        diff = cand[:, :, None, :] - cand[:, None, :, :]
-        diff = np.abs(diff - TWO_PI * np.round(diff / TWO_PI))          # modulo 2 pi
-        dup = np.any(np.all(diff < MERGE_TOL, axis=-1) & earlier[None], axis=-1)
+        # pairs (i < j) closer than MERGE_TOL in q1..q6 (wrapped, so |a - b| < 2 pi) modulo 2 pi
+        diff = np.abs(cand[:, _PAIR_I, :6] - cand[:, _PAIR_J, :6])
+        close = np.all(np.minimum(diff, TWO_PI - diff) < MERGE_TOL, axis=-1)
+        dup = (close.astype(np.int8) @ _LATER) > 0          # the later one of a close pair
         keep = ok & ~dup
         order = np.argsort(~keep, axis=1, kind="stable")
         kept = np.take_along_axis(keep, order, axis=1)
