@@ -565,42 +565,80 @@ def _within(limits, q):
 # --------------------------------------------------------------------------- #
 # One joint given instead of psi
 # --------------------------------------------------------------------------- #
-JOINTS_GIVEN = (1, 3)
+JOINTS_GIVEN = (1, 3, 5, 7)
+#: Ry(pi): turns the reversed chain (wrist to shoulder) into canonical form (see _reverse).
+_RY_PI = np.diag([-1.0, 1.0, -1.0])
 
 
 def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
-    """All solutions (up to 8) of poses (8,) or (n, 8) with joint ``joint`` (1-based; 1 or 3)
-    held at ``value`` (rad, a number or one per pose): the remaining 6R problem in closed form.
-
-    Steps: the wrist centre and the elbow as in :func:`ik_psi`; then the shoulder carries
-    v(t4) onto W with the given joint (Paden-Kahan subproblem 2 about two of the axes z, y, z):
-    - q3 given: Rz(t1) Ry(t2) w = W with w = Rz(t3) v(t4): t2 = +-acos(W_z / r) - atan2(w_x, w_z),
-      r = hypot(w_x, w_z), then t1 = atan2(W_y, W_x) - atan2(u_y, u_x), u = Ry(t2) w (t1 from
-      q_ref or 0 where W lies on axis 1);
-    - q1 given: Ry(t2) Rz(t3) v = y with y = Rz(t1)^T W: sin t3 = y_y / v_x (two roots), then
-      t2 = atan2(v_z, cos t3 v_x) - atan2(y_z, y_x) (t3 from q_ref or 0 where the elbow is
-      stretched, v_x = 0);
-    and the wrist joints by the ZYZ decomposition of (R_s Ry(t4))^T R. Branch id
-    k = 4 i + 2 i4 + i6, i the index of the subproblem's root (+ first)."""
+    """All solutions (up to 8) of poses (8,) or (n, 8) with joint ``joint`` (1-based: 1, 3, 5
+    or 7) held at ``value`` (rad, a number or one per pose): the remaining 6R problem in closed
+    form (:func:`joint_given_steps`). Joints 5 and 7 are joints 3 and 1 of the reversed chain
+    (:func:`_reverse`). ``q_ref`` supplies the joint that a singular set leaves free (else 0).
+    Branch id k = 4 i + 2 i4 + ie: i the root of the shoulder (wrist) subproblem, i4 the elbow
+    sign, ie the sign of the Euler decomposition solved last (+ first)."""
     geo = srs_geometry(robot)
     if isinstance(joint, bool) or not isinstance(joint, (int, np.integer)) or joint not in JOINTS_GIVEN:
-        raise InputError(f"joint: ik_joint solves with joint 1 or 3 given (1-based), got {joint!r}")
+        raise InputError(f"joint: ik_joint solves with joint 1, 3, 5 or 7 given (1-based), got {joint!r}")
     P, single = _poses(poses)
     n = len(P)
     val = _per_pose(value, "value", n)
     qr = _q_ref(q_ref, n)
     rc, w = _into_canonical(geo, P)
-    cand = np.full((n, 8, 7), np.nan)
-    singular = np.zeros((n, 8), dtype=bool)
     reason = np.full(n, "", dtype=object)
     c4 = elbow_cosine(geo, w)
     bad = np.abs(c4) > 1.0 + REACH_TOL
     reason[bad] = REASON_REACH
-    t4abs = elbow_angle(c4)
     tg = geo.signs[joint - 1] * val
-    free1, free5 = _free_angles(geo, qr, n)
-    free3 = np.zeros(n) if qr is None else geo.signs[2] * qr[:, 2]
-    any_root = np.zeros(n, dtype=bool)
+    fr = np.zeros((n, 7)) if qr is None else qr * geo.signs      # canonical free values
+    if joint in (1, 3):
+        theta, singular, reach = joint_given_steps(geo, rc, w, joint, tg, fr[:, 0], fr[:, 2], fr[:, 4])
+    else:
+        rgeo, rrc, rw = _reverse(geo, rc, w)
+        phi, singular, reach = joint_given_steps(rgeo, rrc, rw, 8 - joint, tg,
+                                                 fr[:, 6], fr[:, 4], fr[:, 2])
+        theta = phi[..., ::-1] * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+        flip = np.array([k ^ 2 for k in range(8)])          # the elbow sign turns: t4 = -phi4
+        theta, singular = theta[:, flip], singular[:, flip]
+    cand = np.where(bad[:, None, None], np.nan, wrap_angle(theta * geo.signs))
+    singular = singular & ~bad[:, None]
+    reason[~np.any(reach, 1) & (reason == "")] = REASON_JOINT
+    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+
+
+def _reverse(geo: SRSGeometry, rc, w):
+    """The chain read from the wrist to the shoulder, in canonical form: with phi = (t7, -t6,
+    t5, -t4, t3, -t2, t1) and d_se, d_ew swapped, Ry(pi) R^T Ry(pi) = Rz(phi1) Ry(phi2) ...
+    Rz(phi7) and Ry(pi) (-R^T W) = Rz(phi1) Ry(phi2) Rz(phi3) v'(phi4) (conjugation by Ry(pi)
+    negates z-rotations and keeps y-rotations)."""
+    from_end = _t(rc)
+    rgeo = SRSGeometry(geo.robot, 0.0, geo.d_ew, geo.d_se, 0.0, geo.frame, geo.shoulder,
+                       geo.tool_rotation, geo.tool_translation, geo.signs, geo.limits, geo.error)
+    rrc = _RY_PI @ from_end @ _RY_PI
+    rw = -(_RY_PI @ (from_end @ w[..., None]))[..., 0]
+    return rgeo, rrc, rw
+
+
+def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, free5):
+    """The closed form with canonical joint t1 (``joint`` 1) or t3 (``joint`` 3) given: canonical
+    angles (n, 8, 7) (NaN where a root does not exist), singular (n, 8), root exists (n, 8).
+
+    Steps: the elbow as in :func:`ik_psi` (two signs); then the shoulder carries v(t4) onto W
+    with the given joint (Paden-Kahan subproblem 2 about two of the axes z, y, z):
+    - t3 given: Rz(t1) Ry(t2) u = W with u = Rz(t3) v(t4): t2 = +-acos(W_z / r) - atan2(u_x, u_z),
+      r = hypot(u_x, u_z); t1 = atan2(W_y, W_x) - atan2(u'_y, u'_x), u' = Ry(t2) u (t1 free
+      where W lies on axis 1);
+    - t1 given: Ry(t2) Rz(t3) v = y with y = Rz(t1)^T W: sin t3 = y_y / v_x (two roots), then
+      t2 = atan2(v_z, cos t3 v_x) - atan2(y_z, y_x) (t3 free where the elbow is stretched,
+      v_x = 0);
+    and the wrist joints by the ZYZ decomposition of (R_s Ry(t4))^T R."""
+    n = len(w)
+    theta = np.full((n, 8, 7), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    reach_all = np.zeros((n, 8), dtype=bool)
+    c4 = elbow_cosine(geo, w)
+    ok = np.abs(c4) <= 1.0 + REACH_TOL
+    t4abs = elbow_angle(c4)
     for i4, g4 in enumerate((1.0, -1.0)):
         t4 = g4 * t4abs
         v = _forearm(geo, t4)
@@ -622,6 +660,7 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
             reach = np.where(stretched, np.abs(yv[:, 1]) <= REACH_TOL, np.abs(s3) <= 1.0 + REACH_TOL)
             a3 = np.arcsin(np.clip(s3, -1, 1))
             roots = [np.where(stretched, free3, a3), np.where(stretched, free3, math.pi - a3)]
+        reach = reach & ok
         for i, root in enumerate(roots):
             if joint == 3:
                 t2 = root
@@ -632,18 +671,16 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
                 t3 = root
                 t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
                 sing_s = stretched
-            rs = _zyz_matrix(t1, t2, t3)
-            rw = _t(rs @ _ry(t4)) @ rc
+            t1b, t3b = np.broadcast_to(t1, (n,)), np.broadcast_to(t3, (n,))
+            rw = _t(_zyz_matrix(t1b, t2, t3b) @ _ry(t4)) @ rc
             for i6, g6 in enumerate((1.0, -1.0)):
                 t5, t6, t7, sing_w = _zyz(rw, g6, free5)
                 k = 4 * i + 2 * i4 + i6
-                theta = np.stack([t1, t2, t3, t4, t5, t6, t7], -1)
-                rows = reach & ~bad
-                cand[rows, k] = wrap_angle(theta * geo.signs)[rows]
-                singular[:, k] = rows & (sing_s | sing_w)
-            any_root |= reach & ~bad
-    reason[~any_root & (reason == "")] = REASON_JOINT
-    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+                th = np.stack([t1b, t2, t3b, t4, t5, t6, t7], -1)
+                theta[reach, k] = th[reach]
+                singular[:, k] = reach & (sing_s | sing_w)
+                reach_all[:, k] = reach
+    return theta, singular, reach_all
 
 
 # --------------------------------------------------------------------------- #
