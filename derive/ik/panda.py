@@ -122,8 +122,7 @@ REASON_ELBOW = ("unreachable: the distance from the shoulder to the point O6 (fi
 REASON_WRIST = ("unreachable for this q7: no q6 turns the wrist so that the shoulder lies at the "
                 "height Z(q4) along axis 5 that the elbow needs")
 REASON_NO_CANDIDATE = "unreachable: no candidate reproduces the pose"
-REASON_FREE_Q6 = ("unreachable for this q7: the shoulder lies on axis 6 but not at the height "
-                  "the elbow needs")
+
 
 # reason codes per candidate
 _OK, _CODE_ELBOW, _CODE_WRIST = 0, 1, 2
