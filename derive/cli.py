@@ -19,8 +19,8 @@ Exit codes:
   0  success
   1  no solution: the target is not reachable (ik), or refine found no exact solution
   2  usage or input error: unknown option or robot, malformed number, wrong count of joint
-     values, non-unit quaternion, file that cannot be read or written; one line on stderr,
-     never a traceback
+     values, non-unit quaternion, a robot without a closed-form IK (ik, plot --ik-of: use
+     refine), file that cannot be read or written; one line on stderr, never a traceback
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ import argparse
 import json
 import math
 import sys
+import textwrap
 import time
 
 import numpy as np
@@ -556,7 +557,8 @@ def build_parser() -> argparse.ArgumentParser:
                            help="one of the subcommands below; dq-derive COMMAND --help for its options")
 
     def command(name, help_text, func, description=None):
-        s = sub.add_parser(name, help=help_text, description=description or help_text[:1].upper() + help_text[1:] + ".",
+        text = description or help_text[:1].upper() + help_text[1:] + "."
+        s = sub.add_parser(name, help=help_text, description=textwrap.fill(text, 92),
                            epilog=_EXIT_EPILOG, formatter_class=_Formatter)
         s.set_defaults(func=func)
         return s
@@ -619,7 +621,8 @@ def build_parser() -> argparse.ArgumentParser:
         """A subcommand that writes files for one robot into --out."""
         s = command(name, help_text, func)
         robot_argument(s)
-        s.add_argument("--out", default="generated", help="output folder")
+        s.add_argument("--out", default="generated", metavar="DIR",
+                       help="output folder" + (" of the typeset IK (without a target)" if name == "ik" else ""))
         if quiet:
             s.add_argument("--quiet", action="store_true", help="no progress output")
         json_option(s, "the results (ik with a target: the solutions; otherwise the written files)"
@@ -669,7 +672,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--ik-of", nargs="+", type=float, default=None, metavar="Q",
                    help="draw every closed-form IK solution of the pose of these joint values")
     s.add_argument("--out", required=True, metavar="FILE", help="the PNG file to write")
-    deg_option(s, "revolute joint values, in and in the figure's labels")
+    deg_option(s, "revolute joint values (--q, --ik-of) and in the figure's labels")
     json_option(s, "the drawn frame origins or solutions")
 
     s = command("generate", "regenerate the outputs of the default robots", cmd_generate)
