@@ -71,7 +71,7 @@ midpoint.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -612,8 +612,7 @@ def _reverse(geo: SRSGeometry, rc, w):
     Rz(phi7) and Ry(pi) (-R^T W) = Rz(phi1) Ry(phi2) Rz(phi3) v'(phi4) (conjugation by Ry(pi)
     negates z-rotations and keeps y-rotations)."""
     from_end = _t(rc)
-    rgeo = SRSGeometry(geo.robot, 0.0, geo.d_ew, geo.d_se, 0.0, geo.frame, geo.shoulder,
-                       geo.tool_rotation, geo.tool_translation, geo.signs, geo.limits, geo.error)
+    rgeo = replace(geo, d_se=geo.d_ew, d_ew=geo.d_se)       # only the lengths are used
     rrc = _RY_PI @ from_end @ _RY_PI
     rw = -(_RY_PI @ (from_end @ w[..., None]))[..., 0]
     return rgeo, rrc, rw
