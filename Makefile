@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV   := .venv
 VPY    := $(VENV)/bin/python
 
-.PHONY: generate test clean
+.PHONY: generate test docs figures clean
 
 $(VENV)/.stamp-base: pyproject.toml
 	@test -x $(VPY) || $(PYTHON) -m venv $(VENV)
@@ -21,6 +21,18 @@ generate: $(VENV)/.stamp-base
 
 test: $(VENV)/.stamp-test
 	$(VPY) -m pytest -q
+
+$(VENV)/.stamp-docs: $(VENV)/.stamp-base
+	$(VPY) -m pip install --quiet -e '.[docs]'
+	@touch $@
+
+# the documentation site (mkdocs.yml) into site/, warnings as errors; no network needed
+docs: $(VENV)/.stamp-docs
+	$(VPY) -m mkdocs build --strict --site-dir site
+
+# the convention figures of docs/img/ (frames, DH parameters), committed
+figures: $(VENV)/.stamp-base
+	$(VPY) -m derive.reports.diagrams --out docs/img
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis
