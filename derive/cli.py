@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import textwrap
 import time
@@ -83,9 +84,10 @@ def _fmt(values, width=10, prec=6) -> str:
     return " ".join(f"{_clean(v, prec):{width}.{prec}f}" for v in np.asarray(values, dtype=float).ravel())
 
 
-def _jnum(x) -> float:
-    """A float for JSON: -0.0 becomes 0.0."""
-    return float(x) + 0.0
+def _jnum(x) -> float | None:
+    """A float for JSON: -0.0 becomes 0.0; NaN and inf (which JSON lacks) become null."""
+    x = float(x)
+    return x + 0.0 if math.isfinite(x) else None
 
 
 def _jlist(values) -> list:
@@ -219,7 +221,7 @@ def _pose_lines(pose, deg: bool) -> list[str]:
 def _target_text(robot, pose, q, deg: bool) -> str:
     t, rpy = to_position_rpy(pose)
     rpy = np.degrees(rpy) if deg else rpy
-    text = f"position {_fmt(t, 0, 5).strip()} m, rpy {_fmt(rpy, 0, 3).strip()} {_angle_unit(deg)}"
+    text = f"position {_fmt(t, 0, 5).strip()} m, rpy {_fmt(rpy, 0, 3 if deg else 5).strip()} {_angle_unit(deg)}"
     if q is not None:
         text += f" (the pose of q = {_fmt(_joints_out(robot, q, deg), 0, 4).strip()})"
     return text
@@ -699,6 +701,9 @@ def main(argv=None) -> int:
     except DeriveError as exc:
         print(f"dq-derive: error: {exc}", file=sys.stderr)
         return EXIT_INPUT
+    except BrokenPipeError:                # stdout closed early (dq-derive robots | head): not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_OK
     except OSError as exc:                 # an output folder or file that cannot be written
         print(f"dq-derive: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return EXIT_INPUT
