@@ -109,6 +109,12 @@ def test_robot_file_numbers_and_fk_equal_pinocchio_of_the_vendor_urdf(name):
     assert np.allclose(model.upperPositionLimit, robot.limits[:, 1], atol=1e-12)
 
 
+def test_the_library_s_srs_arms_are_the_iiwas_and_classify_agrees():
+    found = [n for n in derive.list_robots() if srs.is_srs(n)]
+    assert found == ["iiwa14", "iiwa7"]
+    assert all(classify(n).cls == "SRS" for n in found)
+
+
 def test_srs_geometry_of_the_iiwa():
     g = srs.srs_geometry("iiwa14")
     assert (g.d_bs, g.d_se, g.d_ew, g.d_wf) == pytest.approx(PUBLISHED["iiwa14"], abs=1e-12)

@@ -3,12 +3,13 @@ wrist) with the arm angle psi as the free parameter: the KUKA LBR iiwa class.
 
 References: M. Shimizu, H. Kakuya, W.-K. Yoon, K. Kitagaki, K. Kosuge, "Analytical inverse
 kinematic computation for 7-DOF redundant manipulators with joint limits and its application
-to redundancy resolution", IEEE T-RO 24(5), 2008 ("Shimizu" below; sec. III the parameterised
-closed form, sec. IV the joint limits as functions of psi); C. Faria, F. Ferreira, W. Erlhagen,
+to redundancy resolution", IEEE T-RO 24(5), 2008 ("Shimizu" below; sec. III, the closed form
+parameterised by the arm angle and the joints as tangent- or cosine-type functions of it, and
+the feasible arm angles under the joint limits); C. Faria, F. Ferreira, W. Erlhagen,
 S. Monteiro, E. Bicho, "Position-based kinematics for 7-DoF serial manipulators with global
 configuration control, joint limit and singularity avoidance", Mechanism and Machine Theory
-121, 2018 ("Faria" below; sec. 3 the same construction for the iiwa, its configuration flags
-GC2, GC4, GC6).
+121, 2018 ("Faria" below; the same construction for the iiwa, with the configuration flags
+GC2, GC4, GC6). The steps below cite the construction, not equation numbers.
 
 The class
 ---------
@@ -34,7 +35,7 @@ R0 = Rz(a) Ry(b - phi), a = atan2(x_y, x_x), b = atan2(hypot(x_x, x_y), x_z),
 phi = atan2(v_x, v_z) (its other decomposition, a + pi and -b - phi, is the same rotation). With
 t3 = 0 the whole arm lies in the plane spanned by axis 1 and x: the **reference plane**. Every
 shoulder rotation that carries v(t4) onto x is R_s = R_psi R0, R_psi the rotation by psi about
-x/|x| (right hand); psi is the arm angle (Shimizu sec. III-B). Geometrically psi turns the arm
+x/|x| (right hand); psi is the arm angle (Shimizu sec. III). Geometrically psi turns the arm
 plane (S, E, W) out of the reference plane about the shoulder-wrist line; psi = 0 is the arm in
 the reference plane with its elbow on the side that t4's sign gives (so the elbow of the other
 elbow branch at psi sits where this branch's elbow sits at psi + pi).
@@ -58,9 +59,9 @@ taken from ``q_ref``, else q1 = 0) and the wrist aligned (sin t6 = 0: q5 from ``
 Feasible intervals
 ------------------
 R_s(psi) = A_s sin psi + B_s cos psi + C_s and R_w(psi) = A_w sin psi + B_w cos psi + C_w
-(Shimizu sec. III-C), so each joint is of tangent type, t = atan2(n(psi), d(psi)) with n, d of
+(Shimizu sec. III), so each joint is of tangent type, t = atan2(n(psi), d(psi)) with n, d of
 the form a sin psi + b cos psi + c (joints 1, 3, 5, 7), or of cosine type, t = +-acos(a sin psi +
-b cos psi + c) (joints 2, 6); t4 does not depend on psi (Shimizu sec. IV). A joint reaches a
+b cos psi + c) (joints 2, 6); t4 does not depend on psi (Shimizu sec. III). A joint reaches a
 limit L where n cos L - d sin L = 0 (tangent type) or the cosine equals cos L (cosine type):
 equations a sin psi + b cos psi + c = 0 with closed-form roots. :func:`psi_intervals` takes
 those roots (and the roots of n and d, where a tangent-type joint may jump) as the only places
@@ -343,7 +344,7 @@ def _q_ref(q_ref, n: int) -> np.ndarray | None:
 
 
 def _into_canonical(geo: SRSGeometry, poses: np.ndarray):
-    """Step 0, the wrist centre (Shimizu sec. III-A): the pose's rotation and wrist centre in
+    """Step 0, the wrist centre (Shimizu sec. III): the pose's rotation and wrist centre in
     the canonical frame, R_c = C^T R T_R^T and W = C^T (p - S) - R_c t_T."""
     r = quat._to_matrix(poses[:, :4])
     p = dq._translation(poses)
@@ -356,7 +357,7 @@ def _into_canonical(geo: SRSGeometry, poses: np.ndarray):
 # The named closed-form steps
 # --------------------------------------------------------------------------- #
 def elbow_cosine(geo: SRSGeometry, w):
-    """Step 1, the elbow (Shimizu sec. III-A, Faria eq. for theta4): the triangle S, E, W gives
+    """Step 1, the elbow (Shimizu sec. III; Faria, the elbow angle): the triangle S, E, W gives
     cos t4 = (|W|^2 - d_se^2 - d_ew^2) / (2 d_se d_ew), independent of psi."""
     return (np.sum(w * w, -1) - geo.d_se ** 2 - geo.d_ew ** 2) / (2.0 * geo.d_se * geo.d_ew)
 
@@ -371,7 +372,7 @@ def elbow_angle(c4):
 
 
 def reference_shoulder(geo: SRSGeometry, w, t4):
-    """Step 2, the reference configuration (Shimizu sec. III-B, t3 = 0): R0 = Rz(a) Ry(b - phi)
+    """Step 2, the reference configuration (Shimizu sec. III, t3 = 0): R0 = Rz(a) Ry(b - phi)
     with a = atan2(W_y, W_x) (a = 0 when W is on axis 1), b = atan2(hypot(W_x, W_y), W_z),
     phi = atan2(v_x, v_z), v = v(t4); R0 v(t4) = W."""
     rho = np.hypot(w[..., 0], w[..., 1])
@@ -382,7 +383,7 @@ def reference_shoulder(geo: SRSGeometry, w, t4):
 
 
 def arm_angle_matrices(w, r0):
-    """Step 3, the shoulder as a function of psi (Shimizu sec. III-C): with x = W/|W| and
+    """Step 3, the shoulder as a function of psi (Shimizu sec. III): with x = W/|W| and
     R_psi = I + sin psi [x]x + (1 - cos psi) [x]x^2 (Rodrigues),
     R_s = R_psi R0 = A_s sin psi + B_s cos psi + C_s,
     A_s = [x]x R0, B_s = -[x]x^2 R0, C_s = x x^T R0."""
@@ -396,7 +397,7 @@ def arm_angle_matrices(w, r0):
 
 def _zyz(m, sign, free):
     """ZYZ Euler angles of m = Rz(a) Ry(b) Rz(c) for the branch sign(sin b) = ``sign``
-    (Shimizu sec. III-C, Faria sec. 3): b = atan2(sign hypot(m02, m12), m22),
+    (Shimizu sec. III; Faria, GC2 / GC6): b = atan2(sign hypot(m02, m12), m22),
     a = atan2(sign m12, sign m02), and c from Rz(c) = Ry(b)^T Rz(a)^T m (equal to
     atan2(sign m21, -sign m20), but consistent with the rounded a and b, which keeps the
     product exact near sin b = 0). Where |sin b| < WRIST_SINGULAR only a + c (b = 0) or a - c
@@ -683,7 +684,7 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
 
 
 # --------------------------------------------------------------------------- #
-# Feasible arm angles under the joint limits (Shimizu sec. IV)
+# Feasible arm angles under the joint limits (Shimizu sec. III)
 # --------------------------------------------------------------------------- #
 def _trig_roots(a, b, c) -> list[float]:
     """Roots psi in (-pi, pi] of a sin psi + b cos psi + c = 0: with r = hypot(a, b),
