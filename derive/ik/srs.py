@@ -687,14 +687,14 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
 # Feasible arm angles under the joint limits (Shimizu sec. III)
 # --------------------------------------------------------------------------- #
 def _trig_roots(a, b, c) -> list[float]:
-    """Roots psi in (-pi, pi] of a sin psi + b cos psi + c = 0: with r = hypot(a, b),
+    """Roots psi in [-pi, pi] of a sin psi + b cos psi + c = 0: with r = hypot(a, b),
     r cos(psi - atan2(a, b)) = -c."""
     r = math.hypot(a, b)
     if r < 1e-14 or abs(c) > r:
         return []
     base = math.atan2(a, b)
     d = math.acos(max(-1.0, min(1.0, -c / r)))
-    return [float(wrap_angle(base + d)), float(wrap_angle(base - d))]
+    return [math.remainder(base + d, 2 * math.pi), math.remainder(base - d, 2 * math.pi)]
 
 
 def _breakpoints(geo: SRSGeometry, coeffs, limits) -> list[float]:
