@@ -267,6 +267,8 @@ def test_plot_writes_both_figures(robot, q_deg, tmp_path, capsys):
 def test_figures_draw_the_reference_positions(robot, q, tmp_path):
     drawn = figures.arm_figure(robot, q, tmp_path / "a.png")
     assert np.array_equal(drawn, reference.joint_positions(robot, q))
+    figures.arm_figure(robot, q, tmp_path / "again.png")
+    assert (tmp_path / "a.png").read_bytes() == (tmp_path / "again.png").read_bytes()   # deterministic
     sols, drawn = figures.ik_figure(robot, q, tmp_path / "b.png")
     assert sols.shape == (8, 6) and drawn.shape[0] == 8
     target = reference.fk_matrix(robot, q)

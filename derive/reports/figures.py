@@ -119,8 +119,10 @@ def _triad(ax, pose: np.ndarray, length: float, width: float = 1.6) -> None:
 
 def draw_arm(ax, robot, q, *, length: float, labels: bool = True, colour: str = "0.25",
              axes: bool = True) -> np.ndarray:
-    """Draw the arm at ``q`` into a 3-D axes: links through the frame origins, joints as dots,
-    joint axes (dashed, ``axes``), base and end frames; joint names when ``labels``. Returns the
+    """Draw the arm at ``q`` into a 3-D axes: links through the frame origins, frame origins as
+    dots, joint axes (dashed, ``axes``), base and end frames; each joint's name at the end of its
+    axis when ``labels`` (in DH conventions a joint's frame sits at the far end of its link, so
+    the name goes with the axis, not the frame). Returns the
     drawn frame origins (m, 3), in the order of ``robot.frame_names``."""
     robot = load_robot(robot)
     pos = reference.joint_positions(robot, q)
@@ -133,8 +135,8 @@ def draw_arm(ax, robot, q, *, length: float, labels: bool = True, colour: str = 
         a, b = pos[e.parent + 1], pos[nj + 1 + k]
         ax.plot(*zip(a, b), color=colour, linewidth=2.0)
     ax.scatter(*pos[1:nj + 1].T, color="black", s=14, depthshade=False)
+    points, dirs = joint_axes(robot, q)
     if axes:
-        points, dirs = joint_axes(robot, q)
         for p, d in zip(points, dirs):
             ax.plot(*zip(p - 1.1 * length * d, p + 1.1 * length * d), color="tab:purple",
                     linewidth=1.5, linestyle="--")
@@ -142,8 +144,9 @@ def draw_arm(ax, robot, q, *, length: float, labels: bool = True, colour: str = 
     for k in range(len(robot.ends)):
         _triad(ax, poses[nj + 1 + k], length)
     if labels:
-        for i, j in enumerate(robot.joints):
-            ax.text(*(pos[i + 1] + 0.25 * length), j.name, fontsize=7, color="0.15")
+        for i, (p, d, j) in enumerate(zip(points, dirs, robot.joints)):   # at its axis, not its frame
+            end = p + (1.2 if i % 2 == 0 else -1.2) * length * d        # alternate ends: less overlap
+            ax.text(*end, j.name, fontsize=7, color="0.1")
         ax.text(*(pos[0] - 0.4 * length * np.array([0, 0, 1])), "base", fontsize=7, color="0.15")
     return pos
 
