@@ -140,7 +140,7 @@ def write_manifest(folder: Path, data: dict) -> Path:
     when several processes write the same folder: the read-merge-write holds a lock on the
     folder, and the file is replaced atomically from a temporary file of this process."""
     path = Path(folder) / MANIFEST
-    with _folder_lock(folder):
+    with locked(folder):
         old = read_manifest(folder)
         if old.get("id") not in (None, data.get("id")):
             old = {}
@@ -157,12 +157,13 @@ def write_manifest(folder: Path, data: dict) -> Path:
 
 
 @contextmanager
-def _folder_lock(folder):
-    """An exclusive advisory lock (flock) on the folder itself, so no lock file is left in it;
-    no lock where flock is not available."""
+def locked(path):
+    """An exclusive advisory lock (flock) on an existing file or folder itself, so no lock file
+    is left beside it, held for the ``with`` block; other processes locking the same path wait.
+    No lock where flock is not available."""
     try:
         import fcntl
-        fd = os.open(folder, os.O_RDONLY)
+        fd = os.open(path, os.O_RDONLY)
     except (ImportError, OSError):
         yield
         return

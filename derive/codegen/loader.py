@@ -35,6 +35,7 @@ from derive.algebra import dualquat as dq
 from derive.algebra.dualquat import UNIT_TOL
 from derive.cache import (
     build_folder,
+    locked,
     memo,
     read_manifest,
     shipped_index,
@@ -110,12 +111,15 @@ def _compile(source: Path, prefix: str) -> Path:
     if compiler is None:
         raise DeriveError("backend 'c' needs a C compiler (cc or gcc) on PATH")
     lib.parent.mkdir(parents=True, exist_ok=True)
-    tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
-    res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", "-o", str(tmp), str(source), "-lm"],
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        raise DeriveError(f"compiling the C kernels {source} failed:\n{res.stderr}")
-    os.replace(tmp, lib)
+    with locked(source):          # a process that needs the same library meanwhile waits for it
+        if lib.exists():
+            return lib
+        tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
+        res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", "-o", str(tmp), str(source), "-lm"],
+                             capture_output=True, text=True)
+        if res.returncode != 0:
+            raise DeriveError(f"compiling the C kernels {source} failed:\n{res.stderr}")
+        os.replace(tmp, lib)
     return lib
 
 
@@ -147,20 +151,23 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool):
         if compiler is None:
             return None
         lib.parent.mkdir(parents=True, exist_ok=True)
-        # this process's own source and output names, renamed into place when built: another
-        # process building the same module at the same time never sees a partial file
-        src = lib.with_suffix(".c")
-        src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
-        src_tmp.write_text(text, encoding="utf-8")
-        tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
-        res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
-                              f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],
-                             capture_output=True, text=True)
-        os.replace(src_tmp, src)
-        if res.returncode != 0:
-            step(f"the CPython extension of the C kernels did not build (ctypes instead):\n{res.stderr[-800:]}")
-            return None
-        os.replace(tmp, lib)
+        with locked(source):      # a process that needs the same module meanwhile waits for it
+            if not lib.exists():
+                # this process's own source and output names, renamed into place when built:
+                # another process never sees a partial file
+                src = lib.with_suffix(".c")
+                src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
+                src_tmp.write_text(text, encoding="utf-8")
+                tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
+                res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
+                                      f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],
+                                     capture_output=True, text=True)
+                os.replace(src_tmp, src)
+                if res.returncode != 0:
+                    step("the CPython extension of the C kernels did not build (ctypes instead):\n"
+                         f"{res.stderr[-800:]}")
+                    return None
+                os.replace(tmp, lib)
     loader = importlib.machinery.ExtensionFileLoader(module, str(lib))
     spec = importlib.util.spec_from_file_location(module, lib, loader=loader)
     try:
