@@ -19,8 +19,10 @@ $(VENV)/.stamp-test: $(VENV)/.stamp-base
 generate: $(VENV)/.stamp-base
 	$(VPY) -m derive generate --out generated
 
+# -n auto: one pytest-xdist worker per core; loadgroup keeps the modules marked xdist_group
+# (expensive module fixtures) on one worker
 test: $(VENV)/.stamp-test
-	$(VPY) -m pytest -q
+	$(VPY) -m pytest -q -n auto --dist loadgroup
 
 $(VENV)/.stamp-docs: $(VENV)/.stamp-base
 	$(VPY) -m pip install --quiet -e '.[docs]'

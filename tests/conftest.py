@@ -1,9 +1,19 @@
+import os
+
 import numpy as np
 import pytest
 from hypothesis import settings
 
 settings.register_profile("ci", max_examples=60, deadline=None, derandomize=True)
 settings.load_profile("ci")
+
+
+@pytest.fixture(scope="session")
+def run_folder(tmp_path_factory):
+    """A folder of this test run shared by all its processes: under pytest-xdist (``make test``
+    runs ``pytest -n auto``) the workers' base folders are children of the run's folder."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
 
 @pytest.fixture

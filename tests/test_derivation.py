@@ -24,6 +24,10 @@ from derive.symbolic.equations import (
 )
 from derive.symbolic.trig import half_angle_normal_form
 
+#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
+#: expensive module fixture and the in-memory derivations it shares are computed once
+pytestmark = pytest.mark.xdist_group("ur3-derivation")
+
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 S = sp.Symbol

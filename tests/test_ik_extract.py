@@ -15,6 +15,10 @@ from derive.ik.extract import R_SYMS, _rot, check_numerically, extract
 from derive.kinematics import fk as kin
 from derive.symbolic.equations import POSES
 
+#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
+#: expensive module fixture and the in-memory derivations it shares are computed once
+pytestmark = pytest.mark.xdist_group("ur3-derivation")
+
 
 @pytest.fixture(scope="module")
 def ext():

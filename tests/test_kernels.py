@@ -21,9 +21,13 @@ UR = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e"]
 
 
 @pytest.fixture(autouse=True, scope="module")
-def private_cache(tmp_path_factory):
+def private_cache(run_folder):
+    """A user cache of this test run, empty when the run starts: one for all the pytest-xdist
+    workers, so each C extension is compiled once per run (cache writes are process-safe)."""
     old = os.environ.get("DQ_DERIVE_CACHE")
-    os.environ["DQ_DERIVE_CACHE"] = str(tmp_path_factory.mktemp("cache"))
+    folder = run_folder / "test_kernels-cache"
+    folder.mkdir(exist_ok=True)
+    os.environ["DQ_DERIVE_CACHE"] = str(folder)
     yield
     if old is None:
         os.environ.pop("DQ_DERIVE_CACHE", None)

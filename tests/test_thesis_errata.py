@@ -9,6 +9,10 @@ from pathlib import Path
 import pytest
 from thesis_compare import check_formulas, compare_equations, load
 
+#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
+#: expensive module fixture and the in-memory derivations it shares are computed once
+pytestmark = pytest.mark.xdist_group("thesis-errata")
+
 ERRATA = Path(__file__).resolve().parent.parent / "docs" / "errata.md"
 
 
