@@ -32,9 +32,11 @@ $(VENV)/.stamp-docs: $(VENV)/.stamp-base
 docs: $(VENV)/.stamp-docs
 	$(VPY) -m mkdocs build --strict --site-dir site
 
-# the convention figures of docs/img/ (frames, DH parameters), committed
+# the figures of docs/img/, committed: the convention figures (frames, DH parameters) and the
+# README's 8 IK solutions of one UR5 pose
 figures: $(VENV)/.stamp-base
 	$(VPY) -m derive.reports.diagrams --out docs/img
+	$(VPY) -m derive plot ur5 --ik-of 10 -60 80 -20 45 30 --deg --out docs/img/ur5_ik.png
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .hypothesis
