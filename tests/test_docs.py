@@ -49,7 +49,16 @@ def blocks(path: Path) -> list[dict]:
 
 
 def runnable_pages() -> list[Path]:
-    return sorted(p for p in DOCS.rglob("*.md") if any(b["run"] for b in blocks(p)))
+    pages = sorted(DOCS.rglob("*.md")) + [ROOT / "README.md"]
+    return [p for p in pages if any(b["run"] for b in blocks(p))]
+
+
+def test_readme_opens_with_title_paragraph_and_the_two_commands():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    parts = text.split("\n\n")
+    assert parts[0] == "# dq-derive"
+    assert "robot" in parts[1] and not parts[1].startswith(("#", " "))       # one paragraph: what, for whom
+    assert [line.split("#")[0].strip() for line in parts[2].splitlines()] == ["make generate", "make test"]
 
 
 def test_the_parser_sees_marked_blocks_and_titles():
@@ -64,7 +73,7 @@ def test_every_python_block_is_marked(page):
     assert unmarked == [], f"{page}: Python blocks without {RUN_MARK} at lines {unmarked}"
 
 
-@pytest.mark.parametrize("page", runnable_pages(), ids=lambda p: str(p.relative_to(DOCS)))
+@pytest.mark.parametrize("page", runnable_pages(), ids=lambda p: str(p.relative_to(ROOT)))
 def test_marked_blocks_run(page, tmp_path):
     marked = [b for b in blocks(page) if b["run"]]
     assert all(b["lang"] in ("python", "py") for b in marked), "only Python blocks are run"
