@@ -65,6 +65,8 @@ UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
 #: Every other robot of the class gets them on request (``dq-derive kernels ROBOT`` ...).
 SW_ROBOTS = ("irb120", "kr6-r900")
 
+#: A --quat typed with a few decimals is normalised when its norm is this close to 1.
+QUAT_TOL = 1e-4
 #: Exit codes (documented in the module docstring, the --help epilog and docs/cli.md).
 EXIT_OK, EXIT_NO_SOLUTION, EXIT_INPUT = 0, 1, 2
 
@@ -191,8 +193,12 @@ def _target(robot, args, what: str):
         return pose, None, {"xyz": _jlist(args.xyz), "rpy": _jlist(args.rpy)}
     if args.quat_order is None:
         raise InputError(f"{what}: --quat needs --quat-order xyzw (scipy, ROS) or wxyz (scalar first)")
-    pose = from_position_quaternion(np.array(args.xyz, dtype=float), np.array(args.quat, dtype=float),
-                                    args.quat_order)
+    quat = np.array(args.quat, dtype=float)
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > QUAT_TOL:
+        raise InputError(f"--quat: not a unit quaternion (|q| = {norm:.6g}; within {QUAT_TOL:g} of 1 "
+                         "it is normalised, so 4 printed decimals are enough)")
+    pose = from_position_quaternion(np.array(args.xyz, dtype=float), quat / norm, args.quat_order)
     return pose, None, {"xyz": _jlist(args.xyz), "quat": _jlist(args.quat), "quat_order": args.quat_order}
 
 
@@ -589,7 +595,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="orientation of --xyz: roll, pitch, yaw about the fixed x, y, z axes, "
                             "R = Rz(Y) Ry(P) Rx(R) (rad; --deg: degrees)")
         s.add_argument("--quat", nargs=4, type=float, default=None, metavar=("A", "B", "C", "D"),
-                       help="orientation of --xyz: a unit quaternion in the order of --quat-order")
+                       help="orientation of --xyz: a unit quaternion in the order of --quat-order "
+                            "(normalised when its norm is within 1e-4 of 1)")
         s.add_argument("--quat-order", choices=("xyzw", "wxyz"), default=None,
                        help="the order of --quat: xyzw (scipy, ROS) or wxyz (scalar first, as dq-derive); "
                             "required with --quat")

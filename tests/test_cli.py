@@ -127,6 +127,13 @@ def test_ik_quat_needs_its_order_and_both_orders_agree(capsys):
     wxyz = json.loads(capsys.readouterr().out)
     assert np.allclose([s["q"] for s in xyzw["solutions"]], [s["q"] for s in wxyz["solutions"]], atol=1e-12)
     assert np.allclose(reference.fk_matrix("ur5", xyzw["solutions"][0]["q"]), _target_matrix(), atol=1e-9)
+    # typed with 4 decimals (|q| - 1 = 2e-5): normalised, the rotation Rx(pi) Rz(pi/2)
+    assert main(base + ["0", "0.7071", "0.7071", "0", "--quat-order", "wxyz"]) == 0
+    sols = json.loads(capsys.readouterr().out)["solutions"]
+    target = _target_matrix()
+    target[:3, :3] = [[0, 1, 0], [1, 0, 0], [0, 0, -1]]
+    assert len(sols) == 8
+    assert all(np.allclose(reference.fk_matrix("ur5", s["q"]), target, atol=1e-9) for s in sols)
 
 
 def test_ik_of_q_and_deprecated_pose_spelling(capsys):
@@ -156,7 +163,7 @@ def test_ik_unreachable_exits_1_and_says_why(capsys):
      "give exactly one target"),
     (["ik", "ur5", "--dq", "2", "0", "0", "0", "0", "0", "0", "0"], "--dq"),
     (["ik", "ur5", "--xyz", "0.4", "0.1", "0.3", "--quat", "1", "1", "0", "0", "--quat-order", "wxyz"],
-     "not unit"),
+     "--quat: not a unit quaternion (|q| = 1.41421"),
     (["fk", "ur5", "--q", "0", "0", "nan", "0", "0", "0"], "NaN at index"),
     (["fk", "ur5", "--q", "0", "0", "0", "0", "0", "0", "0"], "got 7 value(s)"),
     (["refine", "ur5", "--q", "0", "0", "0", "0", "0", "0", "--max-iter", "0"], "max_iter: must be an integer >= 1"),
