@@ -30,7 +30,7 @@ $(VENV)/.stamp-docs: $(VENV)/.stamp-base
 
 # the documentation site (mkdocs.yml) into site/, warnings as errors; no network needed
 docs: $(VENV)/.stamp-docs
-	$(VPY) -m mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(VPY) -m mkdocs build --strict --site-dir site
 
 # the figures of docs/img/, committed: the convention figures (frames, DH parameters) and the
 # README's 8 IK solutions of one UR5 pose
