@@ -64,6 +64,7 @@ def test_saved_functions_reproduce_the_reference_fk_in_a_fresh_process(tmp_path)
         assert sum(out[r]["ik_valid"]) >= 1
 
 
+@pytest.mark.xdist_group("ur-derivation")   # with the other derivation tests (one worker)
 def test_generated_casadi_files_are_a_fresh_regeneration(tmp_path):
     from derive.refinement.functions import write_casadi
     for r in ("ur3", "ur5"):
@@ -84,6 +85,7 @@ def test_generated_casadi_files_are_a_fresh_regeneration(tmp_path):
             assert (GENERATED / r / f"{r}_{name}.casadi").exists()
 
 
+@pytest.mark.xdist_group("ur-derivation")   # with the other derivation tests (one worker)
 def test_derived_and_product_fk_agree():
     """The two constructions of fk (derived straight-line code, joint product) agree."""
     q = np.random.default_rng(3).uniform(-math.pi, math.pi, size=(300, 6))

@@ -24,9 +24,9 @@ from derive.symbolic.equations import (
 )
 from derive.symbolic.trig import half_angle_normal_form
 
-#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
-#: expensive module fixture and the in-memory derivations it shares are computed once
-pytestmark = pytest.mark.xdist_group("ur3-derivation")
+#: one pytest-xdist worker runs the tests of group "ur-derivation" (make test: --dist loadgroup),
+#: so the symbolic work they share (the UR family's equations, memoised in the process) is done once
+pytestmark = pytest.mark.xdist_group("ur-derivation")
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"

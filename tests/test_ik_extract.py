@@ -15,9 +15,9 @@ from derive.ik.extract import R_SYMS, _rot, check_numerically, extract
 from derive.kinematics import fk as kin
 from derive.symbolic.equations import POSES
 
-#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
-#: expensive module fixture and the in-memory derivations it shares are computed once
-pytestmark = pytest.mark.xdist_group("ur3-derivation")
+#: one pytest-xdist worker runs the tests of group "ur-derivation" (make test: --dist loadgroup),
+#: so the symbolic work they share (the UR family's equations, memoised in the process) is done once
+pytestmark = pytest.mark.xdist_group("ur-derivation")
 
 
 @pytest.fixture(scope="module")

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from thesis_compare import check_formulas, compare_equations, load
 
-#: one worker runs this module under pytest-xdist (make test: --dist loadgroup), so its
-#: expensive module fixture and the in-memory derivations it shares are computed once
-pytestmark = pytest.mark.xdist_group("thesis-errata")
+#: one pytest-xdist worker runs the tests of group "ur-derivation" (make test: --dist loadgroup),
+#: so the symbolic work they share (the UR family's equations, memoised in the process) is done once
+pytestmark = pytest.mark.xdist_group("ur-derivation")
 
 ERRATA = Path(__file__).resolve().parent.parent / "docs" / "errata.md"
 
