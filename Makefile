@@ -19,10 +19,11 @@ $(VENV)/.stamp-test: $(VENV)/.stamp-base
 generate: $(VENV)/.stamp-base
 	$(VPY) -m derive generate --out generated
 
-# -n auto: one pytest-xdist worker per core; loadgroup keeps the modules marked xdist_group
-# (expensive module fixtures) on one worker
+# -n logical: one pytest-xdist worker per CPU the process may use (also with psutil installed,
+# where -n auto would count physical cores only); loadgroup keeps the tests marked xdist_group
+# (shared symbolic work in memory) on one worker
 test: $(VENV)/.stamp-test
-	$(VPY) -m pytest -q -n auto --dist loadgroup
+	$(VPY) -m pytest -q -n logical --dist loadgroup
 
 $(VENV)/.stamp-docs: $(VENV)/.stamp-base
 	$(VPY) -m pip install --quiet -e '.[docs]'

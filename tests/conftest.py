@@ -11,7 +11,7 @@ settings.load_profile("ci")
 @pytest.fixture(scope="session")
 def run_folder(tmp_path_factory):
     """A folder of this test run shared by all its processes: under pytest-xdist (``make test``
-    runs ``pytest -n auto``) the workers' base folders are children of the run's folder."""
+    runs ``pytest -n logical``) the workers' base folders are children of the run's folder."""
     base = tmp_path_factory.getbasetemp()
     return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
 
