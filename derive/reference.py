@@ -4,12 +4,24 @@ closed-form IK, the check every generated kernel is tested against.
 * :func:`fk`, :func:`fk_matrix`, :func:`frame_poses`, :func:`joint_positions`, :func:`fk_pair`,
   :func:`pose_error`: :mod:`derive.kinematics.fk` (dual-quaternion products, Kunze eq. 1.8 and
   5.28, and plain 4x4 matrices, Kunze eq. 5.1-5.4, sharing no code);
-* :func:`ik`, :func:`ik_batch`: :mod:`derive.ik.closed_form` (the UR family's closed form in
-  numpy, written by hand after the thesis's section 4.3.5 and kept independent of the IK
-  program that the kernels and the CasADi ``ik`` are generated from).
+* :func:`ik`, :func:`ik_batch`: for 6R arms :mod:`derive.ik.closed_form` (the UR family's closed
+  form in numpy, written by hand after the thesis's section 4.3.5 and kept independent of the
+  IK program that the kernels and the CasADi ``ik`` are generated from, and the
+  spherical-wrist class); for the seven-joint arms with a free parameter
+  :mod:`derive.ik.redundant` (the Franka Panda class with q7 given, after He & Liu 2021, and
+  the SRS class with the arm angle psi given, after Shimizu et al. 2008);
+* :func:`free_parameter`, :func:`ik_sweep`, :func:`nearest`: the free parameter of a 7R arm,
+  its sweep, and the solution nearest to a seed (7R: by a 1D search along the path).
 """
 
-from derive.ik.closed_form import IKSolutions, ik, ik_batch
+import math
+
+import numpy as np
+
+from derive.errors import InputError, as_finite_array
+from derive.ik import closed_form, redundant, select
+from derive.ik.closed_form import IKSolutions
+from derive.ik.redundant import RedundantIKSolutions, Sweep, free_parameter
 from derive.kinematics.fk import (
            fk,
            fk_matrix,
@@ -18,6 +30,104 @@ from derive.kinematics.fk import (
            joint_positions,
            pose_error,
 )
+from derive.kinematics.pose import as_pose_batch
+from derive.model.robot import load_robot
 
 __all__ = ["fk", "fk_matrix", "fk_pair", "frame_poses", "joint_positions", "pose_error",
-           "ik", "ik_batch", "IKSolutions"]
+           "ik", "ik_batch", "ik_sweep", "nearest", "free_parameter", "IKSolutions",
+           "RedundantIKSolutions", "Sweep"]
+
+
+def _no_free(robot) -> InputError:
+    return InputError(f"free: {robot.name} has {robot.dof} joint variables and no free parameter; "
+                      "free= is for the seven-joint arms of the Franka Panda class (q7) and the "
+                      "SRS class (the arm angle psi)")
+
+
+def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, free=None) -> IKSolutions:
+    """Every closed-form IK solution of one pose (a unit dual quaternion (8,) or a 4x4 matrix
+    of the robot's end frame), as :class:`IKSolutions` (k, dof) with ``.singular`` and
+    ``.reason`` (why there is none).
+
+    6R arms (UR family, spherical wrist): :func:`derive.ik.closed_form.ik`; ``free`` must not be
+    given. Seven-joint arms: ``free`` is required, the value (rad) of the free parameter:
+    **q7** (joint 7) for the Franka Panda class (panda, fr3), the **arm angle psi** for the SRS
+    class (iiwa7, iiwa14); :func:`free_parameter` names it and its range. Up to 8 solutions,
+    a :class:`RedundantIKSolutions` with ``.branch`` and ``.free`` too
+    (:func:`derive.ik.redundant.ik`). ``q_ref``: the joints a singular set leaves free are
+    taken from it; ``within_limits``: only solutions inside the joint limits, every 2 pi
+    winding; ``sort_by``: sorted by distance to this configuration."""
+    robot = load_robot(robot)
+    if redundant.redundant_kind(robot) is not None:
+        if free is None:
+            raise InputError("free: " + redundant.missing_free_message(robot))
+        return redundant.ik(robot, pose, free, q_ref=q_ref, within_limits=within_limits, sort_by=sort_by)
+    if free is not None:
+        raise _no_free(robot)
+    return closed_form.ik(robot, pose, q_ref=q_ref, within_limits=within_limits, sort_by=sort_by)
+
+
+def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False):
+    """Closed-form IK of n poses (n, 8) or (n, 4, 4): (solutions (n, 8, dof) NaN-padded, valid
+    rows first, counts (n,)).
+
+    6R arms: :func:`derive.ik.closed_form.ik_batch` (``free`` must not be given; the 6R branch
+    ids come from the C kernels, ``derive.kernels(robot, "c").ik(P, details=True)``).
+    Seven-joint arms: ``free`` is required, q7 (Panda class) or the arm angle psi (SRS class),
+    a number or one per pose (rad); ``details``: (solutions, counts, branch (n, 8), singular
+    (n, 8)) as the kernels' ``details=True`` (:func:`derive.ik.redundant.branch_labels` says
+    what the branch bits choose)."""
+    robot = load_robot(robot)
+    if redundant.redundant_kind(robot) is not None:
+        if free is None:
+            raise InputError("free: " + redundant.missing_free_message(robot))
+        return redundant.ik_batch(robot, poses, free, q_ref=q_ref, details=details)
+    if free is not None:
+        raise _no_free(robot)
+    if details:
+        raise InputError("details: the reference IK of a 6R arm gives no branch ids; "
+                         "derive.kernels(robot, 'c').ik(P, details=True) does")
+    return closed_form.ik_batch(robot, poses, q_ref=q_ref)
+
+
+def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sweep:
+    """A seven-joint arm's solutions at ``n`` values of its free parameter over the feasible
+    range (q7: joint 7's limits; psi: the pose's feasible intervals,
+    :func:`derive.ik.srs.psi_intervals`): :func:`derive.ik.redundant.ik_sweep`."""
+    return redundant.ik_sweep(robot, poses, n, q_ref=q_ref, within_limits=within_limits)
+
+
+def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
+    """Per pose the closed-form solution nearest to the seed(s) ``q_seed`` ((dof,) or (n, dof)),
+    inside the joint limits with every winding, by the largest single-joint move then the
+    summed move, as a :class:`derive.ik.select.Nearest` record; ``found`` False where there is
+    none (or none within ``tol``).
+
+    Seven-joint arms: the free parameter and the branch are chosen by the 1D search of
+    :func:`derive.ik.redundant.nearest` (from the seed's own q7 or arm angle), which keeps a path
+    continuous. 6R arms: every solution (:func:`derive.ik.closed_form.ik_batch` with the seed as
+    reference configuration) and :func:`derive.ik.select.nearest` (branch ids -1)."""
+    robot = load_robot(robot)
+    if redundant.redundant_kind(robot) is not None:
+        return redundant.nearest(robot, poses, q_seed, tol=tol)
+    if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
+                                and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol: expected a finite number >= 0 (rad or m), got {tol!r}")
+    P, single = as_pose_batch(poses)
+    seeds = _seeds(robot, q_seed, len(P))
+    single = single and seeds[1]
+    sols, counts = closed_form.ik_batch(robot, P, q_ref=seeds[0])
+    revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
+    res = select.nearest(sols, counts, seeds[0], robot.limits, revolute, tol=tol)
+    if single:
+        return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
+                                                           "branch", "singular")))
+    return res
+
+
+def _seeds(robot, q_seed, n: int):
+    """(seeds (n, dof), whether one seed (dof,) was given); InputError for another shape."""
+    arr = as_finite_array(q_seed, "q_seed", last_dim=robot.dof)
+    if arr.ndim > 2 or (arr.ndim == 2 and arr.shape[0] not in (1, n)):
+        raise InputError(f"q_seed: expected shape ({robot.dof},) or ({n}, {robot.dof}), got {arr.shape}")
+    return np.broadcast_to(arr.reshape(-1, robot.dof), (n, robot.dof)).astype(float), arr.ndim == 1

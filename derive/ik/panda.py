@@ -396,10 +396,15 @@ def candidates(geo: PandaGeometry, poses: np.ndarray, q7: np.ndarray, q_free: np
     """All 8 branches for n poses of the robot's end frame: (q (n, 8, 7), singular (n, 8),
     codes (n, 8): 0 ok, 1 elbow unreachable, 2 wrist unreachable). Not yet checked by FK;
     unreachable branches are NaN. ``q_free`` (n, 7): values of the free joints at singular sets."""
-    n = poses.shape[0]
     c = geo.into_canonical(poses)
-    r7 = quat._to_matrix(c[:, :4])
-    p = dq._translation(c)
+    return canonical_candidates(geo, quat._to_matrix(c[:, :4]), dq._translation(c), q7, q_free)
+
+
+def canonical_candidates(geo: PandaGeometry, r7: np.ndarray, p: np.ndarray, q7: np.ndarray,
+                         q_free: np.ndarray):
+    """:func:`candidates` from the canonical flange poses: rotations r7 (n, 3, 3), positions p
+    (n, 3) (for callers that evaluate one pose at many q7)."""
+    n = r7.shape[0]
     r6, o6 = frame6(geo, r7, p, q7)
     v = shoulder_in_6(geo, r6, o6)
     q4s, bad4 = elbow(geo, v)
@@ -423,6 +428,25 @@ def candidates(geo: PandaGeometry, poses: np.ndarray, q7: np.ndarray, q_free: np
     out[..., :6] = wrap_angle(out[..., :6])
     out[code > 0] = np.nan
     return out, singular, code
+
+
+def canonical_fk(geo: PandaGeometry, q: np.ndarray):
+    """Flange rotation (n, 3, 3) and position (n, 3) of the canonical chain (module docstring's
+    table: T_i = Rx(alpha_(i-1)) Tx(a_(i-1)) Rz(q_i) Tz(d_i), then Tz(d7)) for q (n, 7): a cheap
+    check of candidates against :meth:`PandaGeometry.into_canonical` poses."""
+    rows = ((0.0, 0.0, geo.d1), (-1.0, 0.0, 0.0), (1.0, 0.0, geo.d3), (1.0, geo.a3, 0.0),
+            (-1.0, geo.a4, geo.d5), (1.0, 0.0, 0.0), (1.0, geo.a6, 0.0))
+    n = q.shape[0]
+    r = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+    p = np.zeros((n, 3))
+    for i, (sx, a, d) in enumerate(rows):
+        # Rx(sx pi/2) (sx = +-1) or identity, then Tx(a), Rz(q_i), Tz(d)
+        p = p + a * r[:, :, 0]
+        if sx:
+            r = np.stack([r[:, :, 0], sx * r[:, :, 2], -sx * r[:, :, 1]], -1)
+        r = r @ _rz(q[:, i])
+        p = p + d * r[:, :, 2]
+    return r, p + geo.d7 * r[:, :, 2]
 
 
 # --------------------------------------------------------------------------- #

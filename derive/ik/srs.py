@@ -773,15 +773,13 @@ def psi_intervals(robot, pose) -> list[np.ndarray]:
     return out
 
 
-def ik_sweep(robot, poses, n: int) -> SRSSweep:
-    """``n`` arm angles per pose spread evenly over the union of the branches' feasible
-    intervals (:func:`psi_intervals`; the midpoints of n equal parts of its total length), and
-    at each the solutions within the joint limits. Poses without a feasible arm angle get psi =
-    NaN and count 0."""
+def sweep_psi(robot, poses, n: int) -> np.ndarray:
+    """(m, n) arm angles for poses (8,) or (m, 8): per pose ``n`` values spread evenly over the
+    union of the branches' feasible intervals (:func:`psi_intervals`), the midpoints of n equal
+    parts of its total length; a NaN row for a pose without a feasible arm angle."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n: expected a positive integer, got {n!r}")
-    geo = srs_geometry(robot)
-    P, single = _poses(poses)
+    P, _ = _poses(poses)
     m = len(P)
     psi = np.full((m, n), np.nan)
     for i in range(m):
@@ -802,6 +800,17 @@ def ik_sweep(robot, poses, n: int) -> SRSSweep:
         edges = np.concatenate([[0.0], np.cumsum(lengths)])
         j = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(merged) - 1)
         psi[i] = merged[j, 0] + (s - edges[j])
+    return psi
+
+
+def ik_sweep(robot, poses, n: int) -> SRSSweep:
+    """``n`` arm angles per pose spread evenly over the union of the branches' feasible
+    intervals (:func:`sweep_psi`), and at each the solutions within the joint limits. Poses
+    without a feasible arm angle get psi = NaN and count 0."""
+    geo = srs_geometry(robot)
+    psi = sweep_psi(robot, poses, n)
+    P, single = _poses(poses)
+    m = len(P)
     q = np.full((m, n, 8, 7), np.nan)
     count = np.zeros((m, n), dtype=int)
     branch = np.full((m, n, 8), -1)

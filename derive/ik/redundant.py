@@ -1,0 +1,520 @@
+"""Seven-joint arms with one free parameter: one interface over the two closed forms, the sweep
+of the free parameter, and the nearest solution along a path.
+
+Two classes of 7R arm are solved in closed form once one parameter is fixed:
+
+* the Franka Panda class (Panda, FR3; :mod:`derive.ik.panda`): the free parameter is joint 7,
+  ``q7`` (after He & Liu, ICCCR 2021), its range the joint's limits;
+* the SRS class (KUKA LBR iiwa 7 and 14; :mod:`derive.ik.srs`): the free parameter is the arm
+  angle ``psi`` (Shimizu et al., IEEE T-RO 24(5), 2008, sec. III), the rotation of the arm plane
+  about the shoulder-wrist line, periodic in [-pi, pi).
+
+With the free parameter given, a pose has up to 8 solutions. :func:`solve` returns them in one
+shape for both classes (:class:`Solutions`): NaN-padded rows (valid rows first), counts, branch
+ids (:func:`branch_labels` says what their bits choose), singular flags and reasons, as the 6R
+path (:func:`derive.ik.closed_form.ik_batch`, the kernels' ``ik(..., details=True)``) gives them.
+
+:func:`ik_sweep` evaluates n values of the free parameter over its feasible range (q7: its joint
+limits; psi: the union of the branches' feasible intervals under the joint limits,
+:func:`derive.ik.srs.psi_intervals`, computed from the closed form's breakpoints, not sampled).
+
+:func:`nearest` chooses the free parameter and the branch for a seed configuration by a 1D
+search that keeps a path continuous:
+
+1. start at the seed's own free value f0 (its q7, or its arm angle :func:`derive.ik.srs.arm_angle`)
+   and take the branch whose solution at f0 moves least from the seed (largest single-joint move,
+   then the summed move, every joint at its winding nearest to the seed inside the limits as in
+   :func:`derive.ik.select.nearest`); along a path that solution is within about one step;
+2. refine f on that branch: a grid of 9 values over [f0 - h, f0 + h], h = 4 x the move at f0
+   (a larger h while the best grid value is at an end), then golden-section search (Kiefer,
+   "Sequential minimax search for a maximum", Proc. AMS 4, 1953) between the grid neighbours of
+   the best value, on the same order (largest move, then summed move). For q7 the bound is
+   exact (q7 is a joint, so a better f is within the move at f0); for psi, a rotation by psi of
+   the arm plane turns the shoulder's ZYZ angles by at least psi / 3 to first order;
+3. where the seed's free value gives no solution inside the limits, the start is the best of
+   32 values over the range (a scan) instead.
+
+The result is the same :class:`derive.ik.select.Nearest` record as the 6R path's. The answer is
+the nearest solution *along the path*: a local minimum of the move, not a global search over
+the whole self-motion.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import memo
+from derive.errors import DeriveError, InputError, as_finite_array
+from derive.ik import panda, select, srs
+from derive.ik.closed_form import IKSolutions
+from derive.ik.tolerances import ACCEPT_TOL
+from derive.kinematics.pose import as_pose_batch
+from derive.model.robot import load_robot
+
+TWO_PI = 2.0 * math.pi
+#: Branches per value of the free parameter (both classes).
+BRANCHES = 8
+#: Golden-section search stops when the bracket of the free parameter is narrower than this (rad).
+FREE_TOL = 1e-9
+#: Values of the free parameter in the scan used where the seed's own value has no solution.
+SCAN = 32
+#: Points of the local grid before the golden-section search.
+GRID = 9
+#: Largest-move values closer than this count as equal (the summed move decides).
+TIE = 1e-13
+_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
+#: Offsets (rad) from the seed's free value tried first, both signs: near a singular set the
+#: solutions turn fast with the free parameter, so the seed's own value alone can be far off.
+_OFFSETS = np.array([1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3])
+_ALL = np.concatenate([[0.0], -_OFFSETS[::-1], _OFFSETS])
+_SORTED = np.sort(_ALL)
+#: Per tried offset: the distance down and up to its neighbours (the first bracket); 3 x the
+#: largest offset beyond the ends.
+_LOWER = np.array([(_SORTED[max(np.searchsorted(_SORTED, x) - 1, 0)] - x) or -2 * _OFFSETS[-1]
+                   for x in _ALL])
+_UPPER = np.array([(_SORTED[min(np.searchsorted(_SORTED, x) + 1, len(_ALL) - 1)] - x)
+                   or 2 * _OFFSETS[-1] for x in _ALL])
+#: Values per step of the refinement (the bracket narrows by (REFINE + 1) / 2 per step).
+REFINE = 31
+
+#: What the bits of a branch id choose, most significant first.
+LABELS = {
+    "panda": ["elbow q4 root (eq. E2, + / -)", "wrist q6 root (eq. W2, + / -)",
+              "shoulder sign of sin q2 (+ / -)"],
+    "srs": ["shoulder GC2 = sign of sin q2 (+ / -)", "elbow GC4 = sign of q4 (+ / -)",
+            "wrist GC6 = sign of sin q6 (+ / -)"],
+}
+NAMES = {"panda": "q7", "srs": "psi"}
+CLASS_NAMES = {"panda": "Franka Panda class", "srs": "SRS class (arm angle)"}
+
+
+class Solutions(NamedTuple):
+    """All solutions of n poses at given values of the free parameter: ``q`` (n, 8, 7) NaN-padded
+    (valid rows first), ``counts`` (n,), ``branch`` (n, 8) branch ids (-1 in the padding),
+    ``singular`` (n, 8) (a joint the singular set leaves free was taken from ``q_ref``, else 0),
+    ``reason`` (list of n str: why a pose has no solution, "" where it has one) and ``free``
+    (n,) the value of the free parameter used."""
+
+    q: np.ndarray
+    counts: np.ndarray
+    branch: np.ndarray
+    singular: np.ndarray
+    reason: list
+    free: np.ndarray
+
+
+class Sweep(NamedTuple):
+    """:func:`ik_sweep` of P poses at n values: ``free`` (P, n) the values (NaN where a pose has
+    no feasible value), ``q`` (P, n, M, 7) NaN-padded solutions, ``counts`` (P, n), ``branch``
+    (P, n, M), ``singular`` (P, n, M). M = 8, or more when ``within_limits`` finds more windings."""
+
+    free: np.ndarray
+    q: np.ndarray
+    counts: np.ndarray
+    branch: np.ndarray
+    singular: np.ndarray
+
+
+class RedundantIKSolutions(IKSolutions):
+    """:class:`derive.ik.closed_form.IKSolutions` (k, 7) of one pose with ``branch`` (k,) and the
+    value ``free`` of the free parameter (its name: :func:`free_parameter`)."""
+
+    def __new__(cls, q, singular, reason="", branch=None, free=float("nan")):
+        obj = IKSolutions.__new__(cls, q, singular, reason)
+        obj.branch = np.full(len(obj), -1) if branch is None else np.asarray(branch, dtype=np.int64)
+        obj.free = float(free)
+        return obj
+
+    def __array_finalize__(self, obj):
+        super().__array_finalize__(obj)
+        if obj is not None:
+            self.branch = getattr(obj, "branch", None)
+            self.free = getattr(obj, "free", float("nan"))
+
+
+# --------------------------------------------------------------------------- #
+# The class of a robot and its free parameter
+# --------------------------------------------------------------------------- #
+def redundant_kind(robot) -> str | None:
+    """"panda" (Franka Panda class), "srs" (SRS class with the arm angle) or None."""
+    robot = load_robot(robot)
+    if robot.dof != 7:
+        return None
+    return memo("redundant-kind", robot.id, lambda: _find_kind(robot))
+
+
+def _find_kind(robot) -> str | None:
+    if panda.is_panda_class(robot):
+        return "panda"
+    if srs.is_srs(robot):
+        return "srs"
+    return None
+
+
+def _kind(robot) -> str:
+    kind = redundant_kind(robot)
+    if kind is None:
+        reasons = []
+        for test in (panda.panda_geometry, srs.srs_geometry):
+            try:
+                test(robot)
+            except DeriveError as exc:
+                reasons.append(str(exc).split(": ", 1)[-1])
+        raise InputError(f"{robot.name}: no closed form with a free parameter: neither of the "
+                         f"Franka Panda class ({reasons[0]}) nor of the SRS class ({reasons[1]})")
+    return kind
+
+
+def free_parameter(robot) -> tuple[str, tuple[float, float]]:
+    """The free parameter of a 7R arm of either class and its range (rad): ("q7", joint 7's
+    limits) for the Panda class, ("psi", (-pi, pi)) for the SRS class (psi is periodic; the
+    feasible intervals of one pose under the limits: :func:`derive.ik.srs.psi_intervals`).
+    InputError for any other robot."""
+    robot = load_robot(robot)
+    kind = _kind(robot)
+    if kind == "panda":
+        return "q7", tuple(panda.q7_interval(robot))
+    return "psi", (-math.pi, math.pi)
+
+
+def branch_labels(robot) -> list[str]:
+    """What the three bits of a branch id choose, most significant first."""
+    return list(LABELS[_kind(load_robot(robot))])
+
+
+def missing_free_message(robot) -> str:
+    """The InputError text for a 7R call without its free parameter."""
+    robot = load_robot(robot)
+    name, (lo, hi) = free_parameter(robot)
+    what = ("q7, the value of joint 7" if name == "q7" else
+            "psi, the arm angle (the rotation of the arm plane about the shoulder-wrist line)")
+    return (f"{robot.name} has 7 joints: its solutions form a one-parameter family, so the IK "
+            f"needs free= ({what}, rad, in [{lo:.4g}, {hi:.4g}]), a number or one per pose; "
+            "ik_sweep evaluates several values, nearest chooses one for a seed")
+
+
+# --------------------------------------------------------------------------- #
+# Solutions at given values
+# --------------------------------------------------------------------------- #
+def _free_values(free, n: int) -> np.ndarray:
+    arr = as_finite_array(free, "free", ndim_min=0)
+    if arr.ndim == 0 or arr.shape == (1,):
+        return np.full(n, float(arr.reshape(-1)[0]))
+    if arr.shape != (n,):
+        raise InputError(f"free: expected a number or shape ({n},) (one per pose), got {arr.shape}")
+    return arr.astype(float)
+
+
+def _q_ref(q_ref, n: int) -> np.ndarray | None:
+    if q_ref is None:
+        return None
+    arr = as_finite_array(q_ref, "q_ref", last_dim=7)
+    if arr.ndim == 1:
+        arr = arr[None]
+    if arr.ndim != 2 or arr.shape[0] not in (1, n):
+        raise InputError(f"q_ref: expected shape (7,) or ({n}, 7), got {arr.shape}")
+    return np.broadcast_to(arr, (n, 7)).astype(float)
+
+
+def solve(robot, poses, free, q_ref=None) -> Solutions:
+    """Every closed-form solution of poses (8,) / (n, 8) or (4, 4) / (n, 4, 4) of the end frame
+    with the free parameter at ``free`` (q7 for the Panda class, psi for the SRS class; a number
+    or one per pose, rad): :func:`derive.ik.panda.ik_q7` or :func:`derive.ik.srs.ik_psi`, each
+    solution checked by the reference FK. ``q_ref`` (7,) or (n, 7): the joints a singular set
+    leaves free are taken from it (else 0). Joint values wrapped to (-pi, pi] (q7: as given);
+    limits not applied."""
+    robot = load_robot(robot)
+    kind = _kind(robot)
+    P, _ = as_pose_batch(poses)
+    n = len(P)
+    f = _free_values(free, n)
+    qr = _q_ref(q_ref, n)
+    if kind == "panda":
+        r = panda.ik_q7(robot, P, f, q_ref=qr)
+        return Solutions(r.q, r.counts.astype(np.int64), r.branches.astype(np.int64), r.singular,
+                         list(r.reasons), f)
+    r = srs.ik_psi(robot, P, f, q_ref=qr)
+    return Solutions(r.q, r.count.astype(np.int64), r.branch.astype(np.int64), r.singular,
+                     [str(x) for x in r.reason], f)
+
+
+def ik_batch(robot, poses, free, q_ref=None, details: bool = False):
+    """(solutions (n, 8, 7) NaN-padded, counts (n,)) at the free parameter ``free`` (:func:`solve`);
+    ``details``: also (branch (n, 8), singular (n, 8)), as the kernels' ``ik(..., details=True)``."""
+    r = solve(robot, poses, free, q_ref)
+    return (r.q, r.counts, r.branch, r.singular) if details else (r.q, r.counts)
+
+
+def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None) -> RedundantIKSolutions:
+    """Every closed-form solution (k, 7) of one pose at the free parameter ``free`` (a number):
+    ``.singular``, ``.reason``, ``.branch`` and ``.free`` as attributes; ``within_limits`` and
+    ``sort_by`` as in :func:`derive.ik.closed_form.ik`."""
+    robot = load_robot(robot)
+    P, single = as_pose_batch(pose)
+    if not single:
+        raise InputError("pose: ik() takes one pose; use ik_batch() for several")
+    f = _free_values(free, 1)
+    r = solve(robot, P, f, q_ref)
+    k = int(r.counts[0])
+    sols, sing, br, reason = r.q[0, :k], r.singular[0, :k], r.branch[0, :k], r.reason[0]
+    if within_limits:
+        q, cnt, b, sg = select.within_limits(sols[None], np.array([k]), robot.limits, [True] * 7,
+                                             branch=br[None], singular=sing[None])
+        sols, br, sing = q[0, :cnt[0]], b[0, :cnt[0]], sg[0, :cnt[0]]
+        if len(sols) == 0 and not reason:
+            reason = f"no solution inside the joint limits ({k} outside)"
+    if sort_by is not None and len(sols):
+        ref = as_finite_array(sort_by, "sort_by", last_dim=7)
+        order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
+        sols, sing, br = sols[order], sing[order], br[order]
+    return RedundantIKSolutions(sols.reshape(-1, 7), sing, reason, br, f[0])
+
+
+# --------------------------------------------------------------------------- #
+# Sweep
+# --------------------------------------------------------------------------- #
+def sweep_values(robot, poses, n: int) -> np.ndarray:
+    """(P, n) values of the free parameter: the midpoints of n equal parts of the feasible range
+    (q7: joint 7's limits, the same for every pose; psi: the union of the pose's feasible
+    intervals, :func:`derive.ik.srs.sweep_psi`; NaN for a pose without one)."""
+    robot = load_robot(robot)
+    kind = _kind(robot)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise InputError(f"n: the number of values of the free parameter, a positive integer; got {n!r}")
+    P, _ = as_pose_batch(poses)
+    if kind == "srs":
+        return srs.sweep_psi(robot, P, int(n))
+    lo, hi = panda.q7_interval(robot)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = -math.pi, math.pi
+    return np.broadcast_to(lo + (hi - lo) * (np.arange(n) + 0.5) / n, (len(P), n)).copy()
+
+
+def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sweep:
+    """The solutions of P poses at n values of the free parameter over its feasible range
+    (:func:`sweep_values`). ``within_limits`` (default): only the solutions inside the joint
+    limits, each at its in-limit winding (:func:`derive.ik.select.within_limits`); else every
+    solution (:func:`solve`). One pose (8,) / (4, 4) gives the arrays without the leading axis."""
+    robot = load_robot(robot)
+    values = sweep_values(robot, poses, n)
+    P, single = as_pose_batch(poses)
+    m = len(P)
+    qr = _q_ref(q_ref, m)
+    q = np.full((m, n, BRANCHES, 7), np.nan)
+    counts = np.zeros((m, n), dtype=np.int64)
+    branch = np.full((m, n, BRANCHES), -1, dtype=np.int64)
+    singular = np.zeros((m, n, BRANCHES), dtype=bool)
+    have = np.isfinite(values)
+    if np.any(have):
+        rows = np.nonzero(have)[0]
+        r = solve(robot, P[rows], values[have], None if qr is None else qr[rows])
+        sq, sc, sb, sg = r.q, r.counts, r.branch, r.singular
+        if within_limits:
+            sq, sc, sb, sg = select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
+            width = max(BRANCHES, sq.shape[1])
+            if width > BRANCHES:
+                q = np.full((m, n, width, 7), np.nan)
+                branch = np.full((m, n, width), -1, dtype=np.int64)
+                singular = np.zeros((m, n, width), dtype=bool)
+        k = sq.shape[1]
+        q[have, :k], counts[have], branch[have, :k], singular[have, :k] = sq, sc, sb, sg
+    out = Sweep(values, q, counts, branch, singular)
+    return Sweep(*(x[0] for x in out)) if single else out
+
+
+# --------------------------------------------------------------------------- #
+# Nearest along a path
+# --------------------------------------------------------------------------- #
+class _Problem:
+    """The unchecked closed form of one call, evaluated at free values per pose."""
+
+    def __init__(self, robot, kind, poses, seeds):
+        self.robot, self.kind, self.poses, self.seeds = robot, kind, poses, seeds
+        self.lo, self.hi = robot.limits[:, 0], robot.limits[:, 1]
+        if kind == "panda":
+            self.geo = panda.panda_geometry(robot)
+            c = self.geo.into_canonical(poses)
+            self.r7, self.p = quat._to_matrix(c[:, :4]), dq._translation(c)
+        else:
+            self.geo = srs.srs_geometry(robot)
+            self.rc, self.w = srs._into_canonical(self.geo, poses)
+
+    def candidates(self, rows, f):
+        """Candidates (len(rows), 8, 7), indexed by branch id, and their singular flags (len(rows),
+        8) at free values f for the poses ``rows``; not checked by FK, NaN where a root is missing."""
+        if self.kind == "panda":
+            cand, sing, _ = panda.canonical_candidates(self.geo, self.r7[rows], self.p[rows], f,
+                                                       self.seeds[rows])
+            return cand, sing
+        cand, sing, _ = srs._solve_psi(self.geo, self.rc[rows], self.w[rows], f, self.seeds[rows])
+        return cand, sing
+
+    def residual(self, rows, q):
+        """Position (m) and rotation (Frobenius norm of the difference of rotation matrices,
+        about sqrt 2 x the angle) errors of configurations q (len(rows), 7) against the poses,
+        in the canonical frame of the class (its own FK, cheaper than the reference FK)."""
+        if self.kind == "panda":
+            r, p = panda.canonical_fk(self.geo, q)
+            rc, w = self.r7[rows], self.p[rows]
+        else:
+            r, p = srs._canonical_fk(self.geo, q * self.geo.signs)
+            rc, w = self.rc[rows], self.w[rows]
+        return np.linalg.norm(p - w, axis=-1), np.linalg.norm(r - rc, axis=(-2, -1))
+
+    def moves(self, rows, cand):
+        """Per candidate: the winding nearest to the seed inside the limits (NaN if none), and
+        the largest and summed joint moves (inf if none): the rule of select.nearest."""
+        s = self.seeds[rows][:, None, :]
+        w = s + wrap_angle(cand - s)
+        opts = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
+        inside = ((opts >= self.lo[:, None] - select.LIMIT_SLACK)
+                  & (opts <= self.hi[:, None] + select.LIMIT_SLACK))
+        d = np.where(inside, np.abs(opts - s[..., None]), np.inf)
+        pick = np.argmin(d, axis=-1)
+        best = np.take_along_axis(opts, pick[..., None], axis=-1)[..., 0]
+        ok = np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0] & np.isfinite(best)
+        best = np.where(ok, best, np.nan)
+        move = np.where(ok, np.abs(best - s), np.inf)
+        return best, move.max(axis=-1), move.sum(axis=-1)
+
+    def branch_key(self, rows, f, b):
+        """(largest move, summed move) of branch b (per row) at free values f."""
+        cand, _ = self.candidates(rows, f)
+        pick = cand[np.arange(len(rows)), b][:, None]
+        _, mx, tot = self.moves(rows, pick)
+        return mx[:, 0], tot[:, 0]
+
+
+def _better(mx1, t1, mx2, t2):
+    """(mx1, t1) strictly before (mx2, t2) in the order largest move, then summed move."""
+    return (mx1 < mx2 - TIE) | ((np.abs(mx1 - mx2) <= TIE) & (t1 < t2))
+
+
+def _free_of(kind, robot, seeds) -> np.ndarray:
+    if kind == "panda":
+        return seeds[:, 6].copy()
+    return np.atleast_1d(srs.arm_angle(robot, seeds))
+
+
+def _clip(kind, f, lo, hi):
+    return np.clip(f, lo, hi) if kind == "panda" else f
+
+
+def _refine(prob, kind, rows, a, b, br, f_best, m_best, t_best, flo, fhi):
+    """Successive grid refinement (a parallel form of golden-section search, Kiefer 1953) of the
+    branch's (largest move, summed move) on [a, b]: REFINE values inside the bracket, the bracket
+    narrowed to the neighbours of the best value seen, until narrower than FREE_TOL. Returns the
+    best (f, largest move, summed move)."""
+    f_best, m_best, t_best = f_best.copy(), m_best.copy(), t_best.copy()
+    frac = np.arange(1, REFINE + 1) / (REFINE + 1)
+    for _ in range(40):
+        if np.max(b - a) <= FREE_TOL:
+            break
+        width = b - a
+        fg = _clip(kind, a[:, None] + width[:, None] * frac, flo, fhi)
+        rr = np.repeat(rows, REFINE)
+        mx, tot = prob.branch_key(rr, fg.reshape(-1), np.repeat(br, REFINE))
+        mx, tot = mx.reshape(-1, REFINE), tot.reshape(-1, REFINE)
+        j = np.lexsort((tot, mx), axis=-1)[:, 0]
+        k = np.arange(len(rows))
+        imp = _better(mx[k, j], tot[k, j], m_best, t_best)
+        f_best = np.where(imp, fg[k, j], f_best)
+        m_best, t_best = np.where(imp, mx[k, j], m_best), np.where(imp, tot[k, j], t_best)
+        step = width / (REFINE + 1)
+        a, b = f_best - step, f_best + step
+    return f_best, m_best, t_best
+
+
+def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
+    """Per pose the solution nearest to the seed along a path, with the free parameter and the
+    branch chosen by the 1D search of the module docstring; ``q_seed`` (7,) or (n, 7). The
+    record of :func:`derive.ik.select.nearest`: ``q`` at the winding nearest to the seed inside
+    the limits, ``found`` (False where no solution inside the limits was found, or its largest
+    move exceeds ``tol``), ``max_move``, ``total_move``, ``branch``, ``singular``. The joints a
+    singular set leaves free are the seed's. One pose and one seed give scalars."""
+    robot = load_robot(robot)
+    kind = _kind(robot)
+    if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
+                                and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol: expected a finite number >= 0 (rad), got {tol!r}")
+    P, single = as_pose_batch(poses)
+    seeds_in = as_finite_array(q_seed, "q_seed", last_dim=7)
+    if seeds_in.ndim > 2 or (seeds_in.ndim == 2 and seeds_in.shape[0] not in (1, len(P))):
+        raise InputError(f"q_seed: expected shape (7,) or ({len(P)}, 7), got {seeds_in.shape}")
+    single = single and seeds_in.ndim == 1
+    n = len(P)
+    seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
+    prob = _Problem(robot, kind, P, seeds)
+    _, (flo, fhi) = free_parameter(robot)
+    if kind == "panda" and not (math.isfinite(flo) and math.isfinite(fhi)):
+        flo, fhi = -math.pi, math.pi
+    rows = np.arange(n)
+
+    # 1. and 3. the seed's own free value and values around it at several scales, and a scan of
+    # the range: every branch at each; the best (value, branch) starts the search
+    f0 = _clip(kind, _free_of(kind, robot, seeds), flo, fhi)
+    grid = flo + (fhi - flo) * (np.arange(SCAN) + 0.5) / SCAN
+    vals = np.concatenate([_clip(kind, f0[:, None] + _ALL, flo, fhi),
+                           np.broadcast_to(grid, (n, SCAN))], axis=1)           # (n, 17 + SCAN)
+    m = vals.shape[1]
+    rr = np.repeat(rows, m)
+    _, mx, tot = prob.moves(rr, prob.candidates(rr, vals.reshape(-1))[0])
+    mx, tot = mx.reshape(n, m * BRANCHES), tot.reshape(n, m * BRANCHES)
+    j = np.lexsort((tot, mx), axis=-1)[:, 0]
+    start, branch = vals[rows, j // BRANCHES], j % BRANCHES
+    best_mx, best_tot = mx[rows, j], tot[rows, j]
+    # the bracket: the neighbours of the best value in its set (the offsets around f0 are sorted)
+    col = j // BRANCHES
+    local = col < len(_ALL)
+    lo_off = np.where(local, _LOWER[np.minimum(col, len(_ALL) - 1)], -(fhi - flo) / SCAN)
+    hi_off = np.where(local, _UPPER[np.minimum(col, len(_ALL) - 1)], (fhi - flo) / SCAN)
+    live = np.isfinite(best_mx)
+    best_f = start.copy()
+    at = rows[live]
+    if len(at):
+        with np.errstate(invalid="ignore"):
+            f, m_, t_ = _refine(prob, kind, at, start[at] + lo_off[at], start[at] + hi_off[at],
+                                branch[at], start[at], best_mx[at], best_tot[at], flo, fhi)
+        best_f[at], best_mx[at], best_tot[at] = f, m_, t_
+
+    # the answer: the chosen branch at the chosen value, checked by the class's FK; where the
+    # check fails, the nearest of the checked solutions there (:func:`solve`)
+    q = np.full((n, 7), np.nan)
+    mx_out, tot_out = np.full(n, np.inf), np.full(n, np.inf)
+    br_out, sg_out = np.full(n, -1, dtype=np.int64), np.zeros(n, dtype=bool)
+    at = rows[live]
+    if len(at):
+        k = np.arange(len(at))
+        cand, sing = prob.candidates(at, best_f[at])
+        best, mx, tot = prob.moves(at, cand[k, branch[at]][:, None])
+        dp, dr = prob.residual(at, np.nan_to_num(best[:, 0]))
+        ok = np.isfinite(mx[:, 0]) & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
+        q[at[ok]] = best[ok, 0]
+        mx_out[at[ok]], tot_out[at[ok]] = mx[ok, 0], tot[ok, 0]
+        br_out[at[ok]], sg_out[at[ok]] = branch[at[ok]], sing[k[ok], branch[at[ok]]]
+        redo = at[~ok]
+        if len(redo):
+            r = solve(robot, P[redo], best_f[redo], seeds[redo])
+            kk = np.arange(len(redo))
+            best, mx, tot = prob.moves(redo, r.q)
+            choose = np.lexsort((tot, mx), axis=-1)[:, 0]
+            q[redo] = best[kk, choose]
+            mx_out[redo], tot_out[redo] = mx[kk, choose], tot[kk, choose]
+            br_out[redo], sg_out[redo] = r.branch[kk, choose], r.singular[kk, choose]
+    found = np.isfinite(mx_out)
+    if tol is not None:
+        found &= mx_out <= tol
+    res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
+                         max_move=np.where(found, mx_out, np.nan),
+                         total_move=np.where(found, tot_out, np.nan),
+                         branch=np.where(found, br_out, -1), singular=found & sg_out)
+    if single:
+        return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
+                                                           "branch", "singular")))
+    return res
