@@ -45,6 +45,9 @@ from derive.codegen.emit import write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import classify, spherical_class
+from derive.ik.redundant import NAMES as FREE_NAMES
+from derive.ik.redundant import free_parameter, redundant_kind
+from derive.ik.srs import arm_angle
 from derive.kinematics.pose import from_position_quaternion, from_position_rpy, to_position_rpy
 from derive.model import export
 from derive.model.classify import classify as geometric_classify
@@ -241,12 +244,16 @@ def _robot_row(name: str) -> dict:
     r = load_robot(name)
     c = geometric_classify(r)
     closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else "")
+    kind = redundant_kind(r) if not closed else None
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
-    ik = closed or (f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
+    ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
+                    f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
     shipped_k = find_artifact(r.id, "c_source") is not None
     shipped_c = find_artifact(r.id, "casadi/fk") is not None
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
-            "types": [j.type for j in _variables(r)], "class": cls, "closed_form_ik": closed or None,
+            "types": [j.type for j in _variables(r)], "class": cls,
+            "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else None),
+            "free_parameter": FREE_NAMES[kind] if kind else None,
             "ik": ik,
             "kernels": ("FK+IK" if closed else "FK") + (", shipped" if shipped_k else ", on demand"),
             "casadi": ("fk, residual, ik" if closed else "fk, residual")
@@ -272,8 +279,10 @@ def cmd_robots(args) -> int:
         return EXIT_OK
     for line in _robots_table(rows):
         print(line)
-    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class; kernels and CasADi "
-          "functions: shipped in the package, or derived on first use and cached")
+    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
+          "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
+          "--seed Q; numpy reference, no kernels yet); kernels and CasADi functions: shipped in the "
+          "package, or derived on first use and cached")
     return EXIT_OK
 
 
@@ -342,9 +351,10 @@ def _deprecated(args, old: str, new: str, attr_old: str, attr_new: str) -> None:
 def cmd_ik(args) -> int:
     _deprecated(args, "ik --pose", "--q", "pose_old", "q")
     if args.q is None and args.xyz is None and args.dq is None:
-        if args.seed is not None or args.within_limits or args.rpy is not None or args.quat is not None:
-            raise InputError("ik: --seed, --within-limits, --rpy and --quat need a target "
-                             "(--q, --xyz or --dq)")
+        if (args.seed is not None or args.within_limits or args.rpy is not None or args.quat is not None
+                or args.free is not None or args.sweep is not None):
+            raise InputError("ik: --seed, --within-limits, --free, --sweep, --rpy and --quat need a "
+                             "target (--q, --xyz or --dq)")
         t0 = time.perf_counter()
         return _report(write_ik(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
     robot = _robot(args)
@@ -352,6 +362,11 @@ def cmd_ik(args) -> int:
     deg = args.deg
     head = {"robot": robot.name, "target": {"given": target, **_pose_dict(pose, deg)},
             "joints": _joint_meta(robot, deg)}
+    if redundant_kind(robot) is not None:
+        return _ik_redundant(robot, args, pose, q, head)
+    if args.free is not None or args.sweep is not None:
+        raise InputError(f"ik: --free and --sweep are for the seven-joint arms with a free parameter "
+                         f"(panda, fr3: q7; iiwa7, iiwa14: the arm angle psi); {robot.name} has none")
     if args.seed is not None:
         seed = _joints_in(robot, args.seed, "--seed", deg)
         res = kernels(robot, "c").nearest(pose, seed)
@@ -396,6 +411,80 @@ def cmd_ik(args) -> int:
     print(f"{len(rows)} solution(s) ({what}):")
     for line in _table(robot, [([str(i + 1)], s, note) for i, (s, note, _) in enumerate(rows)], deg,
                        [("#", "", 3)]):
+        print(line)
+    return EXIT_OK
+
+
+def _ik_redundant(robot, args, pose, q, head) -> int:
+    """ik of a seven-joint arm: at --free V, over --sweep N values, or nearest to --seed."""
+    deg = args.deg
+    unit = _angle_unit(deg)
+    conv = np.degrees if deg else (lambda x: x)
+    name, (lo, hi) = free_parameter(robot)
+    given = [o for o, v in (("--free", args.free), ("--sweep", args.sweep), ("--seed", args.seed))
+             if v is not None]
+    if len(given) != 1:
+        what = ("q7, the value of joint 7" if name == "q7" else
+                "psi, the arm angle: the rotation of the arm plane about the shoulder-wrist line")
+        raise InputError(f"ik: {robot.name} has 7 joints and a one-parameter family of solutions per "
+                         f"pose: give exactly one of --free V ({what}; {unit}), --sweep N (N values "
+                         "over its feasible range) or --seed Q (the solution nearest to Q)"
+                         + (f" (got {' and '.join(given)})" if given else ""))
+    free_meta = {"name": name, "unit": unit, "range": [_jnum(conv(lo)), _jnum(conv(hi))]}
+    head = {**head, "free_parameter": free_meta}
+    if args.seed is not None:
+        if args.within_limits:
+            raise InputError("ik: --seed already chooses within the joint limits; drop --within-limits")
+        seed = _joints_in(robot, args.seed, "--seed", deg)
+        res = reference.nearest(robot, pose, seed)
+        if not res.found:
+            return _no_solution(robot, args, head, "no solution inside the joint limits")
+        value = float(res.q[6]) if name == "q7" else float(arm_angle(robot, res.q))
+        sol = {"q": _jlist(_joints_out(robot, res.q, deg)), "free": _jnum(conv(value)),
+               "branch": int(res.branch), "singular": bool(res.singular)}
+        if args.json:
+            _print_json({**head, "count": 1, "selection": f"nearest to the seed, within the limits, {name} "
+                         "chosen by a 1D search", "largest_move": _jnum(conv(res.max_move)),
+                         "summed_move": _jnum(conv(res.total_move)), "move_unit": unit,
+                         "solutions": [sol], "reason": ""})
+            return EXIT_OK
+        print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+        print(f"the solution nearest to the seed, within the joint limits, {name} = "
+              f"{_clean(conv(value), 5):g} {unit} (largest joint move {_clean(conv(res.max_move), 5):g} "
+              f"{unit}, summed {_clean(conv(res.total_move), 5):g} {unit}):")
+        note = f"branch {int(res.branch)}" + (", singular" if res.singular else "")
+        for line in _table(robot, [(["1"], res.q, note)], deg, [("#", "", 3)]):
+            print(line)
+        return EXIT_OK
+    if args.sweep is not None:
+        if args.sweep < 1:
+            raise InputError(f"--sweep: the number of values of {name}, an integer >= 1; got {args.sweep}")
+        sw = reference.ik_sweep(robot, pose, args.sweep, q_ref=q)
+        rows = [(v, s, b, g) for v, sols, c, br, sg in zip(sw.free, sw.q, sw.counts, sw.branch, sw.singular)
+                for s, b, g in zip(sols[:c], br[:c], sg[:c])]
+        what = (f"{len(sw.free)} values of {name} over its feasible range, the solutions inside the "
+                "joint limits")
+        reason = "" if rows else f"no solution inside the joint limits at any of the {args.sweep} values of {name}"
+    else:
+        value = math.radians(args.free) if deg else float(args.free)
+        sols = reference.ik(robot, pose, q_ref=q, within_limits=args.within_limits, free=value)
+        rows = [(value, s, b, g) for s, b, g in zip(sols, sols.branch, sols.singular)]
+        what = (f"closed form at {name} = {_clean(args.free, 6):g} {unit}"
+                + (", inside the joint limits, every 2 pi winding" if args.within_limits else ""))
+        reason = sols.reason
+    if not rows:
+        return _no_solution(robot, args, head, reason or "no solution")
+    if args.json:
+        _print_json({**head, "count": len(rows), "selection": what, "reason": "",
+                     "solutions": [{"q": _jlist(_joints_out(robot, s, deg)), "free": _jnum(conv(v)),
+                                    "branch": int(b), "singular": bool(g)} for v, s, b, g in rows]})
+        return EXIT_OK
+    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+    print(f"{len(rows)} solution(s) ({what}):")
+    lead = [("#", "", 3), (name, f"({unit})", 10)]
+    table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s, f"branch {int(b)}" + (", singular" if g else ""))
+             for i, (v, s, b, g) in enumerate(rows)]
+    for line in _table(robot, table, deg, lead):
         print(line)
     return EXIT_OK
 
@@ -650,6 +739,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", nargs="+", type=float, default=None, metavar="Q",
                    help="only the solution nearest to these joint values, within the limits (C kernels; "
                         "--deg: revolute in degrees)")
+    s.add_argument("--free", type=float, default=None, metavar="V",
+                   help="seven-joint arms: the free parameter, q7 (panda, fr3) or the arm angle psi "
+                        "(iiwa7, iiwa14), rad (--deg: degrees); every solution at that value")
+    s.add_argument("--sweep", type=int, default=None, metavar="N",
+                   help="seven-joint arms: N values of the free parameter over its feasible range, the "
+                        "solutions inside the joint limits at each")
     s.add_argument("--pose", nargs="+", type=float, default=None, metavar="Q", dest="pose_old",
                    help="deprecated spelling of --q")
 

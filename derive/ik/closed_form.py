@@ -36,7 +36,7 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import select, spherical
+from derive.ik import panda, select, spherical, srs
 from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import _pose_error, fk
@@ -345,6 +345,16 @@ def classify(robot) -> Classification:
     c = geometric_classify(robot)
     if c.closed_form:
         return c
+    if robot.dof == 7 and (panda.is_panda_class(robot) or srs.is_srs(robot)):
+        notes = [n for n in c.notes if "no closed form" not in n and "7R, redundant" not in n]
+        what = ("of the Franka Panda class with q7 (joint 7) as the free parameter (derive.ik.panda, "
+                "after He & Liu 2021)" if panda.is_panda_class(robot) else
+                "of the SRS class with the arm angle psi as the free parameter (derive.ik.srs, after "
+                "Shimizu et al. 2008)")
+        return dataclasses.replace(c, closed_form=True, notes=notes + [
+            f"closed-form IK {what}: up to 8 solutions per value, derive.reference.ik(robot, pose, "
+            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference; no "
+            "generated kernels yet)"])
     geo = spherical_class(robot)
     if geo is not None:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]

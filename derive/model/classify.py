@@ -444,7 +444,9 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
                      "solves the IK numerically")
     elif cls == "SRS":
         notes.append("7R, redundant: the solutions of a pose form a one-parameter family (the arm "
-                     "angle); dq-derive has no closed form for it")
+                     "angle psi); for the SRS arms stretched at the zero pose with the elbow axis "
+                     "crossing the shoulder-wrist line (the KUKA iiwa) dq-derive has the closed form "
+                     "with psi given (derive.ik.srs; derive.reference.ik(robot, pose, free=psi))")
     elif nominal_cls != cls:
         pass                    # a calibrated arm: the note below says what holds
     elif six_r and pieper:
@@ -456,6 +458,9 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
         notes.append("no three consecutive axes are parallel or meet in one point (Pieper's "
                      "criterion fails): no closed form, up to 16 solutions; derive.refine solves "
                      "the IK numerically from several starts")
+    elif chain.n == 7 and all(t == "revolute" for t in chain.types):
+        notes.append("7R, redundant: no closed form in dq-derive for this chain unless it is of "
+                     "the Franka Panda class (q7 given, derive.ik.panda), which derive.classify checks")
     else:
         notes.append("no closed form in dq-derive for this chain")
     if nominal_cls == cls:
