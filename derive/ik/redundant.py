@@ -21,18 +21,20 @@ limits; psi: the union of the branches' feasible intervals under the joint limit
 :func:`nearest` chooses the free parameter and the branch for a seed configuration by a 1D
 search that keeps a path continuous:
 
-1. start at the seed's own free value f0 (its q7, or its arm angle :func:`derive.ik.srs.arm_angle`)
-   and take the branch whose solution at f0 moves least from the seed (largest single-joint move,
-   then the summed move, every joint at its winding nearest to the seed inside the limits as in
-   :func:`derive.ik.select.nearest`); along a path that solution is within about one step;
-2. refine f on that branch: a grid of 9 values over [f0 - h, f0 + h], h = 4 x the move at f0
-   (a larger h while the best grid value is at an end), then golden-section search (Kiefer,
-   "Sequential minimax search for a maximum", Proc. AMS 4, 1953) between the grid neighbours of
-   the best value, on the same order (largest move, then summed move). For q7 the bound is
-   exact (q7 is a joint, so a better f is within the move at f0); for psi, a rotation by psi of
-   the arm plane turns the shoulder's ZYZ angles by at least psi / 3 to first order;
-3. where the seed's free value gives no solution inside the limits, the start is the best of
-   32 values over the range (a scan) instead.
+1. start at the seed's own free value f0 (its q7, or its arm angle :func:`derive.ik.srs.arm_angle`):
+   evaluate every branch at f0, at f0 +- 1e-4, 3e-4, ..., 0.1, 0.3 (near a singular set the
+   solutions turn fast with the free parameter, so f0 alone can be far off) and at 32 values
+   over the range, and take the (value, branch) whose solution moves least from the seed
+   (largest single-joint move, then the summed move, every joint at its winding nearest to the
+   seed inside the limits as in :func:`derive.ik.select.nearest`); along a path that is the
+   seed's branch near f0, within about one step;
+2. refine the value on that branch between the neighbours of the start in its set: successive
+   grid refinement, 31 values per step and the bracket narrowed to the neighbours of the best
+   value, down to FREE_TOL (a parallel form of golden-section search, J. Kiefer, "Sequential
+   minimax search for a maximum", Proc. AMS 4, 1953; each step is one batched evaluation of the
+   closed form, which costs about what one value costs);
+3. the chosen branch at the chosen value is checked by the class's FK (else the nearest of the
+   FK-checked solutions there is taken).
 
 The result is the same :class:`derive.ik.select.Nearest` record as the 6R path's. The answer is
 the nearest solution *along the path*: a local minimum of the move, not a global search over
@@ -60,22 +62,19 @@ from derive.model.robot import load_robot
 TWO_PI = 2.0 * math.pi
 #: Branches per value of the free parameter (both classes).
 BRANCHES = 8
-#: Golden-section search stops when the bracket of the free parameter is narrower than this (rad).
+#: The refinement of nearest stops when the bracket of the free parameter is narrower than this (rad).
 FREE_TOL = 1e-9
-#: Values of the free parameter in the scan used where the seed's own value has no solution.
+#: Values of the free parameter over its range in the first scan (nearest, step 1).
 SCAN = 32
-#: Points of the local grid before the golden-section search.
-GRID = 9
 #: Largest-move values closer than this count as equal (the summed move decides).
 TIE = 1e-13
-_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 #: Offsets (rad) from the seed's free value tried first, both signs: near a singular set the
 #: solutions turn fast with the free parameter, so the seed's own value alone can be far off.
 _OFFSETS = np.array([1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3])
 _ALL = np.concatenate([[0.0], -_OFFSETS[::-1], _OFFSETS])
 _SORTED = np.sort(_ALL)
-#: Per tried offset: the distance down and up to its neighbours (the first bracket); 3 x the
-#: largest offset beyond the ends.
+#: Per tried offset: the distance down and up to its neighbours (the first bracket); 0.6 rad
+#: beyond the ends.
 _LOWER = np.array([(_SORTED[max(np.searchsorted(_SORTED, x) - 1, 0)] - x) or -2 * _OFFSETS[-1]
                    for x in _ALL])
 _UPPER = np.array([(_SORTED[min(np.searchsorted(_SORTED, x) + 1, len(_ALL) - 1)] - x)
