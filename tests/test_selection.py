@@ -83,6 +83,47 @@ def test_nearest_returns_the_generating_configuration_from_a_noisy_seed(robot):
     assert np.array_equal(tight.found, res.max_move <= 0.01) and np.all(np.isnan(tight.q[~tight.found]))
 
 
+@pytest.mark.parametrize("robot", ["ur5", "kr6-r900", "irb120"])
+def test_nearest_in_c_equals_the_numpy_rule(robot):
+    """The kernel's one-pass nearest (IK, duplicates, windings clamped to the limits, all in C)
+    against derive.ik.select.nearest (numpy, three windings per joint) on the merged solutions
+    of k.ik: the same choice (branch), the same joints and moves, on 2000 poses with seeds
+    anywhere in the limits (windings other than the nearest are often needed there), with
+    singular poses among them (theta5 = 0, and joint 5 at 0 for the OPW arms)."""
+    from derive.ik import select
+    k = kernels(robot, "c")
+    r = derive.load_robot(robot)
+    rng = np.random.default_rng(SEED + 5)
+    lo, hi = (np.array(v) for v in zip(*r.limits))
+    q = rng.uniform(np.maximum(lo, -math.pi), np.minimum(hi, math.pi), size=(2000, 6))
+    q[:200, 4] = 0.0
+    seeds = rng.uniform(np.maximum(lo, -2 * math.pi), np.minimum(hi, 2 * math.pi), size=q.shape)
+    poses = reference.fk(r, q)
+    gq, gmx, gtt, gbr, gsg = k._ext.nearest(poses, seeds)     # the C pass itself (k.nearest then
+    sols, counts, branch, sing = k.ik(poses, details=True)    # re-solves singular choices)
+    want = select.nearest(sols, counts, seeds, r.limits, k._revolute, branch, sing)
+    f = gbr >= 0
+    assert np.array_equal(f, want.found) and f.sum() > 1500
+    assert np.allclose(gmx[f], want.max_move[f], atol=1e-12)
+    assert np.allclose(gtt[f], want.total_move[f], atol=1e-12)
+    # the same choice, except at exact ties: two solutions of an elbow pair whose moves of joints
+    # 2-4 have one sign have the same summed move (theta2 + theta3 + theta4 is common to both),
+    # and then the last bit of the two sums decides
+    same = gbr == want.branch
+    assert (~same).sum() <= 10, np.nonzero(~same)
+    assert np.abs(gq[same & f] - want.q[same & f]).max() < 1e-12
+    assert np.array_equal(gsg[same & f] != 0, want.singular[same & f]) and want.singular.sum() > 50
+    for i in np.nonzero(~same)[0]:           # a tie: the C choice is another solution, as near
+        row = np.nonzero(branch[i] == gbr[i])[0]
+        assert len(row) == 1
+        assert np.abs(_wrapped(gq[i] - sols[i, row[0]])).max() < 1e-12
+    assert np.all(np.isnan(gq[~f])) and np.all(np.isnan(gmx[~f]))
+    for i in range(0, 2000, 97):                             # single = batch, bit for bit
+        one = k._ext.nearest(poses[i], seeds[i])
+        assert one[3] == gbr[i] and np.array_equal(one[0], gq[i], equal_nan=True)
+        assert one[1] == gmx[i] or (np.isnan(one[1]) and np.isnan(gmx[i]))
+
+
 @pytest.mark.parametrize("robot", ["ur5", "irb120"])
 def test_nearest_along_a_trajectory_keeps_the_generating_branch(robot):
     """A smooth random trajectory of 1000 steps that stays away from the singular sets (every
@@ -216,8 +257,16 @@ def test_c_extension_input_contract():
         k.ik(off)
     s, c = k.ik(P * (1 + 1e-9))           # within 1e-6 of unit: normalised
     assert c >= 1
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match="q_seed"):
         k.nearest(P, q[:5])
+    with pytest.raises(InputError, match="q_seed"):
+        k.nearest(P, q[:5] + [True])
+    with pytest.raises(InputError, match="q_seed"):
+        k.nearest(P, q[:5] + [float("nan")])
+    with pytest.raises(InputError, match="tol"):
+        k.nearest(P, q, tol=float("nan"))
+    with pytest.raises(InputError, match="not a unit dual quaternion"):
+        k.nearest(0.9 * P, q)
 
 
 def test_docs_example_runs():

@@ -6,7 +6,7 @@ header naming the robot, its parameters, the dq-derive version and the command t
 
 from __future__ import annotations
 
-import itertools
+import math
 import re
 from pathlib import Path
 
@@ -21,6 +21,7 @@ from derive.codegen.fk import fk_kernel
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
+from derive.ik.select import LIMIT_SLACK
 from derive.ik.program import ik_program
 from derive.model.robot import load_robot
 
@@ -148,8 +149,22 @@ def _context(robot, command: str) -> dict:
         "dof": robot.dof, "parameters": [(str(p), v) for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
+        "limits": _limit_context(robot),
         **_ik_context(robot),
     }
+
+
+def _limit_context(robot) -> list:
+    """Per joint its limits as C literals with the slack of :mod:`derive.ik.select` (``lo``,
+    ``hi``; +-INFINITY where the description gives none), as written (``lo_text``,
+    ``hi_text``), and whether it is revolute (the nearest winding is chosen for those)."""
+    def lit(x):
+        return repr(float(x)) if math.isfinite(x) else ("INFINITY" if x > 0 else "-INFINITY")
+
+    revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
+    return [{"lo": lit(lo - LIMIT_SLACK), "hi": lit(hi + LIMIT_SLACK), "lo_text": f"{lo:.6g}",
+             "hi_text": f"{hi:.6g}", "revolute": rev}
+            for (lo, hi), rev in zip(robot.limits.tolist(), revolute)]
 
 
 def _ik_context(robot) -> dict:
@@ -189,7 +204,16 @@ def _ik_context(robot) -> dict:
         ops.append(d)
     k = len(branch_index)
     leaf = " + ".join(f"{2 ** (k - 1 - i)}*{b}" if k - 1 - i else b for i, b in enumerate(branch_index))
-    flat = _flat_ops(prog, printers["cc"], numeric)
+    flat_full = _flat_ops(prog, printers["cc"], numeric)
+    flat = _live(flat_full)
+    # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
+    # is common to four leaves of the UR, ...): the nearest pass computes each value's winding once
+    first: dict = {}
+    same_as = [[0] * robot.dof for _ in range(prog.branches)]
+    for d in flat:
+        if d["kind"] == "solution":
+            for k, e in enumerate(d["q"]):
+                same_as[d["leaf"]][k] = first.setdefault((k, e), d["leaf"])
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
     labels = list(prog.branch_labels) or [f"step {i + 1}" for i in range(k)]
     bits = [f"{2 ** (k - 1 - i)} x ({lab}: 1 for the second root)" for i, lab in enumerate(labels)]
@@ -197,8 +221,19 @@ def _ik_context(robot) -> dict:
     return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
                    "branch_doc": branch_doc, "branch_labels": labels,
                    "free_joint": prog.free_joint, "free_rule": prog.free_rule,
-                   "leaf": leaf or "0", "flat": flat, "merge_tol": repr(MERGE_TOL), "steps": step_lines},
+                   "leaf": leaf or "0", "flat": flat, "flat_full": flat_full, "merge_tol": repr(MERGE_TOL), "steps": step_lines,
+                   "singular_flag": any(op.kind == "flag" and op.name == "singular" for op in prog.ops),
+                   "same_as": same_as},
             "ik_missing": ""}
+
+
+def _singular_only(cond) -> bool:
+    """Whether a select's condition can hold only where the program's ``singular`` flag is set
+    (the flag itself, or a conjunction with it): the batch loop then takes the other arm and
+    leaves the singular poses to a scalar pass (``dq_singular_block`` in the C template)."""
+    cond = sp.sympify(cond)
+    terms = cond.args if isinstance(cond, sp.And) else (cond,)
+    return any(t.is_Symbol and t.name == "singular" for t in terms)
 
 
 def _flat_ops(prog, printer, numeric) -> list:
@@ -206,7 +241,8 @@ def _flat_ops(prog, printer, numeric) -> list:
 
     A name defined at depth d gets the suffix of the first d branch bits of the path it
     belongs to (theta1_0, theta1_1, ...); branch signs become constants; "require" lines
-    become validity flags ok_<path>; each leaf writes its candidate and its flag."""
+    become validity flags ok_<path>; each leaf writes its candidate and its flag. The paths are
+    unrolled depth first (see ``walk``)."""
 
     depth_of: dict = {}
     for op in prog.ops:
@@ -230,30 +266,81 @@ def _flat_ops(prog, printer, numeric) -> list:
     def ok(path):
         return "ok_" + "".join(map(str, path)) if path else "ok"
 
+    def line(op, path):
+        """One op of the program on one branch path, as a flat line."""
+        d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
+        if op.kind == "branch":
+            return [{"kind": "ok_copy", "name": ok(path), "e": ok(path[:-1])},
+                    {"kind": "let", "name": name(op.name, path), "e": "-1.0" if path[-1] else "1.0"}]
+        if op.kind in ("let", "flag"):
+            d["e"] = pr(op.expr, path)
+        elif op.kind == "select":
+            d["e"], d["cond"], d["other"] = pr(op.expr, path), pr(op.cond, path), pr(op.other, path)
+            d["regular"] = _singular_only(op.cond)
+        elif op.kind == "sincos":
+            d["e"], d["name2"] = pr(op.expr, path), name(op.name2, path)
+        elif op.kind == "double":
+            d["name2"] = name(op.name2, path)
+            d["hs"], d["hc"] = (name(a, path) for a in op.args)
+        elif op.kind == "require":
+            d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
+        elif op.kind == "solution":
+            leaf = int("".join(map(str, path)) or "0", 2)
+            d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
+                 "sing": name("singular", path) if "singular" in depth_of else "0"}
+        return [d]
+
+    ops = prog.ops
     out = [{"kind": "ok_init", "name": "ok"}]
-    for op in prog.ops:
-        for path in itertools.product((0, 1), repeat=op.depth):
-            d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
-            if op.kind == "branch":
-                d = {"kind": "let", "name": name(op.name, path), "e": "-1.0" if path[-1] else "1.0"}
-                out.append({"kind": "ok_copy", "name": ok(path), "e": ok(path[:-1])})
-            elif op.kind in ("let", "flag"):
-                d["e"] = pr(op.expr, path)
-            elif op.kind == "select":
-                d["e"], d["cond"], d["other"] = pr(op.expr, path), pr(op.cond, path), pr(op.other, path)
-            elif op.kind == "sincos":
-                d["e"], d["name2"] = pr(op.expr, path), name(op.name2, path)
-            elif op.kind == "double":
-                d["name2"] = name(op.name2, path)
-                d["hs"], d["hc"] = (name(a, path) for a in op.args)
-            elif op.kind == "require":
-                d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
-            elif op.kind == "solution":
-                leaf = int("".join(map(str, path)) or "0", 2)
-                d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
-                     "sing": name("singular", path) if "singular" in depth_of else "0"}
-            out.append(d)
+
+    def walk(i, path):
+        """Depth first, as the nested loops run: the ops from i on at the depth of path, each
+        branch's body first for the root 0, then for the root 1. Every path's values are then
+        dead before the next path starts, which keeps the vectorised loop's live values (and
+        register spills) down. Returns the index of the first op outside the body."""
+        while i < len(ops) and ops[i].depth >= len(path):
+            if ops[i].kind == "branch" and ops[i].depth == len(path) + 1:
+                for root in (0, 1):
+                    out.extend(line(ops[i], path + (root,)))
+                    end = walk(i + 1, path + (root,))
+                i = end
+            else:
+                out.extend(line(ops[i], path))
+                i += 1
+        return i
+
+    walk(0, ())
     return out
+
+
+_IDENT = re.compile(r"[A-Za-z_]\w*")
+
+
+def _live(flat: list) -> list:
+    """The flat lines without the values nothing reads: where a select's condition can hold only
+    on a singular set (``regular``), its first arm is left to the scalar pass, and the lines that
+    only it read go (no unused variables in the emitted C)."""
+    live: set = set()
+    kept = []
+    for d in reversed(flat):
+        if d["kind"] in ("let", "flag", "select", "sincos", "double"):
+            names = {d["name"], d.get("name2")}
+            if not names & live:
+                continue
+        if d["kind"] == "select":
+            reads = [d["other"]] if d["regular"] else [d["e"], d["cond"], d["other"]]
+        elif d["kind"] == "double":
+            reads = [d["hs"], d["hc"]]
+        elif d["kind"] == "solution":
+            reads = [*d["q"], d["ok"], d["sing"]]
+        else:
+            reads = [d.get("e", "")]
+        if d["kind"] in ("ok_copy", "ok_and"):
+            reads.append(d["name"])
+        for text in reads:
+            live.update(_IDENT.findall(str(text)))
+        kept.append(d)
+    return kept[::-1]
 
 
 FILES = {

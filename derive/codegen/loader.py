@@ -21,6 +21,7 @@ import ctypes
 import hashlib
 import importlib.machinery
 import importlib.util
+import math
 import os
 import platform
 import shutil
@@ -140,6 +141,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool):
     text = template_environment().get_template("pyext.c.j2").render(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
         prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, q_max=repr(Q_MAX),
+        revolute=[j.type == "revolute" for j in robot.joints if not j.is_mimic],
         unit_tol=repr(UNIT_TOL), module="MODULE")
     digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
@@ -313,7 +315,12 @@ class Kernels:
             if within_limits:
                 s3, c1 = (sols[None], np.atleast_1d(counts)) if single else (sols, counts)
                 b3, g3 = (branch[None], sing[None]) if single else (branch, sing)
-                sols3, cnt, b3, g3 = select.within_limits(s3, c1, self.robot.limits, self._revolute, b3, g3)
+                if self._ext is not None:       # the enumeration in C, with the kernel's limits
+                    sols3, cnt, b3, g3 = self._ext.within_limits(s3, np.asarray(c1, dtype=np.int64),
+                                                                 np.asarray(b3, dtype=np.int64),
+                                                                 np.asarray(g3, dtype=np.int64))
+                else:
+                    sols3, cnt, b3, g3 = select.within_limits(s3, c1, self.robot.limits, self._revolute, b3, g3)
                 sols, counts, branch, sing = ((sols3[0], int(cnt[0]), b3[0], g3[0]) if single
                                               else (sols3, cnt, b3, g3))
             return (sols, counts, branch, sing) if details else (sols, counts)
@@ -371,31 +378,36 @@ class Kernels:
         solution lies on a singular set, the free joint is the seed's (the reference solver
         re-solves those poses with the seed as reference configuration)."""
         self._require_ik()
-        sols, counts, branch, sing = self._ik_details(P, need=False)
-        single = sols.ndim == 2
-        if single:
-            sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
-        seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
-        seeds = np.broadcast_to(seeds, (len(sols), self.dof))
-        if self._ext is not None:
-            q, mx, tot, ix = self._ext.nearest(sols, np.asarray(counts, dtype=np.int64), np.ascontiguousarray(seeds),
-                                               np.asarray(self.robot.limits, dtype=float),
-                                               self._revolute.astype(float))
-            found = ix >= 0
+        if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
+                                    and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
+            raise InputError(f"tol: expected a finite number >= 0 (rad or m), got {tol!r}")
+        if self._ext is not None:               # IK and selection in one C pass (ik_nearest_batch)
+            out = self._ext.nearest(P, q_seed, self._tool)
+            if out is NotImplemented:
+                poses, one = as_pose_batch(P)
+                out = self._ext.nearest(poses[0] if one else poses, q_seed, self._tool)
+            q, mx, tot, br, sg = out
+            single = q.ndim == 1
+            q, br, sg = np.atleast_2d(q), np.atleast_1d(br), np.atleast_1d(sg)
+            seeds = np.broadcast_to(np.asarray(q_seed, dtype=float), q.shape)
+            found = br >= 0
             if tol is not None:
                 found &= mx <= tol
-            rows = np.arange(len(ix))
-            take = np.where(found, ix, 0)
             res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
                                  max_move=np.where(found, mx, np.nan), total_move=np.where(found, tot, np.nan),
-                                 branch=np.where(found, branch[rows, take], -1),
-                                 singular=found & sing[rows, take])
+                                 branch=np.where(found, br, -1), singular=found & (sg != 0))
         else:
+            sols, counts, branch, sing = self._ik_details(P, need=False)
+            single = sols.ndim == 2
+            if single:
+                sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
+            seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
+            seeds = np.broadcast_to(seeds, (len(sols), self.dof))
             res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
         if np.any(res.singular):
             at = np.nonzero(res.singular)[0]
             poses, _ = as_pose_batch(P)
-            poses = np.broadcast_to(poses, (len(sols), 8))[at]
+            poses = np.broadcast_to(poses, (len(res.q), 8))[at]
             if self._tool is not None:
                 poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
             qs, cs = reference_ik_batch(self.robot, poses, q_ref=seeds[at])

@@ -9,7 +9,9 @@ return them (:mod:`derive.codegen.loader`), and are plain numpy:
   joint with limits +-2 pi has two values for almost every angle (three at exactly 0), so a UR
   pose has up to 8 x 2^6 solutions within its limits;
 * :func:`nearest`: per pose, the solution inside the limits (windings included) whose largest
-  single-joint move from the seed is smallest (then the smallest summed move). The winding of
+  single-joint move from the seed is smallest (then the smallest summed move; both compared in
+  steps of 1e-9 (``MOVE_SCALE``), since a joint shared by several branches, often the one that
+  moves most, has values that differ in their last bits; the first solution on a tie). The winding of
   each joint is chosen independently (the largest move is a maximum over joints), so no
   enumeration is needed. A joint without finite limits moves by the wrapped difference.
 """
@@ -24,6 +26,8 @@ from derive.algebra.angles import wrap_angle
 
 TWO_PI = 2.0 * np.pi
 LIMIT_SLACK = 1e-12
+#: nearest compares moves as rint(move * MOVE_SCALE): in steps of 1e-9 (rad or m)
+MOVE_SCALE = 1e9
 
 
 def _limits(limits, dof):
@@ -122,7 +126,11 @@ def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, t
     valid = (np.arange(m)[None, :] < np.asarray(counts)[:, None]) & np.all(np.isfinite(best), axis=-1)
     mx = np.where(valid, np.max(np.where(np.isnan(move), np.inf, move), axis=-1), np.inf)
     tot = np.where(valid, np.sum(np.where(np.isnan(move), np.inf, move), axis=-1), np.inf)
-    order = np.lexsort((tot, mx), axis=-1)[:, 0] if m else np.zeros(n, dtype=int)
+    # moves compared in steps of 1e-9 (the same joint value reached by two branches differs in its
+    # last bits), as rint(move * 1e9) like the C kernels' pass; lexsort is stable: on a tie the
+    # first solution, as there
+    order = (np.lexsort((np.rint(tot * MOVE_SCALE), np.rint(mx * MOVE_SCALE)), axis=-1)[:, 0] if m
+             else np.zeros(n, dtype=int))
     idx = np.arange(n)
     q = best[idx, order] if m else np.full((n, dof), np.nan)
     found = np.isfinite(mx[idx, order]) if m else np.zeros(n, dtype=bool)

@@ -304,10 +304,18 @@ DQ_INLINE double dq_wrap(double x)
     return dq_sel(r <= -3.14159265358979311600, r + 6.28318530717958647693, r);
 }
 
-static inline int dq_close(double a, double b)
+/* The distance of two wrapped angles, |a - b| or 2 pi - |a - b| when that is smaller. */
+DQ_INLINE double dq_adist(double a, double b)
 {
     const double d = fabs(a - b);
-    return d < 1e-06 || d > 6.28318530717958647693 - 1e-06;
+    const double e = 6.28318530717958647693 - d;
+    return dq_sel(e < d, e, d);
+}
+
+/* The larger of a and b (a select, which vectorises; both are finite here). */
+DQ_INLINE double dq_max(double a, double b)
+{
+    return dq_sel(a > b, a, b);
 }
 
 /* Candidates without near-duplicates (the first of each group kept), packed into sols; where
@@ -322,7 +330,7 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
         }
         int dup = 0;
         for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_close(cand[i][0], cand[j][0]) && dq_close(cand[i][1], cand[j][1]) && dq_close(cand[i][2], cand[j][2]) && dq_close(cand[i][3], cand[j][3]) && dq_close(cand[i][4], cand[j][4]) && dq_close(cand[i][5], cand[j][5])) {
+            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_adist(cand[i][5], cand[j][5])))))) < 1e-06) {
                 dup = 1;
             }
         }
@@ -339,10 +347,15 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
     return count;
 }
 
-int irb120_ik(const double *restrict pose, double *restrict sols)
+/* The IK program on one pose, its branches as nested loops: each leaf's candidate, whether it
+ * is valid, and its singular flag (valid and sing cleared first). */
+static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
+                             int valid[8], int sing[8])
 {
-    double cand[8][6];
-    int valid[8] = {0};
+    for (int b = 0; b < 8; ++b) {
+        valid[b] = 0;
+        sing[b] = 0;
+    }
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
     const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
     const double x_w = -0.144*p0*p2 + 2.0*p0*p5 - 0.144*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
@@ -353,7 +366,7 @@ int irb120_ik(const double *restrict pose, double *restrict sols)
     const double k3 = 0;
     const double k4 = k1*k1 + k2*k2 - k3*k3;
     if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return 0;
+        return;
     }
     const double k5 = dq_atan2(k1, -k2);
     const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
@@ -413,33 +426,339 @@ int irb120_ik(const double *restrict pose, double *restrict sols)
                     cq[4] = dq_wrap(theta5);
                     cq[5] = dq_wrap(theta6);
                     valid[4*b1 + 2*b2 + b3] = 1;
+                    sing[4*b1 + 2*b2 + b3] = singular;
                 }
             }
         }
     }
+}
+
+int irb120_ik(const double *restrict pose, double *restrict sols)
+{
+    double cand[8][6];
+    int valid[8], sing[8];
+    dq_ik_candidates(pose, cand, valid, sing);
     return dq_merge((const double (*)[6])cand, valid, sols, NULL);
 }
 
-/* The scalar pass after the vectorised loop of the batch IK: the candidates of each of the m
- * poses of a block merged (dq_merge) and NaN-padded, with their count, and (where branch is not
- * NULL) each solution's branch index and singular flag (-1 and 0 in the padding). Kept out of
- * the batch function so that its loops are the vectorised ones only. */
-static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK], int sb[][DQ_BLOCK],
-                           double *restrict sols, int *restrict counts, int *restrict branch,
-                           int *restrict singular)
+/* The whole unrolled program on one pose (the singular arms of the selects included): every
+ * leaf's candidate, valid or not, as the vectorised loop writes it. */
+static void dq_ik_full(const double *restrict pose, double cand[8][6],
+                       int valid[8], int sing[8])
+{
+    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
+    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
+        int ok = 1;
+        const double x_w = -0.144*p0*p2 + 2.0*p0*p5 - 0.144*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
+        const double y_w = 0.144*p0*p1 + 2.0*p0*p6 - 2.0*p1*p7 - 0.144*p2*p3 - 2.0*p2*p4 + 2.0*p3*p5;
+        const double z_w = 2.0*p0*p7 + 0.144*p1*p1 + 2.0*p1*p6 + 0.144*p2*p2 - 2.0*p2*p5 - 2.0*p3*p4 - 0.072;
+        const double k1 = y_w;
+        const double k2 = -x_w;
+        const double k3 = 0;
+        const double k4 = k1*k1 + k2*k2 - k3*k3;
+        ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
+        const double k5 = dq_atan2(k1, -k2);
+        const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
+        int ok_0 = ok;
+        const double sg1_0 = 1.0;
+        const double theta1_0 = k5 - dq_atan2(-k3, k6*sg1_0);
+        double s1_0, c1_0;
+        dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
+        const double s2_0 = 2.0*s1_0*c1_0;
+        const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
+        const double w7_0 = c2_0*x_w + s2_0*y_w;
+        const double w8_0 = z_w - 0.29;
+        const double k9_0 = 0.16308;
+        const double k10_0 = 0.03780000000000001;
+        const double k11_0 = -w7_0*w7_0 - w8_0*w8_0 + 0.16900400000000002;
+        const double k12_0 = k10_0*k10_0 - k11_0*k11_0 + k9_0*k9_0;
+        ok_0 = ok_0 & (k12_0 >= -1e-10*dq_sel((1.0) > (k11_0*k11_0), 1.0, k11_0*k11_0));
+        const double k13_0 = dq_atan2(k10_0, k9_0);
+        const double k14_0 = dq_atan2(sqrt(dq_sel((k12_0) > 0.0, k12_0, 0.0)), -k11_0);
+        int ok_00 = ok_0;
+        const double sg2_00 = 1.0;
+        const double theta3_00 = k13_0 + k14_0*sg2_00;
+        double s3_00, c3_00;
+        dq_sincos(theta3_00, &s3_00, &c3_00);
+        const double k15_00 = copysign(1.0, -0.16308*c3_00 - 0.03780000000000001*s3_00 - 0.16900400000000002);
+        const double theta2_00 = dq_atan2(k15_00*(-0.302*c3_00*w7_0 - 0.07*c3_00*w8_0 - 0.07*s3_00*w7_0 + 0.302*s3_00*w8_0 - 0.27*w7_0), k15_00*(0.07*c3_00*w7_0 - 0.302*c3_00*w8_0 - 0.302*s3_00*w7_0 - 0.07*s3_00*w8_0 - 0.27*w8_0));
+        double s4_00, c4_00;
+        dq_sincos(0.5*theta2_00 + 0.5*theta3_00, &s4_00, &c4_00);
+        const double w_r_00 = c1_0*c4_00*p0 + c1_0*p2*s4_00 + c4_00*p3*s1_0 - p1*s1_0*s4_00;
+        const double a_r_00 = c1_0*c4_00*p1 - c1_0*p3*s4_00 + c4_00*p2*s1_0 + p0*s1_0*s4_00;
+        const double b_r_00 = c1_0*c4_00*p2 - c1_0*p0*s4_00 - c4_00*p1*s1_0 - p3*s1_0*s4_00;
+        const double c_r_00 = c1_0*c4_00*p3 + c1_0*p1*s4_00 - c4_00*p0*s1_0 + p2*s1_0*s4_00;
+        const double h16_00 = sqrt(c_r_00*c_r_00 + w_r_00*w_r_00);
+        const double h17_00 = dq_atan2(c_r_00, w_r_00);
+        const double h18_00 = sqrt(a_r_00*a_r_00 + b_r_00*b_r_00);
+        const double h19_00 = dq_atan2(-a_r_00, b_r_00);
+        const double h20_00 = dq_atan2(h18_00, h16_00);
+        const double h21_00 = 2.0*h16_00*h18_00/(h16_00*h16_00 + h18_00*h18_00);
+        const int singular_00 = h21_00 < 1e-11;
+        const int cos_small_00 = h16_00 < h18_00;
+        int ok_000 = ok_00;
+        const double sg3_000 = 1.0;
+        const double theta5_singular_000 = dq_sel(cos_small_00, 3.141592653589793, 0);
+        const double theta5_000 = dq_sel(singular_00, theta5_singular_000, 2.0*h20_00*sg3_000);
+        const double h22_000 = h19_00 - 1.5707963267948966*sg3_000 + 1.5707963267948966;
+        const double theta4_000 = dq_sel(singular_00, 0, h17_00 + h22_000);
+        const double theta6_singular_000 = dq_sel(cos_small_00, -2.0*h22_000, 2.0*h17_00);
+        const double theta6_000 = dq_sel(singular_00, theta6_singular_000, h17_00 - h22_000);
+        cand[0][0] = dq_wrap(theta1_0);
+        cand[0][1] = dq_wrap(theta2_00);
+        cand[0][2] = dq_wrap(theta3_00 - 1.5707963267948966);
+        cand[0][3] = dq_wrap(theta4_000);
+        cand[0][4] = dq_wrap(theta5_000);
+        cand[0][5] = dq_wrap(theta6_000);
+        valid[0] = ok_000;
+        sing[0] = singular_00;
+        int ok_001 = ok_00;
+        const double sg3_001 = -1.0;
+        const double theta5_singular_001 = dq_sel(cos_small_00, 3.141592653589793, 0);
+        const double theta5_001 = dq_sel(singular_00, theta5_singular_001, 2.0*h20_00*sg3_001);
+        const double h22_001 = h19_00 - 1.5707963267948966*sg3_001 + 1.5707963267948966;
+        const double theta4_001 = dq_sel(singular_00, 0, h17_00 + h22_001);
+        const double theta6_singular_001 = dq_sel(cos_small_00, -2.0*h22_001, 2.0*h17_00);
+        const double theta6_001 = dq_sel(singular_00, theta6_singular_001, h17_00 - h22_001);
+        cand[1][0] = dq_wrap(theta1_0);
+        cand[1][1] = dq_wrap(theta2_00);
+        cand[1][2] = dq_wrap(theta3_00 - 1.5707963267948966);
+        cand[1][3] = dq_wrap(theta4_001);
+        cand[1][4] = dq_wrap(theta5_001);
+        cand[1][5] = dq_wrap(theta6_001);
+        valid[1] = ok_001;
+        sing[1] = singular_00;
+        int ok_01 = ok_0;
+        const double sg2_01 = -1.0;
+        const double theta3_01 = k13_0 + k14_0*sg2_01;
+        double s3_01, c3_01;
+        dq_sincos(theta3_01, &s3_01, &c3_01);
+        const double k15_01 = copysign(1.0, -0.16308*c3_01 - 0.03780000000000001*s3_01 - 0.16900400000000002);
+        const double theta2_01 = dq_atan2(k15_01*(-0.302*c3_01*w7_0 - 0.07*c3_01*w8_0 - 0.07*s3_01*w7_0 + 0.302*s3_01*w8_0 - 0.27*w7_0), k15_01*(0.07*c3_01*w7_0 - 0.302*c3_01*w8_0 - 0.302*s3_01*w7_0 - 0.07*s3_01*w8_0 - 0.27*w8_0));
+        double s4_01, c4_01;
+        dq_sincos(0.5*theta2_01 + 0.5*theta3_01, &s4_01, &c4_01);
+        const double w_r_01 = c1_0*c4_01*p0 + c1_0*p2*s4_01 + c4_01*p3*s1_0 - p1*s1_0*s4_01;
+        const double a_r_01 = c1_0*c4_01*p1 - c1_0*p3*s4_01 + c4_01*p2*s1_0 + p0*s1_0*s4_01;
+        const double b_r_01 = c1_0*c4_01*p2 - c1_0*p0*s4_01 - c4_01*p1*s1_0 - p3*s1_0*s4_01;
+        const double c_r_01 = c1_0*c4_01*p3 + c1_0*p1*s4_01 - c4_01*p0*s1_0 + p2*s1_0*s4_01;
+        const double h16_01 = sqrt(c_r_01*c_r_01 + w_r_01*w_r_01);
+        const double h17_01 = dq_atan2(c_r_01, w_r_01);
+        const double h18_01 = sqrt(a_r_01*a_r_01 + b_r_01*b_r_01);
+        const double h19_01 = dq_atan2(-a_r_01, b_r_01);
+        const double h20_01 = dq_atan2(h18_01, h16_01);
+        const double h21_01 = 2.0*h16_01*h18_01/(h16_01*h16_01 + h18_01*h18_01);
+        const int singular_01 = h21_01 < 1e-11;
+        const int cos_small_01 = h16_01 < h18_01;
+        int ok_010 = ok_01;
+        const double sg3_010 = 1.0;
+        const double theta5_singular_010 = dq_sel(cos_small_01, 3.141592653589793, 0);
+        const double theta5_010 = dq_sel(singular_01, theta5_singular_010, 2.0*h20_01*sg3_010);
+        const double h22_010 = h19_01 - 1.5707963267948966*sg3_010 + 1.5707963267948966;
+        const double theta4_010 = dq_sel(singular_01, 0, h17_01 + h22_010);
+        const double theta6_singular_010 = dq_sel(cos_small_01, -2.0*h22_010, 2.0*h17_01);
+        const double theta6_010 = dq_sel(singular_01, theta6_singular_010, h17_01 - h22_010);
+        cand[2][0] = dq_wrap(theta1_0);
+        cand[2][1] = dq_wrap(theta2_01);
+        cand[2][2] = dq_wrap(theta3_01 - 1.5707963267948966);
+        cand[2][3] = dq_wrap(theta4_010);
+        cand[2][4] = dq_wrap(theta5_010);
+        cand[2][5] = dq_wrap(theta6_010);
+        valid[2] = ok_010;
+        sing[2] = singular_01;
+        int ok_011 = ok_01;
+        const double sg3_011 = -1.0;
+        const double theta5_singular_011 = dq_sel(cos_small_01, 3.141592653589793, 0);
+        const double theta5_011 = dq_sel(singular_01, theta5_singular_011, 2.0*h20_01*sg3_011);
+        const double h22_011 = h19_01 - 1.5707963267948966*sg3_011 + 1.5707963267948966;
+        const double theta4_011 = dq_sel(singular_01, 0, h17_01 + h22_011);
+        const double theta6_singular_011 = dq_sel(cos_small_01, -2.0*h22_011, 2.0*h17_01);
+        const double theta6_011 = dq_sel(singular_01, theta6_singular_011, h17_01 - h22_011);
+        cand[3][0] = dq_wrap(theta1_0);
+        cand[3][1] = dq_wrap(theta2_01);
+        cand[3][2] = dq_wrap(theta3_01 - 1.5707963267948966);
+        cand[3][3] = dq_wrap(theta4_011);
+        cand[3][4] = dq_wrap(theta5_011);
+        cand[3][5] = dq_wrap(theta6_011);
+        valid[3] = ok_011;
+        sing[3] = singular_01;
+        int ok_1 = ok;
+        const double sg1_1 = -1.0;
+        const double theta1_1 = k5 - dq_atan2(-k3, k6*sg1_1);
+        double s1_1, c1_1;
+        dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
+        const double s2_1 = 2.0*s1_1*c1_1;
+        const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
+        const double w7_1 = c2_1*x_w + s2_1*y_w;
+        const double w8_1 = z_w - 0.29;
+        const double k9_1 = 0.16308;
+        const double k10_1 = 0.03780000000000001;
+        const double k11_1 = -w7_1*w7_1 - w8_1*w8_1 + 0.16900400000000002;
+        const double k12_1 = k10_1*k10_1 - k11_1*k11_1 + k9_1*k9_1;
+        ok_1 = ok_1 & (k12_1 >= -1e-10*dq_sel((1.0) > (k11_1*k11_1), 1.0, k11_1*k11_1));
+        const double k13_1 = dq_atan2(k10_1, k9_1);
+        const double k14_1 = dq_atan2(sqrt(dq_sel((k12_1) > 0.0, k12_1, 0.0)), -k11_1);
+        int ok_10 = ok_1;
+        const double sg2_10 = 1.0;
+        const double theta3_10 = k13_1 + k14_1*sg2_10;
+        double s3_10, c3_10;
+        dq_sincos(theta3_10, &s3_10, &c3_10);
+        const double k15_10 = copysign(1.0, -0.16308*c3_10 - 0.03780000000000001*s3_10 - 0.16900400000000002);
+        const double theta2_10 = dq_atan2(k15_10*(-0.302*c3_10*w7_1 - 0.07*c3_10*w8_1 - 0.07*s3_10*w7_1 + 0.302*s3_10*w8_1 - 0.27*w7_1), k15_10*(0.07*c3_10*w7_1 - 0.302*c3_10*w8_1 - 0.302*s3_10*w7_1 - 0.07*s3_10*w8_1 - 0.27*w8_1));
+        double s4_10, c4_10;
+        dq_sincos(0.5*theta2_10 + 0.5*theta3_10, &s4_10, &c4_10);
+        const double w_r_10 = c1_1*c4_10*p0 + c1_1*p2*s4_10 + c4_10*p3*s1_1 - p1*s1_1*s4_10;
+        const double a_r_10 = c1_1*c4_10*p1 - c1_1*p3*s4_10 + c4_10*p2*s1_1 + p0*s1_1*s4_10;
+        const double b_r_10 = c1_1*c4_10*p2 - c1_1*p0*s4_10 - c4_10*p1*s1_1 - p3*s1_1*s4_10;
+        const double c_r_10 = c1_1*c4_10*p3 + c1_1*p1*s4_10 - c4_10*p0*s1_1 + p2*s1_1*s4_10;
+        const double h16_10 = sqrt(c_r_10*c_r_10 + w_r_10*w_r_10);
+        const double h17_10 = dq_atan2(c_r_10, w_r_10);
+        const double h18_10 = sqrt(a_r_10*a_r_10 + b_r_10*b_r_10);
+        const double h19_10 = dq_atan2(-a_r_10, b_r_10);
+        const double h20_10 = dq_atan2(h18_10, h16_10);
+        const double h21_10 = 2.0*h16_10*h18_10/(h16_10*h16_10 + h18_10*h18_10);
+        const int singular_10 = h21_10 < 1e-11;
+        const int cos_small_10 = h16_10 < h18_10;
+        int ok_100 = ok_10;
+        const double sg3_100 = 1.0;
+        const double theta5_singular_100 = dq_sel(cos_small_10, 3.141592653589793, 0);
+        const double theta5_100 = dq_sel(singular_10, theta5_singular_100, 2.0*h20_10*sg3_100);
+        const double h22_100 = h19_10 - 1.5707963267948966*sg3_100 + 1.5707963267948966;
+        const double theta4_100 = dq_sel(singular_10, 0, h17_10 + h22_100);
+        const double theta6_singular_100 = dq_sel(cos_small_10, -2.0*h22_100, 2.0*h17_10);
+        const double theta6_100 = dq_sel(singular_10, theta6_singular_100, h17_10 - h22_100);
+        cand[4][0] = dq_wrap(theta1_1);
+        cand[4][1] = dq_wrap(theta2_10);
+        cand[4][2] = dq_wrap(theta3_10 - 1.5707963267948966);
+        cand[4][3] = dq_wrap(theta4_100);
+        cand[4][4] = dq_wrap(theta5_100);
+        cand[4][5] = dq_wrap(theta6_100);
+        valid[4] = ok_100;
+        sing[4] = singular_10;
+        int ok_101 = ok_10;
+        const double sg3_101 = -1.0;
+        const double theta5_singular_101 = dq_sel(cos_small_10, 3.141592653589793, 0);
+        const double theta5_101 = dq_sel(singular_10, theta5_singular_101, 2.0*h20_10*sg3_101);
+        const double h22_101 = h19_10 - 1.5707963267948966*sg3_101 + 1.5707963267948966;
+        const double theta4_101 = dq_sel(singular_10, 0, h17_10 + h22_101);
+        const double theta6_singular_101 = dq_sel(cos_small_10, -2.0*h22_101, 2.0*h17_10);
+        const double theta6_101 = dq_sel(singular_10, theta6_singular_101, h17_10 - h22_101);
+        cand[5][0] = dq_wrap(theta1_1);
+        cand[5][1] = dq_wrap(theta2_10);
+        cand[5][2] = dq_wrap(theta3_10 - 1.5707963267948966);
+        cand[5][3] = dq_wrap(theta4_101);
+        cand[5][4] = dq_wrap(theta5_101);
+        cand[5][5] = dq_wrap(theta6_101);
+        valid[5] = ok_101;
+        sing[5] = singular_10;
+        int ok_11 = ok_1;
+        const double sg2_11 = -1.0;
+        const double theta3_11 = k13_1 + k14_1*sg2_11;
+        double s3_11, c3_11;
+        dq_sincos(theta3_11, &s3_11, &c3_11);
+        const double k15_11 = copysign(1.0, -0.16308*c3_11 - 0.03780000000000001*s3_11 - 0.16900400000000002);
+        const double theta2_11 = dq_atan2(k15_11*(-0.302*c3_11*w7_1 - 0.07*c3_11*w8_1 - 0.07*s3_11*w7_1 + 0.302*s3_11*w8_1 - 0.27*w7_1), k15_11*(0.07*c3_11*w7_1 - 0.302*c3_11*w8_1 - 0.302*s3_11*w7_1 - 0.07*s3_11*w8_1 - 0.27*w8_1));
+        double s4_11, c4_11;
+        dq_sincos(0.5*theta2_11 + 0.5*theta3_11, &s4_11, &c4_11);
+        const double w_r_11 = c1_1*c4_11*p0 + c1_1*p2*s4_11 + c4_11*p3*s1_1 - p1*s1_1*s4_11;
+        const double a_r_11 = c1_1*c4_11*p1 - c1_1*p3*s4_11 + c4_11*p2*s1_1 + p0*s1_1*s4_11;
+        const double b_r_11 = c1_1*c4_11*p2 - c1_1*p0*s4_11 - c4_11*p1*s1_1 - p3*s1_1*s4_11;
+        const double c_r_11 = c1_1*c4_11*p3 + c1_1*p1*s4_11 - c4_11*p0*s1_1 + p2*s1_1*s4_11;
+        const double h16_11 = sqrt(c_r_11*c_r_11 + w_r_11*w_r_11);
+        const double h17_11 = dq_atan2(c_r_11, w_r_11);
+        const double h18_11 = sqrt(a_r_11*a_r_11 + b_r_11*b_r_11);
+        const double h19_11 = dq_atan2(-a_r_11, b_r_11);
+        const double h20_11 = dq_atan2(h18_11, h16_11);
+        const double h21_11 = 2.0*h16_11*h18_11/(h16_11*h16_11 + h18_11*h18_11);
+        const int singular_11 = h21_11 < 1e-11;
+        const int cos_small_11 = h16_11 < h18_11;
+        int ok_110 = ok_11;
+        const double sg3_110 = 1.0;
+        const double theta5_singular_110 = dq_sel(cos_small_11, 3.141592653589793, 0);
+        const double theta5_110 = dq_sel(singular_11, theta5_singular_110, 2.0*h20_11*sg3_110);
+        const double h22_110 = h19_11 - 1.5707963267948966*sg3_110 + 1.5707963267948966;
+        const double theta4_110 = dq_sel(singular_11, 0, h17_11 + h22_110);
+        const double theta6_singular_110 = dq_sel(cos_small_11, -2.0*h22_110, 2.0*h17_11);
+        const double theta6_110 = dq_sel(singular_11, theta6_singular_110, h17_11 - h22_110);
+        cand[6][0] = dq_wrap(theta1_1);
+        cand[6][1] = dq_wrap(theta2_11);
+        cand[6][2] = dq_wrap(theta3_11 - 1.5707963267948966);
+        cand[6][3] = dq_wrap(theta4_110);
+        cand[6][4] = dq_wrap(theta5_110);
+        cand[6][5] = dq_wrap(theta6_110);
+        valid[6] = ok_110;
+        sing[6] = singular_11;
+        int ok_111 = ok_11;
+        const double sg3_111 = -1.0;
+        const double theta5_singular_111 = dq_sel(cos_small_11, 3.141592653589793, 0);
+        const double theta5_111 = dq_sel(singular_11, theta5_singular_111, 2.0*h20_11*sg3_111);
+        const double h22_111 = h19_11 - 1.5707963267948966*sg3_111 + 1.5707963267948966;
+        const double theta4_111 = dq_sel(singular_11, 0, h17_11 + h22_111);
+        const double theta6_singular_111 = dq_sel(cos_small_11, -2.0*h22_111, 2.0*h17_11);
+        const double theta6_111 = dq_sel(singular_11, theta6_singular_111, h17_11 - h22_111);
+        cand[7][0] = dq_wrap(theta1_1);
+        cand[7][1] = dq_wrap(theta2_11);
+        cand[7][2] = dq_wrap(theta3_11 - 1.5707963267948966);
+        cand[7][3] = dq_wrap(theta4_111);
+        cand[7][4] = dq_wrap(theta5_111);
+        cand[7][5] = dq_wrap(theta6_111);
+        valid[7] = ok_111;
+        sing[7] = singular_11;
+}
+
+/* The scalar pass after the vectorised loop of the batch IK: that loop computes every pose as
+ * if no step were singular (the singular arms of the selects are left out, so their extra
+ * transcendentals cost nothing on the common path); the poses of a block with a singular flag
+ * set are computed again here by the whole unrolled program (dq_ik_full), every leaf (valid or
+ * not) as the loop would write it, so that values several leaves share stay shared. */
+static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6][DQ_BLOCK],
+                              int vb[][DQ_BLOCK], int sb[][DQ_BLOCK])
 {
     for (size_t j = 0; j < m; ++j) {
-        double cand[8][6];
-        int valid[8];
-        int ids[8];
+        int any = 0;
         for (int b = 0; b < 8; ++b) {
-            valid[b] = vb[b][j];
-            for (int k = 0; k < 6; ++k) {
-                cand[b][k] = cb[b][k][j];
-            }
+            any |= sb[b][j];
         }
+        if (!any) {
+            continue;
+        }
+        double pose[8], cand[8][6];
+        int valid[8], sing[8];
+        for (int k = 0; k < 8; ++k) {
+            pose[k] = pb[k][j];
+        }
+        dq_ik_full(pose, cand, valid, sing);
+        for (int b = 0; b < 8; ++b) {
+            for (int k = 0; k < 6; ++k) {
+                cb[b][k][j] = cand[b][k];
+            }
+            vb[b][j] = valid[b];
+            sb[b][j] = sing[b];
+        }
+    }
+}
+
+/* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
+ * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
+ * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
+ * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
+ * are the vectorised ones only. */
+static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
+                          double *restrict sols, int *restrict counts, int *restrict branch,
+                          int *restrict singular)
+{
+    for (size_t j = 0; j < m; ++j) {
         double *const s = sols + j * 48;
-        const int c = dq_merge((const double (*)[6])cand, valid, s, ids);
+        int ids[8];
+        int c = 0;
+        for (int b = 0; b < 8; ++b) {
+            for (int k = 0; k < 6; ++k) {
+                s[c * 6 + k] = cb[b][k][j];
+            }
+            ids[c] = b;
+            c += kb[b][j];
+        }
         for (int k = c * 6; k < 48; ++k) {
             s[k] = NAN;
         }
@@ -453,15 +772,275 @@ static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK
     }
 }
 
-/* n poses (n x 8) in blocks of DQ_BLOCK: the IK program with its branches unrolled runs over
- * the poses of a block with unit stride (vectorisable), then each pose's candidates are merged. */
+/* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
+ * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
+ * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
+ * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
+ * loops over them). */
+DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6][DQ_BLOCK],
+                        int vb[][DQ_BLOCK], int sb[][DQ_BLOCK], int kb[][DQ_BLOCK])
+{
+    for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
+        const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
+        const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
+        int ok = 1;
+        const double x_w = -0.144*p0*p2 + 2.0*p0*p5 - 0.144*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
+        const double y_w = 0.144*p0*p1 + 2.0*p0*p6 - 2.0*p1*p7 - 0.144*p2*p3 - 2.0*p2*p4 + 2.0*p3*p5;
+        const double z_w = 2.0*p0*p7 + 0.144*p1*p1 + 2.0*p1*p6 + 0.144*p2*p2 - 2.0*p2*p5 - 2.0*p3*p4 - 0.072;
+        const double k1 = y_w;
+        const double k2 = -x_w;
+        const double k3 = 0;
+        const double k4 = k1*k1 + k2*k2 - k3*k3;
+        ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
+        const double k5 = dq_atan2(k1, -k2);
+        const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
+        int ok_0 = ok;
+        const double sg1_0 = 1.0;
+        const double theta1_0 = k5 - dq_atan2(-k3, k6*sg1_0);
+        double s1_0, c1_0;
+        dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
+        const double s2_0 = 2.0*s1_0*c1_0;
+        const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
+        const double w7_0 = c2_0*x_w + s2_0*y_w;
+        const double w8_0 = z_w - 0.29;
+        const double k9_0 = 0.16308;
+        const double k10_0 = 0.03780000000000001;
+        const double k11_0 = -w7_0*w7_0 - w8_0*w8_0 + 0.16900400000000002;
+        const double k12_0 = k10_0*k10_0 - k11_0*k11_0 + k9_0*k9_0;
+        ok_0 = ok_0 & (k12_0 >= -1e-10*dq_sel((1.0) > (k11_0*k11_0), 1.0, k11_0*k11_0));
+        const double k13_0 = dq_atan2(k10_0, k9_0);
+        const double k14_0 = dq_atan2(sqrt(dq_sel((k12_0) > 0.0, k12_0, 0.0)), -k11_0);
+        int ok_00 = ok_0;
+        const double sg2_00 = 1.0;
+        const double theta3_00 = k13_0 + k14_0*sg2_00;
+        double s3_00, c3_00;
+        dq_sincos(theta3_00, &s3_00, &c3_00);
+        const double k15_00 = copysign(1.0, -0.16308*c3_00 - 0.03780000000000001*s3_00 - 0.16900400000000002);
+        const double theta2_00 = dq_atan2(k15_00*(-0.302*c3_00*w7_0 - 0.07*c3_00*w8_0 - 0.07*s3_00*w7_0 + 0.302*s3_00*w8_0 - 0.27*w7_0), k15_00*(0.07*c3_00*w7_0 - 0.302*c3_00*w8_0 - 0.302*s3_00*w7_0 - 0.07*s3_00*w8_0 - 0.27*w8_0));
+        double s4_00, c4_00;
+        dq_sincos(0.5*theta2_00 + 0.5*theta3_00, &s4_00, &c4_00);
+        const double w_r_00 = c1_0*c4_00*p0 + c1_0*p2*s4_00 + c4_00*p3*s1_0 - p1*s1_0*s4_00;
+        const double a_r_00 = c1_0*c4_00*p1 - c1_0*p3*s4_00 + c4_00*p2*s1_0 + p0*s1_0*s4_00;
+        const double b_r_00 = c1_0*c4_00*p2 - c1_0*p0*s4_00 - c4_00*p1*s1_0 - p3*s1_0*s4_00;
+        const double c_r_00 = c1_0*c4_00*p3 + c1_0*p1*s4_00 - c4_00*p0*s1_0 + p2*s1_0*s4_00;
+        const double h16_00 = sqrt(c_r_00*c_r_00 + w_r_00*w_r_00);
+        const double h17_00 = dq_atan2(c_r_00, w_r_00);
+        const double h18_00 = sqrt(a_r_00*a_r_00 + b_r_00*b_r_00);
+        const double h19_00 = dq_atan2(-a_r_00, b_r_00);
+        const double h20_00 = dq_atan2(h18_00, h16_00);
+        const double h21_00 = 2.0*h16_00*h18_00/(h16_00*h16_00 + h18_00*h18_00);
+        const int singular_00 = h21_00 < 1e-11;
+        int ok_000 = ok_00;
+        const double sg3_000 = 1.0;
+        const double theta5_000 = 2.0*h20_00*sg3_000;   /* singular_00 is 0 here (dq_singular_block) */
+        const double h22_000 = h19_00 - 1.5707963267948966*sg3_000 + 1.5707963267948966;
+        const double theta4_000 = h17_00 + h22_000;   /* singular_00 is 0 here (dq_singular_block) */
+        const double theta6_000 = h17_00 - h22_000;   /* singular_00 is 0 here (dq_singular_block) */
+        cb[0][0][j] = dq_wrap(theta1_0);
+        cb[0][1][j] = dq_wrap(theta2_00);
+        cb[0][2][j] = dq_wrap(theta3_00 - 1.5707963267948966);
+        cb[0][3][j] = dq_wrap(theta4_000);
+        cb[0][4][j] = dq_wrap(theta5_000);
+        cb[0][5][j] = dq_wrap(theta6_000);
+        vb[0][j] = ok_000;
+        sb[0][j] = singular_00;
+        int ok_001 = ok_00;
+        const double sg3_001 = -1.0;
+        const double theta5_001 = 2.0*h20_00*sg3_001;   /* singular_00 is 0 here (dq_singular_block) */
+        const double h22_001 = h19_00 - 1.5707963267948966*sg3_001 + 1.5707963267948966;
+        const double theta4_001 = h17_00 + h22_001;   /* singular_00 is 0 here (dq_singular_block) */
+        const double theta6_001 = h17_00 - h22_001;   /* singular_00 is 0 here (dq_singular_block) */
+        cb[1][0][j] = dq_wrap(theta1_0);
+        cb[1][1][j] = dq_wrap(theta2_00);
+        cb[1][2][j] = dq_wrap(theta3_00 - 1.5707963267948966);
+        cb[1][3][j] = dq_wrap(theta4_001);
+        cb[1][4][j] = dq_wrap(theta5_001);
+        cb[1][5][j] = dq_wrap(theta6_001);
+        vb[1][j] = ok_001;
+        sb[1][j] = singular_00;
+        int ok_01 = ok_0;
+        const double sg2_01 = -1.0;
+        const double theta3_01 = k13_0 + k14_0*sg2_01;
+        double s3_01, c3_01;
+        dq_sincos(theta3_01, &s3_01, &c3_01);
+        const double k15_01 = copysign(1.0, -0.16308*c3_01 - 0.03780000000000001*s3_01 - 0.16900400000000002);
+        const double theta2_01 = dq_atan2(k15_01*(-0.302*c3_01*w7_0 - 0.07*c3_01*w8_0 - 0.07*s3_01*w7_0 + 0.302*s3_01*w8_0 - 0.27*w7_0), k15_01*(0.07*c3_01*w7_0 - 0.302*c3_01*w8_0 - 0.302*s3_01*w7_0 - 0.07*s3_01*w8_0 - 0.27*w8_0));
+        double s4_01, c4_01;
+        dq_sincos(0.5*theta2_01 + 0.5*theta3_01, &s4_01, &c4_01);
+        const double w_r_01 = c1_0*c4_01*p0 + c1_0*p2*s4_01 + c4_01*p3*s1_0 - p1*s1_0*s4_01;
+        const double a_r_01 = c1_0*c4_01*p1 - c1_0*p3*s4_01 + c4_01*p2*s1_0 + p0*s1_0*s4_01;
+        const double b_r_01 = c1_0*c4_01*p2 - c1_0*p0*s4_01 - c4_01*p1*s1_0 - p3*s1_0*s4_01;
+        const double c_r_01 = c1_0*c4_01*p3 + c1_0*p1*s4_01 - c4_01*p0*s1_0 + p2*s1_0*s4_01;
+        const double h16_01 = sqrt(c_r_01*c_r_01 + w_r_01*w_r_01);
+        const double h17_01 = dq_atan2(c_r_01, w_r_01);
+        const double h18_01 = sqrt(a_r_01*a_r_01 + b_r_01*b_r_01);
+        const double h19_01 = dq_atan2(-a_r_01, b_r_01);
+        const double h20_01 = dq_atan2(h18_01, h16_01);
+        const double h21_01 = 2.0*h16_01*h18_01/(h16_01*h16_01 + h18_01*h18_01);
+        const int singular_01 = h21_01 < 1e-11;
+        int ok_010 = ok_01;
+        const double sg3_010 = 1.0;
+        const double theta5_010 = 2.0*h20_01*sg3_010;   /* singular_01 is 0 here (dq_singular_block) */
+        const double h22_010 = h19_01 - 1.5707963267948966*sg3_010 + 1.5707963267948966;
+        const double theta4_010 = h17_01 + h22_010;   /* singular_01 is 0 here (dq_singular_block) */
+        const double theta6_010 = h17_01 - h22_010;   /* singular_01 is 0 here (dq_singular_block) */
+        cb[2][0][j] = dq_wrap(theta1_0);
+        cb[2][1][j] = dq_wrap(theta2_01);
+        cb[2][2][j] = dq_wrap(theta3_01 - 1.5707963267948966);
+        cb[2][3][j] = dq_wrap(theta4_010);
+        cb[2][4][j] = dq_wrap(theta5_010);
+        cb[2][5][j] = dq_wrap(theta6_010);
+        vb[2][j] = ok_010;
+        sb[2][j] = singular_01;
+        int ok_011 = ok_01;
+        const double sg3_011 = -1.0;
+        const double theta5_011 = 2.0*h20_01*sg3_011;   /* singular_01 is 0 here (dq_singular_block) */
+        const double h22_011 = h19_01 - 1.5707963267948966*sg3_011 + 1.5707963267948966;
+        const double theta4_011 = h17_01 + h22_011;   /* singular_01 is 0 here (dq_singular_block) */
+        const double theta6_011 = h17_01 - h22_011;   /* singular_01 is 0 here (dq_singular_block) */
+        cb[3][0][j] = dq_wrap(theta1_0);
+        cb[3][1][j] = dq_wrap(theta2_01);
+        cb[3][2][j] = dq_wrap(theta3_01 - 1.5707963267948966);
+        cb[3][3][j] = dq_wrap(theta4_011);
+        cb[3][4][j] = dq_wrap(theta5_011);
+        cb[3][5][j] = dq_wrap(theta6_011);
+        vb[3][j] = ok_011;
+        sb[3][j] = singular_01;
+        int ok_1 = ok;
+        const double sg1_1 = -1.0;
+        const double theta1_1 = k5 - dq_atan2(-k3, k6*sg1_1);
+        double s1_1, c1_1;
+        dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
+        const double s2_1 = 2.0*s1_1*c1_1;
+        const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
+        const double w7_1 = c2_1*x_w + s2_1*y_w;
+        const double w8_1 = z_w - 0.29;
+        const double k9_1 = 0.16308;
+        const double k10_1 = 0.03780000000000001;
+        const double k11_1 = -w7_1*w7_1 - w8_1*w8_1 + 0.16900400000000002;
+        const double k12_1 = k10_1*k10_1 - k11_1*k11_1 + k9_1*k9_1;
+        ok_1 = ok_1 & (k12_1 >= -1e-10*dq_sel((1.0) > (k11_1*k11_1), 1.0, k11_1*k11_1));
+        const double k13_1 = dq_atan2(k10_1, k9_1);
+        const double k14_1 = dq_atan2(sqrt(dq_sel((k12_1) > 0.0, k12_1, 0.0)), -k11_1);
+        int ok_10 = ok_1;
+        const double sg2_10 = 1.0;
+        const double theta3_10 = k13_1 + k14_1*sg2_10;
+        double s3_10, c3_10;
+        dq_sincos(theta3_10, &s3_10, &c3_10);
+        const double k15_10 = copysign(1.0, -0.16308*c3_10 - 0.03780000000000001*s3_10 - 0.16900400000000002);
+        const double theta2_10 = dq_atan2(k15_10*(-0.302*c3_10*w7_1 - 0.07*c3_10*w8_1 - 0.07*s3_10*w7_1 + 0.302*s3_10*w8_1 - 0.27*w7_1), k15_10*(0.07*c3_10*w7_1 - 0.302*c3_10*w8_1 - 0.302*s3_10*w7_1 - 0.07*s3_10*w8_1 - 0.27*w8_1));
+        double s4_10, c4_10;
+        dq_sincos(0.5*theta2_10 + 0.5*theta3_10, &s4_10, &c4_10);
+        const double w_r_10 = c1_1*c4_10*p0 + c1_1*p2*s4_10 + c4_10*p3*s1_1 - p1*s1_1*s4_10;
+        const double a_r_10 = c1_1*c4_10*p1 - c1_1*p3*s4_10 + c4_10*p2*s1_1 + p0*s1_1*s4_10;
+        const double b_r_10 = c1_1*c4_10*p2 - c1_1*p0*s4_10 - c4_10*p1*s1_1 - p3*s1_1*s4_10;
+        const double c_r_10 = c1_1*c4_10*p3 + c1_1*p1*s4_10 - c4_10*p0*s1_1 + p2*s1_1*s4_10;
+        const double h16_10 = sqrt(c_r_10*c_r_10 + w_r_10*w_r_10);
+        const double h17_10 = dq_atan2(c_r_10, w_r_10);
+        const double h18_10 = sqrt(a_r_10*a_r_10 + b_r_10*b_r_10);
+        const double h19_10 = dq_atan2(-a_r_10, b_r_10);
+        const double h20_10 = dq_atan2(h18_10, h16_10);
+        const double h21_10 = 2.0*h16_10*h18_10/(h16_10*h16_10 + h18_10*h18_10);
+        const int singular_10 = h21_10 < 1e-11;
+        int ok_100 = ok_10;
+        const double sg3_100 = 1.0;
+        const double theta5_100 = 2.0*h20_10*sg3_100;   /* singular_10 is 0 here (dq_singular_block) */
+        const double h22_100 = h19_10 - 1.5707963267948966*sg3_100 + 1.5707963267948966;
+        const double theta4_100 = h17_10 + h22_100;   /* singular_10 is 0 here (dq_singular_block) */
+        const double theta6_100 = h17_10 - h22_100;   /* singular_10 is 0 here (dq_singular_block) */
+        cb[4][0][j] = dq_wrap(theta1_1);
+        cb[4][1][j] = dq_wrap(theta2_10);
+        cb[4][2][j] = dq_wrap(theta3_10 - 1.5707963267948966);
+        cb[4][3][j] = dq_wrap(theta4_100);
+        cb[4][4][j] = dq_wrap(theta5_100);
+        cb[4][5][j] = dq_wrap(theta6_100);
+        vb[4][j] = ok_100;
+        sb[4][j] = singular_10;
+        int ok_101 = ok_10;
+        const double sg3_101 = -1.0;
+        const double theta5_101 = 2.0*h20_10*sg3_101;   /* singular_10 is 0 here (dq_singular_block) */
+        const double h22_101 = h19_10 - 1.5707963267948966*sg3_101 + 1.5707963267948966;
+        const double theta4_101 = h17_10 + h22_101;   /* singular_10 is 0 here (dq_singular_block) */
+        const double theta6_101 = h17_10 - h22_101;   /* singular_10 is 0 here (dq_singular_block) */
+        cb[5][0][j] = dq_wrap(theta1_1);
+        cb[5][1][j] = dq_wrap(theta2_10);
+        cb[5][2][j] = dq_wrap(theta3_10 - 1.5707963267948966);
+        cb[5][3][j] = dq_wrap(theta4_101);
+        cb[5][4][j] = dq_wrap(theta5_101);
+        cb[5][5][j] = dq_wrap(theta6_101);
+        vb[5][j] = ok_101;
+        sb[5][j] = singular_10;
+        int ok_11 = ok_1;
+        const double sg2_11 = -1.0;
+        const double theta3_11 = k13_1 + k14_1*sg2_11;
+        double s3_11, c3_11;
+        dq_sincos(theta3_11, &s3_11, &c3_11);
+        const double k15_11 = copysign(1.0, -0.16308*c3_11 - 0.03780000000000001*s3_11 - 0.16900400000000002);
+        const double theta2_11 = dq_atan2(k15_11*(-0.302*c3_11*w7_1 - 0.07*c3_11*w8_1 - 0.07*s3_11*w7_1 + 0.302*s3_11*w8_1 - 0.27*w7_1), k15_11*(0.07*c3_11*w7_1 - 0.302*c3_11*w8_1 - 0.302*s3_11*w7_1 - 0.07*s3_11*w8_1 - 0.27*w8_1));
+        double s4_11, c4_11;
+        dq_sincos(0.5*theta2_11 + 0.5*theta3_11, &s4_11, &c4_11);
+        const double w_r_11 = c1_1*c4_11*p0 + c1_1*p2*s4_11 + c4_11*p3*s1_1 - p1*s1_1*s4_11;
+        const double a_r_11 = c1_1*c4_11*p1 - c1_1*p3*s4_11 + c4_11*p2*s1_1 + p0*s1_1*s4_11;
+        const double b_r_11 = c1_1*c4_11*p2 - c1_1*p0*s4_11 - c4_11*p1*s1_1 - p3*s1_1*s4_11;
+        const double c_r_11 = c1_1*c4_11*p3 + c1_1*p1*s4_11 - c4_11*p0*s1_1 + p2*s1_1*s4_11;
+        const double h16_11 = sqrt(c_r_11*c_r_11 + w_r_11*w_r_11);
+        const double h17_11 = dq_atan2(c_r_11, w_r_11);
+        const double h18_11 = sqrt(a_r_11*a_r_11 + b_r_11*b_r_11);
+        const double h19_11 = dq_atan2(-a_r_11, b_r_11);
+        const double h20_11 = dq_atan2(h18_11, h16_11);
+        const double h21_11 = 2.0*h16_11*h18_11/(h16_11*h16_11 + h18_11*h18_11);
+        const int singular_11 = h21_11 < 1e-11;
+        int ok_110 = ok_11;
+        const double sg3_110 = 1.0;
+        const double theta5_110 = 2.0*h20_11*sg3_110;   /* singular_11 is 0 here (dq_singular_block) */
+        const double h22_110 = h19_11 - 1.5707963267948966*sg3_110 + 1.5707963267948966;
+        const double theta4_110 = h17_11 + h22_110;   /* singular_11 is 0 here (dq_singular_block) */
+        const double theta6_110 = h17_11 - h22_110;   /* singular_11 is 0 here (dq_singular_block) */
+        cb[6][0][j] = dq_wrap(theta1_1);
+        cb[6][1][j] = dq_wrap(theta2_11);
+        cb[6][2][j] = dq_wrap(theta3_11 - 1.5707963267948966);
+        cb[6][3][j] = dq_wrap(theta4_110);
+        cb[6][4][j] = dq_wrap(theta5_110);
+        cb[6][5][j] = dq_wrap(theta6_110);
+        vb[6][j] = ok_110;
+        sb[6][j] = singular_11;
+        int ok_111 = ok_11;
+        const double sg3_111 = -1.0;
+        const double theta5_111 = 2.0*h20_11*sg3_111;   /* singular_11 is 0 here (dq_singular_block) */
+        const double h22_111 = h19_11 - 1.5707963267948966*sg3_111 + 1.5707963267948966;
+        const double theta4_111 = h17_11 + h22_111;   /* singular_11 is 0 here (dq_singular_block) */
+        const double theta6_111 = h17_11 - h22_111;   /* singular_11 is 0 here (dq_singular_block) */
+        cb[7][0][j] = dq_wrap(theta1_1);
+        cb[7][1][j] = dq_wrap(theta2_11);
+        cb[7][2][j] = dq_wrap(theta3_11 - 1.5707963267948966);
+        cb[7][3][j] = dq_wrap(theta4_111);
+        cb[7][4][j] = dq_wrap(theta5_111);
+        cb[7][5][j] = dq_wrap(theta6_111);
+        vb[7][j] = ok_111;
+        sb[7][j] = singular_11;
+    }
+    dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
+    for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicates */
+        kb[0][j] = vb[0][j];
+        kb[1][j] = vb[1][j] & !((vb[0][j] & (dq_max(dq_adist(cb[1][0][j], cb[0][0][j]), dq_max(dq_adist(cb[1][1][j], cb[0][1][j]), dq_max(dq_adist(cb[1][2][j], cb[0][2][j]), dq_max(dq_adist(cb[1][3][j], cb[0][3][j]), dq_max(dq_adist(cb[1][4][j], cb[0][4][j]), dq_adist(cb[1][5][j], cb[0][5][j])))))) < 1e-06)));
+        kb[2][j] = vb[2][j] & !((vb[0][j] & (dq_max(dq_adist(cb[2][0][j], cb[0][0][j]), dq_max(dq_adist(cb[2][1][j], cb[0][1][j]), dq_max(dq_adist(cb[2][2][j], cb[0][2][j]), dq_max(dq_adist(cb[2][3][j], cb[0][3][j]), dq_max(dq_adist(cb[2][4][j], cb[0][4][j]), dq_adist(cb[2][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[2][0][j], cb[1][0][j]), dq_max(dq_adist(cb[2][1][j], cb[1][1][j]), dq_max(dq_adist(cb[2][2][j], cb[1][2][j]), dq_max(dq_adist(cb[2][3][j], cb[1][3][j]), dq_max(dq_adist(cb[2][4][j], cb[1][4][j]), dq_adist(cb[2][5][j], cb[1][5][j])))))) < 1e-06)));
+        kb[3][j] = vb[3][j] & !((vb[0][j] & (dq_max(dq_adist(cb[3][0][j], cb[0][0][j]), dq_max(dq_adist(cb[3][1][j], cb[0][1][j]), dq_max(dq_adist(cb[3][2][j], cb[0][2][j]), dq_max(dq_adist(cb[3][3][j], cb[0][3][j]), dq_max(dq_adist(cb[3][4][j], cb[0][4][j]), dq_adist(cb[3][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[3][0][j], cb[1][0][j]), dq_max(dq_adist(cb[3][1][j], cb[1][1][j]), dq_max(dq_adist(cb[3][2][j], cb[1][2][j]), dq_max(dq_adist(cb[3][3][j], cb[1][3][j]), dq_max(dq_adist(cb[3][4][j], cb[1][4][j]), dq_adist(cb[3][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[3][0][j], cb[2][0][j]), dq_max(dq_adist(cb[3][1][j], cb[2][1][j]), dq_max(dq_adist(cb[3][2][j], cb[2][2][j]), dq_max(dq_adist(cb[3][3][j], cb[2][3][j]), dq_max(dq_adist(cb[3][4][j], cb[2][4][j]), dq_adist(cb[3][5][j], cb[2][5][j])))))) < 1e-06)));
+        kb[4][j] = vb[4][j] & !((vb[0][j] & (dq_max(dq_adist(cb[4][0][j], cb[0][0][j]), dq_max(dq_adist(cb[4][1][j], cb[0][1][j]), dq_max(dq_adist(cb[4][2][j], cb[0][2][j]), dq_max(dq_adist(cb[4][3][j], cb[0][3][j]), dq_max(dq_adist(cb[4][4][j], cb[0][4][j]), dq_adist(cb[4][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[4][0][j], cb[1][0][j]), dq_max(dq_adist(cb[4][1][j], cb[1][1][j]), dq_max(dq_adist(cb[4][2][j], cb[1][2][j]), dq_max(dq_adist(cb[4][3][j], cb[1][3][j]), dq_max(dq_adist(cb[4][4][j], cb[1][4][j]), dq_adist(cb[4][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[4][0][j], cb[2][0][j]), dq_max(dq_adist(cb[4][1][j], cb[2][1][j]), dq_max(dq_adist(cb[4][2][j], cb[2][2][j]), dq_max(dq_adist(cb[4][3][j], cb[2][3][j]), dq_max(dq_adist(cb[4][4][j], cb[2][4][j]), dq_adist(cb[4][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[4][0][j], cb[3][0][j]), dq_max(dq_adist(cb[4][1][j], cb[3][1][j]), dq_max(dq_adist(cb[4][2][j], cb[3][2][j]), dq_max(dq_adist(cb[4][3][j], cb[3][3][j]), dq_max(dq_adist(cb[4][4][j], cb[3][4][j]), dq_adist(cb[4][5][j], cb[3][5][j])))))) < 1e-06)));
+        kb[5][j] = vb[5][j] & !((vb[0][j] & (dq_max(dq_adist(cb[5][0][j], cb[0][0][j]), dq_max(dq_adist(cb[5][1][j], cb[0][1][j]), dq_max(dq_adist(cb[5][2][j], cb[0][2][j]), dq_max(dq_adist(cb[5][3][j], cb[0][3][j]), dq_max(dq_adist(cb[5][4][j], cb[0][4][j]), dq_adist(cb[5][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[5][0][j], cb[1][0][j]), dq_max(dq_adist(cb[5][1][j], cb[1][1][j]), dq_max(dq_adist(cb[5][2][j], cb[1][2][j]), dq_max(dq_adist(cb[5][3][j], cb[1][3][j]), dq_max(dq_adist(cb[5][4][j], cb[1][4][j]), dq_adist(cb[5][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[5][0][j], cb[2][0][j]), dq_max(dq_adist(cb[5][1][j], cb[2][1][j]), dq_max(dq_adist(cb[5][2][j], cb[2][2][j]), dq_max(dq_adist(cb[5][3][j], cb[2][3][j]), dq_max(dq_adist(cb[5][4][j], cb[2][4][j]), dq_adist(cb[5][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[5][0][j], cb[3][0][j]), dq_max(dq_adist(cb[5][1][j], cb[3][1][j]), dq_max(dq_adist(cb[5][2][j], cb[3][2][j]), dq_max(dq_adist(cb[5][3][j], cb[3][3][j]), dq_max(dq_adist(cb[5][4][j], cb[3][4][j]), dq_adist(cb[5][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[5][0][j], cb[4][0][j]), dq_max(dq_adist(cb[5][1][j], cb[4][1][j]), dq_max(dq_adist(cb[5][2][j], cb[4][2][j]), dq_max(dq_adist(cb[5][3][j], cb[4][3][j]), dq_max(dq_adist(cb[5][4][j], cb[4][4][j]), dq_adist(cb[5][5][j], cb[4][5][j])))))) < 1e-06)));
+        kb[6][j] = vb[6][j] & !((vb[0][j] & (dq_max(dq_adist(cb[6][0][j], cb[0][0][j]), dq_max(dq_adist(cb[6][1][j], cb[0][1][j]), dq_max(dq_adist(cb[6][2][j], cb[0][2][j]), dq_max(dq_adist(cb[6][3][j], cb[0][3][j]), dq_max(dq_adist(cb[6][4][j], cb[0][4][j]), dq_adist(cb[6][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[6][0][j], cb[1][0][j]), dq_max(dq_adist(cb[6][1][j], cb[1][1][j]), dq_max(dq_adist(cb[6][2][j], cb[1][2][j]), dq_max(dq_adist(cb[6][3][j], cb[1][3][j]), dq_max(dq_adist(cb[6][4][j], cb[1][4][j]), dq_adist(cb[6][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[6][0][j], cb[2][0][j]), dq_max(dq_adist(cb[6][1][j], cb[2][1][j]), dq_max(dq_adist(cb[6][2][j], cb[2][2][j]), dq_max(dq_adist(cb[6][3][j], cb[2][3][j]), dq_max(dq_adist(cb[6][4][j], cb[2][4][j]), dq_adist(cb[6][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[6][0][j], cb[3][0][j]), dq_max(dq_adist(cb[6][1][j], cb[3][1][j]), dq_max(dq_adist(cb[6][2][j], cb[3][2][j]), dq_max(dq_adist(cb[6][3][j], cb[3][3][j]), dq_max(dq_adist(cb[6][4][j], cb[3][4][j]), dq_adist(cb[6][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[6][0][j], cb[4][0][j]), dq_max(dq_adist(cb[6][1][j], cb[4][1][j]), dq_max(dq_adist(cb[6][2][j], cb[4][2][j]), dq_max(dq_adist(cb[6][3][j], cb[4][3][j]), dq_max(dq_adist(cb[6][4][j], cb[4][4][j]), dq_adist(cb[6][5][j], cb[4][5][j])))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[6][0][j], cb[5][0][j]), dq_max(dq_adist(cb[6][1][j], cb[5][1][j]), dq_max(dq_adist(cb[6][2][j], cb[5][2][j]), dq_max(dq_adist(cb[6][3][j], cb[5][3][j]), dq_max(dq_adist(cb[6][4][j], cb[5][4][j]), dq_adist(cb[6][5][j], cb[5][5][j])))))) < 1e-06)));
+        kb[7][j] = vb[7][j] & !((vb[0][j] & (dq_max(dq_adist(cb[7][0][j], cb[0][0][j]), dq_max(dq_adist(cb[7][1][j], cb[0][1][j]), dq_max(dq_adist(cb[7][2][j], cb[0][2][j]), dq_max(dq_adist(cb[7][3][j], cb[0][3][j]), dq_max(dq_adist(cb[7][4][j], cb[0][4][j]), dq_adist(cb[7][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[7][0][j], cb[1][0][j]), dq_max(dq_adist(cb[7][1][j], cb[1][1][j]), dq_max(dq_adist(cb[7][2][j], cb[1][2][j]), dq_max(dq_adist(cb[7][3][j], cb[1][3][j]), dq_max(dq_adist(cb[7][4][j], cb[1][4][j]), dq_adist(cb[7][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[7][0][j], cb[2][0][j]), dq_max(dq_adist(cb[7][1][j], cb[2][1][j]), dq_max(dq_adist(cb[7][2][j], cb[2][2][j]), dq_max(dq_adist(cb[7][3][j], cb[2][3][j]), dq_max(dq_adist(cb[7][4][j], cb[2][4][j]), dq_adist(cb[7][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[7][0][j], cb[3][0][j]), dq_max(dq_adist(cb[7][1][j], cb[3][1][j]), dq_max(dq_adist(cb[7][2][j], cb[3][2][j]), dq_max(dq_adist(cb[7][3][j], cb[3][3][j]), dq_max(dq_adist(cb[7][4][j], cb[3][4][j]), dq_adist(cb[7][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[7][0][j], cb[4][0][j]), dq_max(dq_adist(cb[7][1][j], cb[4][1][j]), dq_max(dq_adist(cb[7][2][j], cb[4][2][j]), dq_max(dq_adist(cb[7][3][j], cb[4][3][j]), dq_max(dq_adist(cb[7][4][j], cb[4][4][j]), dq_adist(cb[7][5][j], cb[4][5][j])))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[7][0][j], cb[5][0][j]), dq_max(dq_adist(cb[7][1][j], cb[5][1][j]), dq_max(dq_adist(cb[7][2][j], cb[5][2][j]), dq_max(dq_adist(cb[7][3][j], cb[5][3][j]), dq_max(dq_adist(cb[7][4][j], cb[5][4][j]), dq_adist(cb[7][5][j], cb[5][5][j])))))) < 1e-06)) | (vb[6][j] & (dq_max(dq_adist(cb[7][0][j], cb[6][0][j]), dq_max(dq_adist(cb[7][1][j], cb[6][1][j]), dq_max(dq_adist(cb[7][2][j], cb[6][2][j]), dq_max(dq_adist(cb[7][3][j], cb[6][3][j]), dq_max(dq_adist(cb[7][4][j], cb[6][4][j]), dq_adist(cb[7][5][j], cb[6][5][j])))))) < 1e-06)));
+    }
+}
+
+/* n poses (n x 8) in blocks of DQ_BLOCK: dq_ik_block, then dq_pack_block. */
 void irb120_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
                         int *restrict branch, int *restrict singular)
 {
     double pb[8][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
-    int vb[8][DQ_BLOCK];
-    int sb[8][DQ_BLOCK];
+    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -469,267 +1048,452 @@ void irb120_ik_batch_ex(size_t n, const double *restrict poses, double *restrict
                 pb[k][j] = poses[(i0 + j) * 8 + k];
             }
         }
-        for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
-            const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
-            const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
-            int ok = 1;
-            const double x_w = -0.144*p0*p2 + 2.0*p0*p5 - 0.144*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-            const double y_w = 0.144*p0*p1 + 2.0*p0*p6 - 2.0*p1*p7 - 0.144*p2*p3 - 2.0*p2*p4 + 2.0*p3*p5;
-            const double z_w = 2.0*p0*p7 + 0.144*p1*p1 + 2.0*p1*p6 + 0.144*p2*p2 - 2.0*p2*p5 - 2.0*p3*p4 - 0.072;
-            const double k1 = y_w;
-            const double k2 = -x_w;
-            const double k3 = 0;
-            const double k4 = k1*k1 + k2*k2 - k3*k3;
-            ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
-            const double k5 = dq_atan2(k1, -k2);
-            const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
-            int ok_0 = ok;
-            const double sg1_0 = 1.0;
-            int ok_1 = ok;
-            const double sg1_1 = -1.0;
-            const double theta1_0 = k5 - dq_atan2(-k3, k6*sg1_0);
-            const double theta1_1 = k5 - dq_atan2(-k3, k6*sg1_1);
-            double s1_0, c1_0;
-            dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
-            double s1_1, c1_1;
-            dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
-            const double s2_0 = 2.0*s1_0*c1_0;
-            const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
-            const double s2_1 = 2.0*s1_1*c1_1;
-            const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
-            const double w7_0 = c2_0*x_w + s2_0*y_w;
-            const double w7_1 = c2_1*x_w + s2_1*y_w;
-            const double w8_0 = z_w - 0.29;
-            const double w8_1 = z_w - 0.29;
-            const double k9_0 = 0.16308;
-            const double k9_1 = 0.16308;
-            const double k10_0 = 0.03780000000000001;
-            const double k10_1 = 0.03780000000000001;
-            const double k11_0 = -w7_0*w7_0 - w8_0*w8_0 + 0.16900400000000002;
-            const double k11_1 = -w7_1*w7_1 - w8_1*w8_1 + 0.16900400000000002;
-            const double k12_0 = k10_0*k10_0 - k11_0*k11_0 + k9_0*k9_0;
-            const double k12_1 = k10_1*k10_1 - k11_1*k11_1 + k9_1*k9_1;
-            ok_0 = ok_0 & (k12_0 >= -1e-10*dq_sel((1.0) > (k11_0*k11_0), 1.0, k11_0*k11_0));
-            ok_1 = ok_1 & (k12_1 >= -1e-10*dq_sel((1.0) > (k11_1*k11_1), 1.0, k11_1*k11_1));
-            const double k13_0 = dq_atan2(k10_0, k9_0);
-            const double k13_1 = dq_atan2(k10_1, k9_1);
-            const double k14_0 = dq_atan2(sqrt(dq_sel((k12_0) > 0.0, k12_0, 0.0)), -k11_0);
-            const double k14_1 = dq_atan2(sqrt(dq_sel((k12_1) > 0.0, k12_1, 0.0)), -k11_1);
-            int ok_00 = ok_0;
-            const double sg2_00 = 1.0;
-            int ok_01 = ok_0;
-            const double sg2_01 = -1.0;
-            int ok_10 = ok_1;
-            const double sg2_10 = 1.0;
-            int ok_11 = ok_1;
-            const double sg2_11 = -1.0;
-            const double theta3_00 = k13_0 + k14_0*sg2_00;
-            const double theta3_01 = k13_0 + k14_0*sg2_01;
-            const double theta3_10 = k13_1 + k14_1*sg2_10;
-            const double theta3_11 = k13_1 + k14_1*sg2_11;
-            double s3_00, c3_00;
-            dq_sincos(theta3_00, &s3_00, &c3_00);
-            double s3_01, c3_01;
-            dq_sincos(theta3_01, &s3_01, &c3_01);
-            double s3_10, c3_10;
-            dq_sincos(theta3_10, &s3_10, &c3_10);
-            double s3_11, c3_11;
-            dq_sincos(theta3_11, &s3_11, &c3_11);
-            const double k15_00 = copysign(1.0, -0.16308*c3_00 - 0.03780000000000001*s3_00 - 0.16900400000000002);
-            const double k15_01 = copysign(1.0, -0.16308*c3_01 - 0.03780000000000001*s3_01 - 0.16900400000000002);
-            const double k15_10 = copysign(1.0, -0.16308*c3_10 - 0.03780000000000001*s3_10 - 0.16900400000000002);
-            const double k15_11 = copysign(1.0, -0.16308*c3_11 - 0.03780000000000001*s3_11 - 0.16900400000000002);
-            const double theta2_00 = dq_atan2(k15_00*(-0.302*c3_00*w7_0 - 0.07*c3_00*w8_0 - 0.07*s3_00*w7_0 + 0.302*s3_00*w8_0 - 0.27*w7_0), k15_00*(0.07*c3_00*w7_0 - 0.302*c3_00*w8_0 - 0.302*s3_00*w7_0 - 0.07*s3_00*w8_0 - 0.27*w8_0));
-            const double theta2_01 = dq_atan2(k15_01*(-0.302*c3_01*w7_0 - 0.07*c3_01*w8_0 - 0.07*s3_01*w7_0 + 0.302*s3_01*w8_0 - 0.27*w7_0), k15_01*(0.07*c3_01*w7_0 - 0.302*c3_01*w8_0 - 0.302*s3_01*w7_0 - 0.07*s3_01*w8_0 - 0.27*w8_0));
-            const double theta2_10 = dq_atan2(k15_10*(-0.302*c3_10*w7_1 - 0.07*c3_10*w8_1 - 0.07*s3_10*w7_1 + 0.302*s3_10*w8_1 - 0.27*w7_1), k15_10*(0.07*c3_10*w7_1 - 0.302*c3_10*w8_1 - 0.302*s3_10*w7_1 - 0.07*s3_10*w8_1 - 0.27*w8_1));
-            const double theta2_11 = dq_atan2(k15_11*(-0.302*c3_11*w7_1 - 0.07*c3_11*w8_1 - 0.07*s3_11*w7_1 + 0.302*s3_11*w8_1 - 0.27*w7_1), k15_11*(0.07*c3_11*w7_1 - 0.302*c3_11*w8_1 - 0.302*s3_11*w7_1 - 0.07*s3_11*w8_1 - 0.27*w8_1));
-            double s4_00, c4_00;
-            dq_sincos(0.5*theta2_00 + 0.5*theta3_00, &s4_00, &c4_00);
-            double s4_01, c4_01;
-            dq_sincos(0.5*theta2_01 + 0.5*theta3_01, &s4_01, &c4_01);
-            double s4_10, c4_10;
-            dq_sincos(0.5*theta2_10 + 0.5*theta3_10, &s4_10, &c4_10);
-            double s4_11, c4_11;
-            dq_sincos(0.5*theta2_11 + 0.5*theta3_11, &s4_11, &c4_11);
-            const double w_r_00 = c1_0*c4_00*p0 + c1_0*p2*s4_00 + c4_00*p3*s1_0 - p1*s1_0*s4_00;
-            const double w_r_01 = c1_0*c4_01*p0 + c1_0*p2*s4_01 + c4_01*p3*s1_0 - p1*s1_0*s4_01;
-            const double w_r_10 = c1_1*c4_10*p0 + c1_1*p2*s4_10 + c4_10*p3*s1_1 - p1*s1_1*s4_10;
-            const double w_r_11 = c1_1*c4_11*p0 + c1_1*p2*s4_11 + c4_11*p3*s1_1 - p1*s1_1*s4_11;
-            const double a_r_00 = c1_0*c4_00*p1 - c1_0*p3*s4_00 + c4_00*p2*s1_0 + p0*s1_0*s4_00;
-            const double a_r_01 = c1_0*c4_01*p1 - c1_0*p3*s4_01 + c4_01*p2*s1_0 + p0*s1_0*s4_01;
-            const double a_r_10 = c1_1*c4_10*p1 - c1_1*p3*s4_10 + c4_10*p2*s1_1 + p0*s1_1*s4_10;
-            const double a_r_11 = c1_1*c4_11*p1 - c1_1*p3*s4_11 + c4_11*p2*s1_1 + p0*s1_1*s4_11;
-            const double b_r_00 = c1_0*c4_00*p2 - c1_0*p0*s4_00 - c4_00*p1*s1_0 - p3*s1_0*s4_00;
-            const double b_r_01 = c1_0*c4_01*p2 - c1_0*p0*s4_01 - c4_01*p1*s1_0 - p3*s1_0*s4_01;
-            const double b_r_10 = c1_1*c4_10*p2 - c1_1*p0*s4_10 - c4_10*p1*s1_1 - p3*s1_1*s4_10;
-            const double b_r_11 = c1_1*c4_11*p2 - c1_1*p0*s4_11 - c4_11*p1*s1_1 - p3*s1_1*s4_11;
-            const double c_r_00 = c1_0*c4_00*p3 + c1_0*p1*s4_00 - c4_00*p0*s1_0 + p2*s1_0*s4_00;
-            const double c_r_01 = c1_0*c4_01*p3 + c1_0*p1*s4_01 - c4_01*p0*s1_0 + p2*s1_0*s4_01;
-            const double c_r_10 = c1_1*c4_10*p3 + c1_1*p1*s4_10 - c4_10*p0*s1_1 + p2*s1_1*s4_10;
-            const double c_r_11 = c1_1*c4_11*p3 + c1_1*p1*s4_11 - c4_11*p0*s1_1 + p2*s1_1*s4_11;
-            const double h16_00 = sqrt(c_r_00*c_r_00 + w_r_00*w_r_00);
-            const double h16_01 = sqrt(c_r_01*c_r_01 + w_r_01*w_r_01);
-            const double h16_10 = sqrt(c_r_10*c_r_10 + w_r_10*w_r_10);
-            const double h16_11 = sqrt(c_r_11*c_r_11 + w_r_11*w_r_11);
-            const double h17_00 = dq_atan2(c_r_00, w_r_00);
-            const double h17_01 = dq_atan2(c_r_01, w_r_01);
-            const double h17_10 = dq_atan2(c_r_10, w_r_10);
-            const double h17_11 = dq_atan2(c_r_11, w_r_11);
-            const double h18_00 = sqrt(a_r_00*a_r_00 + b_r_00*b_r_00);
-            const double h18_01 = sqrt(a_r_01*a_r_01 + b_r_01*b_r_01);
-            const double h18_10 = sqrt(a_r_10*a_r_10 + b_r_10*b_r_10);
-            const double h18_11 = sqrt(a_r_11*a_r_11 + b_r_11*b_r_11);
-            const double h19_00 = dq_atan2(-a_r_00, b_r_00);
-            const double h19_01 = dq_atan2(-a_r_01, b_r_01);
-            const double h19_10 = dq_atan2(-a_r_10, b_r_10);
-            const double h19_11 = dq_atan2(-a_r_11, b_r_11);
-            const double h20_00 = dq_atan2(h18_00, h16_00);
-            const double h20_01 = dq_atan2(h18_01, h16_01);
-            const double h20_10 = dq_atan2(h18_10, h16_10);
-            const double h20_11 = dq_atan2(h18_11, h16_11);
-            const double h21_00 = 2.0*h16_00*h18_00/(h16_00*h16_00 + h18_00*h18_00);
-            const double h21_01 = 2.0*h16_01*h18_01/(h16_01*h16_01 + h18_01*h18_01);
-            const double h21_10 = 2.0*h16_10*h18_10/(h16_10*h16_10 + h18_10*h18_10);
-            const double h21_11 = 2.0*h16_11*h18_11/(h16_11*h16_11 + h18_11*h18_11);
-            const int singular_00 = h21_00 < 1e-11;
-            const int singular_01 = h21_01 < 1e-11;
-            const int singular_10 = h21_10 < 1e-11;
-            const int singular_11 = h21_11 < 1e-11;
-            const int cos_small_00 = h16_00 < h18_00;
-            const int cos_small_01 = h16_01 < h18_01;
-            const int cos_small_10 = h16_10 < h18_10;
-            const int cos_small_11 = h16_11 < h18_11;
-            int ok_000 = ok_00;
-            const double sg3_000 = 1.0;
-            int ok_001 = ok_00;
-            const double sg3_001 = -1.0;
-            int ok_010 = ok_01;
-            const double sg3_010 = 1.0;
-            int ok_011 = ok_01;
-            const double sg3_011 = -1.0;
-            int ok_100 = ok_10;
-            const double sg3_100 = 1.0;
-            int ok_101 = ok_10;
-            const double sg3_101 = -1.0;
-            int ok_110 = ok_11;
-            const double sg3_110 = 1.0;
-            int ok_111 = ok_11;
-            const double sg3_111 = -1.0;
-            const double theta5_singular_000 = dq_sel(cos_small_00, 3.141592653589793, 0);
-            const double theta5_singular_001 = dq_sel(cos_small_00, 3.141592653589793, 0);
-            const double theta5_singular_010 = dq_sel(cos_small_01, 3.141592653589793, 0);
-            const double theta5_singular_011 = dq_sel(cos_small_01, 3.141592653589793, 0);
-            const double theta5_singular_100 = dq_sel(cos_small_10, 3.141592653589793, 0);
-            const double theta5_singular_101 = dq_sel(cos_small_10, 3.141592653589793, 0);
-            const double theta5_singular_110 = dq_sel(cos_small_11, 3.141592653589793, 0);
-            const double theta5_singular_111 = dq_sel(cos_small_11, 3.141592653589793, 0);
-            const double theta5_000 = dq_sel(singular_00, theta5_singular_000, 2.0*h20_00*sg3_000);
-            const double theta5_001 = dq_sel(singular_00, theta5_singular_001, 2.0*h20_00*sg3_001);
-            const double theta5_010 = dq_sel(singular_01, theta5_singular_010, 2.0*h20_01*sg3_010);
-            const double theta5_011 = dq_sel(singular_01, theta5_singular_011, 2.0*h20_01*sg3_011);
-            const double theta5_100 = dq_sel(singular_10, theta5_singular_100, 2.0*h20_10*sg3_100);
-            const double theta5_101 = dq_sel(singular_10, theta5_singular_101, 2.0*h20_10*sg3_101);
-            const double theta5_110 = dq_sel(singular_11, theta5_singular_110, 2.0*h20_11*sg3_110);
-            const double theta5_111 = dq_sel(singular_11, theta5_singular_111, 2.0*h20_11*sg3_111);
-            const double h22_000 = h19_00 - 1.5707963267948966*sg3_000 + 1.5707963267948966;
-            const double h22_001 = h19_00 - 1.5707963267948966*sg3_001 + 1.5707963267948966;
-            const double h22_010 = h19_01 - 1.5707963267948966*sg3_010 + 1.5707963267948966;
-            const double h22_011 = h19_01 - 1.5707963267948966*sg3_011 + 1.5707963267948966;
-            const double h22_100 = h19_10 - 1.5707963267948966*sg3_100 + 1.5707963267948966;
-            const double h22_101 = h19_10 - 1.5707963267948966*sg3_101 + 1.5707963267948966;
-            const double h22_110 = h19_11 - 1.5707963267948966*sg3_110 + 1.5707963267948966;
-            const double h22_111 = h19_11 - 1.5707963267948966*sg3_111 + 1.5707963267948966;
-            const double theta4_000 = dq_sel(singular_00, 0, h17_00 + h22_000);
-            const double theta4_001 = dq_sel(singular_00, 0, h17_00 + h22_001);
-            const double theta4_010 = dq_sel(singular_01, 0, h17_01 + h22_010);
-            const double theta4_011 = dq_sel(singular_01, 0, h17_01 + h22_011);
-            const double theta4_100 = dq_sel(singular_10, 0, h17_10 + h22_100);
-            const double theta4_101 = dq_sel(singular_10, 0, h17_10 + h22_101);
-            const double theta4_110 = dq_sel(singular_11, 0, h17_11 + h22_110);
-            const double theta4_111 = dq_sel(singular_11, 0, h17_11 + h22_111);
-            const double theta6_singular_000 = dq_sel(cos_small_00, -2.0*h22_000, 2.0*h17_00);
-            const double theta6_singular_001 = dq_sel(cos_small_00, -2.0*h22_001, 2.0*h17_00);
-            const double theta6_singular_010 = dq_sel(cos_small_01, -2.0*h22_010, 2.0*h17_01);
-            const double theta6_singular_011 = dq_sel(cos_small_01, -2.0*h22_011, 2.0*h17_01);
-            const double theta6_singular_100 = dq_sel(cos_small_10, -2.0*h22_100, 2.0*h17_10);
-            const double theta6_singular_101 = dq_sel(cos_small_10, -2.0*h22_101, 2.0*h17_10);
-            const double theta6_singular_110 = dq_sel(cos_small_11, -2.0*h22_110, 2.0*h17_11);
-            const double theta6_singular_111 = dq_sel(cos_small_11, -2.0*h22_111, 2.0*h17_11);
-            const double theta6_000 = dq_sel(singular_00, theta6_singular_000, h17_00 - h22_000);
-            const double theta6_001 = dq_sel(singular_00, theta6_singular_001, h17_00 - h22_001);
-            const double theta6_010 = dq_sel(singular_01, theta6_singular_010, h17_01 - h22_010);
-            const double theta6_011 = dq_sel(singular_01, theta6_singular_011, h17_01 - h22_011);
-            const double theta6_100 = dq_sel(singular_10, theta6_singular_100, h17_10 - h22_100);
-            const double theta6_101 = dq_sel(singular_10, theta6_singular_101, h17_10 - h22_101);
-            const double theta6_110 = dq_sel(singular_11, theta6_singular_110, h17_11 - h22_110);
-            const double theta6_111 = dq_sel(singular_11, theta6_singular_111, h17_11 - h22_111);
-            cb[0][0][j] = dq_wrap(theta1_0);
-            cb[0][1][j] = dq_wrap(theta2_00);
-            cb[0][2][j] = dq_wrap(theta3_00 - 1.5707963267948966);
-            cb[0][3][j] = dq_wrap(theta4_000);
-            cb[0][4][j] = dq_wrap(theta5_000);
-            cb[0][5][j] = dq_wrap(theta6_000);
-            vb[0][j] = ok_000;
-            sb[0][j] = singular_00;
-            cb[1][0][j] = dq_wrap(theta1_0);
-            cb[1][1][j] = dq_wrap(theta2_00);
-            cb[1][2][j] = dq_wrap(theta3_00 - 1.5707963267948966);
-            cb[1][3][j] = dq_wrap(theta4_001);
-            cb[1][4][j] = dq_wrap(theta5_001);
-            cb[1][5][j] = dq_wrap(theta6_001);
-            vb[1][j] = ok_001;
-            sb[1][j] = singular_00;
-            cb[2][0][j] = dq_wrap(theta1_0);
-            cb[2][1][j] = dq_wrap(theta2_01);
-            cb[2][2][j] = dq_wrap(theta3_01 - 1.5707963267948966);
-            cb[2][3][j] = dq_wrap(theta4_010);
-            cb[2][4][j] = dq_wrap(theta5_010);
-            cb[2][5][j] = dq_wrap(theta6_010);
-            vb[2][j] = ok_010;
-            sb[2][j] = singular_01;
-            cb[3][0][j] = dq_wrap(theta1_0);
-            cb[3][1][j] = dq_wrap(theta2_01);
-            cb[3][2][j] = dq_wrap(theta3_01 - 1.5707963267948966);
-            cb[3][3][j] = dq_wrap(theta4_011);
-            cb[3][4][j] = dq_wrap(theta5_011);
-            cb[3][5][j] = dq_wrap(theta6_011);
-            vb[3][j] = ok_011;
-            sb[3][j] = singular_01;
-            cb[4][0][j] = dq_wrap(theta1_1);
-            cb[4][1][j] = dq_wrap(theta2_10);
-            cb[4][2][j] = dq_wrap(theta3_10 - 1.5707963267948966);
-            cb[4][3][j] = dq_wrap(theta4_100);
-            cb[4][4][j] = dq_wrap(theta5_100);
-            cb[4][5][j] = dq_wrap(theta6_100);
-            vb[4][j] = ok_100;
-            sb[4][j] = singular_10;
-            cb[5][0][j] = dq_wrap(theta1_1);
-            cb[5][1][j] = dq_wrap(theta2_10);
-            cb[5][2][j] = dq_wrap(theta3_10 - 1.5707963267948966);
-            cb[5][3][j] = dq_wrap(theta4_101);
-            cb[5][4][j] = dq_wrap(theta5_101);
-            cb[5][5][j] = dq_wrap(theta6_101);
-            vb[5][j] = ok_101;
-            sb[5][j] = singular_10;
-            cb[6][0][j] = dq_wrap(theta1_1);
-            cb[6][1][j] = dq_wrap(theta2_11);
-            cb[6][2][j] = dq_wrap(theta3_11 - 1.5707963267948966);
-            cb[6][3][j] = dq_wrap(theta4_110);
-            cb[6][4][j] = dq_wrap(theta5_110);
-            cb[6][5][j] = dq_wrap(theta6_110);
-            vb[6][j] = ok_110;
-            sb[6][j] = singular_11;
-            cb[7][0][j] = dq_wrap(theta1_1);
-            cb[7][1][j] = dq_wrap(theta2_11);
-            cb[7][2][j] = dq_wrap(theta3_11 - 1.5707963267948966);
-            cb[7][3][j] = dq_wrap(theta4_111);
-            cb[7][4][j] = dq_wrap(theta5_111);
-            cb[7][5][j] = dq_wrap(theta6_111);
-            vb[7][j] = ok_111;
-            sb[7][j] = singular_11;
+        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
+                      branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
+    }
+}
+
+/* rint, floor and ceil of x (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick and a select, which
+ * vectorise without SSE4.1's round instruction. */
+DQ_INLINE double dq_rint(double x)
+{
+    return (x + 6755399441055744.0) - 6755399441055744.0;
+}
+
+DQ_INLINE double dq_floor(double x)
+{
+    const double r = dq_rint(x);
+    return r - dq_sel(r > x, 1.0, 0.0);
+}
+
+DQ_INLINE double dq_ceil(double x)
+{
+    const double r = dq_rint(x);
+    return r + dq_sel(r < x, 1.0, 0.0);
+}
+
+/* The joint limits of the robot description (lower, upper; rad or m), with the slack of
+ * derive.ik.select (1e-12); +-inf where the description gives none. */
+static const double dq_lim_lo[6] = {-2.8797932657916436, -1.9198621771947626, -1.9198621771947626, -2.7925268031919273, -2.0943951023941954, -6.981317007978318};
+static const double dq_lim_hi[6] = {2.8797932657916436, 1.9198621771947626, 1.2217304763970307, 2.7925268031919273, 2.0943951023941954, 6.981317007978318};
+
+/* n poses and n seed configurations: per pose the solution inside the joint limits, each
+ * revolute joint at its 2 pi winding nearest to the seed, with the smallest largest single-joint
+ * move from the seed, then the smallest summed move (the first in branch order on a tie). The
+ * winding of joint k is m = rint((s - q) / 2 pi) clamped to the windings inside the limits,
+ * ceil((lo - q) / 2 pi) .. floor((hi - q) / 2 pi) (the distance is convex in m); a prismatic
+ * joint must lie inside its limits. Written per pose: q (n x DOF; NaN where none),
+ * max_move and total_move (n; NaN where none), branch (n; -1 where none) and singular (n). */
+void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
+                               double *restrict q, double *restrict max_move, double *restrict total_move,
+                               int *restrict branch, int *restrict singular)
+{
+    double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
+    double cb[8][6][DQ_BLOCK];
+    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
+    double oq[6][DQ_BLOCK], omx[DQ_BLOCK], ott[DQ_BLOCK], obr[DQ_BLOCK], osg[DQ_BLOCK];
+    for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
+        const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
+        for (size_t j = 0; j < m; ++j) {
+            for (int k = 0; k < 8; ++k) {
+                pb[k][j] = poses[(i0 + j) * 8 + k];
+            }
+            for (int k = 0; k < 6; ++k) {
+                zb[k][j] = seeds[(i0 + j) * 6 + k];
+            }
         }
-        dq_merge_block(m, cb, vb, sb, sols + i0 * 48, counts + i0,
-                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
+        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        for (size_t j = 0; j < m; ++j) {   /* vectorised: ik nearest */
+            double bm = INFINITY, bt = INFINITY, mv = NAN, tv = NAN, bb = -1.0, bs = 0.0;
+            double bq0 = NAN;
+            double bq1 = NAN;
+            double bq2 = NAN;
+            double bq3 = NAN;
+            double bq4 = NAN;
+            double bq5 = NAN;
+            const double m0_0 = dq_rint((zb[0][j] - cb[0][0][j]) * 0.15915494309189533577);
+            const double l0_0 = dq_ceil((dq_lim_lo[0] - cb[0][0][j]) * 0.15915494309189533577);
+            const double h0_0 = dq_floor((dq_lim_hi[0] - cb[0][0][j]) * 0.15915494309189533577);
+            const double v0_0 = cb[0][0][j] + 6.28318530717958647693 * dq_sel(m0_0 < l0_0, l0_0, dq_sel(m0_0 > h0_0, h0_0, m0_0));
+            const double d0_0 = dq_sel(l0_0 <= h0_0, fabs(v0_0 - zb[0][j]), INFINITY);
+            const double m0_1 = dq_rint((zb[1][j] - cb[0][1][j]) * 0.15915494309189533577);
+            const double l0_1 = dq_ceil((dq_lim_lo[1] - cb[0][1][j]) * 0.15915494309189533577);
+            const double h0_1 = dq_floor((dq_lim_hi[1] - cb[0][1][j]) * 0.15915494309189533577);
+            const double v0_1 = cb[0][1][j] + 6.28318530717958647693 * dq_sel(m0_1 < l0_1, l0_1, dq_sel(m0_1 > h0_1, h0_1, m0_1));
+            const double d0_1 = dq_sel(l0_1 <= h0_1, fabs(v0_1 - zb[1][j]), INFINITY);
+            const double m0_2 = dq_rint((zb[2][j] - cb[0][2][j]) * 0.15915494309189533577);
+            const double l0_2 = dq_ceil((dq_lim_lo[2] - cb[0][2][j]) * 0.15915494309189533577);
+            const double h0_2 = dq_floor((dq_lim_hi[2] - cb[0][2][j]) * 0.15915494309189533577);
+            const double v0_2 = cb[0][2][j] + 6.28318530717958647693 * dq_sel(m0_2 < l0_2, l0_2, dq_sel(m0_2 > h0_2, h0_2, m0_2));
+            const double d0_2 = dq_sel(l0_2 <= h0_2, fabs(v0_2 - zb[2][j]), INFINITY);
+            const double m0_3 = dq_rint((zb[3][j] - cb[0][3][j]) * 0.15915494309189533577);
+            const double l0_3 = dq_ceil((dq_lim_lo[3] - cb[0][3][j]) * 0.15915494309189533577);
+            const double h0_3 = dq_floor((dq_lim_hi[3] - cb[0][3][j]) * 0.15915494309189533577);
+            const double v0_3 = cb[0][3][j] + 6.28318530717958647693 * dq_sel(m0_3 < l0_3, l0_3, dq_sel(m0_3 > h0_3, h0_3, m0_3));
+            const double d0_3 = dq_sel(l0_3 <= h0_3, fabs(v0_3 - zb[3][j]), INFINITY);
+            const double m0_4 = dq_rint((zb[4][j] - cb[0][4][j]) * 0.15915494309189533577);
+            const double l0_4 = dq_ceil((dq_lim_lo[4] - cb[0][4][j]) * 0.15915494309189533577);
+            const double h0_4 = dq_floor((dq_lim_hi[4] - cb[0][4][j]) * 0.15915494309189533577);
+            const double v0_4 = cb[0][4][j] + 6.28318530717958647693 * dq_sel(m0_4 < l0_4, l0_4, dq_sel(m0_4 > h0_4, h0_4, m0_4));
+            const double d0_4 = dq_sel(l0_4 <= h0_4, fabs(v0_4 - zb[4][j]), INFINITY);
+            const double m0_5 = dq_rint((zb[5][j] - cb[0][5][j]) * 0.15915494309189533577);
+            const double l0_5 = dq_ceil((dq_lim_lo[5] - cb[0][5][j]) * 0.15915494309189533577);
+            const double h0_5 = dq_floor((dq_lim_hi[5] - cb[0][5][j]) * 0.15915494309189533577);
+            const double v0_5 = cb[0][5][j] + 6.28318530717958647693 * dq_sel(m0_5 < l0_5, l0_5, dq_sel(m0_5 > h0_5, h0_5, m0_5));
+            const double d0_5 = dq_sel(l0_5 <= h0_5, fabs(v0_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v0_1, d1 = d0_1;
+                const double v2 = v0_2, d2 = d0_2;
+                const double v3 = v0_3, d3 = d0_3;
+                const double v4 = v0_4, d4 = d0_4;
+                const double v5 = v0_5, d5 = d0_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[0][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 0.0, bb);
+                bs = dq_sel(better, (double)sb[0][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m1_3 = dq_rint((zb[3][j] - cb[1][3][j]) * 0.15915494309189533577);
+            const double l1_3 = dq_ceil((dq_lim_lo[3] - cb[1][3][j]) * 0.15915494309189533577);
+            const double h1_3 = dq_floor((dq_lim_hi[3] - cb[1][3][j]) * 0.15915494309189533577);
+            const double v1_3 = cb[1][3][j] + 6.28318530717958647693 * dq_sel(m1_3 < l1_3, l1_3, dq_sel(m1_3 > h1_3, h1_3, m1_3));
+            const double d1_3 = dq_sel(l1_3 <= h1_3, fabs(v1_3 - zb[3][j]), INFINITY);
+            const double m1_4 = dq_rint((zb[4][j] - cb[1][4][j]) * 0.15915494309189533577);
+            const double l1_4 = dq_ceil((dq_lim_lo[4] - cb[1][4][j]) * 0.15915494309189533577);
+            const double h1_4 = dq_floor((dq_lim_hi[4] - cb[1][4][j]) * 0.15915494309189533577);
+            const double v1_4 = cb[1][4][j] + 6.28318530717958647693 * dq_sel(m1_4 < l1_4, l1_4, dq_sel(m1_4 > h1_4, h1_4, m1_4));
+            const double d1_4 = dq_sel(l1_4 <= h1_4, fabs(v1_4 - zb[4][j]), INFINITY);
+            const double m1_5 = dq_rint((zb[5][j] - cb[1][5][j]) * 0.15915494309189533577);
+            const double l1_5 = dq_ceil((dq_lim_lo[5] - cb[1][5][j]) * 0.15915494309189533577);
+            const double h1_5 = dq_floor((dq_lim_hi[5] - cb[1][5][j]) * 0.15915494309189533577);
+            const double v1_5 = cb[1][5][j] + 6.28318530717958647693 * dq_sel(m1_5 < l1_5, l1_5, dq_sel(m1_5 > h1_5, h1_5, m1_5));
+            const double d1_5 = dq_sel(l1_5 <= h1_5, fabs(v1_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v0_1, d1 = d0_1;
+                const double v2 = v0_2, d2 = d0_2;
+                const double v3 = v1_3, d3 = d1_3;
+                const double v4 = v1_4, d4 = d1_4;
+                const double v5 = v1_5, d5 = d1_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[1][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 1.0, bb);
+                bs = dq_sel(better, (double)sb[1][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m2_1 = dq_rint((zb[1][j] - cb[2][1][j]) * 0.15915494309189533577);
+            const double l2_1 = dq_ceil((dq_lim_lo[1] - cb[2][1][j]) * 0.15915494309189533577);
+            const double h2_1 = dq_floor((dq_lim_hi[1] - cb[2][1][j]) * 0.15915494309189533577);
+            const double v2_1 = cb[2][1][j] + 6.28318530717958647693 * dq_sel(m2_1 < l2_1, l2_1, dq_sel(m2_1 > h2_1, h2_1, m2_1));
+            const double d2_1 = dq_sel(l2_1 <= h2_1, fabs(v2_1 - zb[1][j]), INFINITY);
+            const double m2_2 = dq_rint((zb[2][j] - cb[2][2][j]) * 0.15915494309189533577);
+            const double l2_2 = dq_ceil((dq_lim_lo[2] - cb[2][2][j]) * 0.15915494309189533577);
+            const double h2_2 = dq_floor((dq_lim_hi[2] - cb[2][2][j]) * 0.15915494309189533577);
+            const double v2_2 = cb[2][2][j] + 6.28318530717958647693 * dq_sel(m2_2 < l2_2, l2_2, dq_sel(m2_2 > h2_2, h2_2, m2_2));
+            const double d2_2 = dq_sel(l2_2 <= h2_2, fabs(v2_2 - zb[2][j]), INFINITY);
+            const double m2_3 = dq_rint((zb[3][j] - cb[2][3][j]) * 0.15915494309189533577);
+            const double l2_3 = dq_ceil((dq_lim_lo[3] - cb[2][3][j]) * 0.15915494309189533577);
+            const double h2_3 = dq_floor((dq_lim_hi[3] - cb[2][3][j]) * 0.15915494309189533577);
+            const double v2_3 = cb[2][3][j] + 6.28318530717958647693 * dq_sel(m2_3 < l2_3, l2_3, dq_sel(m2_3 > h2_3, h2_3, m2_3));
+            const double d2_3 = dq_sel(l2_3 <= h2_3, fabs(v2_3 - zb[3][j]), INFINITY);
+            const double m2_4 = dq_rint((zb[4][j] - cb[2][4][j]) * 0.15915494309189533577);
+            const double l2_4 = dq_ceil((dq_lim_lo[4] - cb[2][4][j]) * 0.15915494309189533577);
+            const double h2_4 = dq_floor((dq_lim_hi[4] - cb[2][4][j]) * 0.15915494309189533577);
+            const double v2_4 = cb[2][4][j] + 6.28318530717958647693 * dq_sel(m2_4 < l2_4, l2_4, dq_sel(m2_4 > h2_4, h2_4, m2_4));
+            const double d2_4 = dq_sel(l2_4 <= h2_4, fabs(v2_4 - zb[4][j]), INFINITY);
+            const double m2_5 = dq_rint((zb[5][j] - cb[2][5][j]) * 0.15915494309189533577);
+            const double l2_5 = dq_ceil((dq_lim_lo[5] - cb[2][5][j]) * 0.15915494309189533577);
+            const double h2_5 = dq_floor((dq_lim_hi[5] - cb[2][5][j]) * 0.15915494309189533577);
+            const double v2_5 = cb[2][5][j] + 6.28318530717958647693 * dq_sel(m2_5 < l2_5, l2_5, dq_sel(m2_5 > h2_5, h2_5, m2_5));
+            const double d2_5 = dq_sel(l2_5 <= h2_5, fabs(v2_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v2_1, d1 = d2_1;
+                const double v2 = v2_2, d2 = d2_2;
+                const double v3 = v2_3, d3 = d2_3;
+                const double v4 = v2_4, d4 = d2_4;
+                const double v5 = v2_5, d5 = d2_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[2][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 2.0, bb);
+                bs = dq_sel(better, (double)sb[2][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m3_3 = dq_rint((zb[3][j] - cb[3][3][j]) * 0.15915494309189533577);
+            const double l3_3 = dq_ceil((dq_lim_lo[3] - cb[3][3][j]) * 0.15915494309189533577);
+            const double h3_3 = dq_floor((dq_lim_hi[3] - cb[3][3][j]) * 0.15915494309189533577);
+            const double v3_3 = cb[3][3][j] + 6.28318530717958647693 * dq_sel(m3_3 < l3_3, l3_3, dq_sel(m3_3 > h3_3, h3_3, m3_3));
+            const double d3_3 = dq_sel(l3_3 <= h3_3, fabs(v3_3 - zb[3][j]), INFINITY);
+            const double m3_4 = dq_rint((zb[4][j] - cb[3][4][j]) * 0.15915494309189533577);
+            const double l3_4 = dq_ceil((dq_lim_lo[4] - cb[3][4][j]) * 0.15915494309189533577);
+            const double h3_4 = dq_floor((dq_lim_hi[4] - cb[3][4][j]) * 0.15915494309189533577);
+            const double v3_4 = cb[3][4][j] + 6.28318530717958647693 * dq_sel(m3_4 < l3_4, l3_4, dq_sel(m3_4 > h3_4, h3_4, m3_4));
+            const double d3_4 = dq_sel(l3_4 <= h3_4, fabs(v3_4 - zb[4][j]), INFINITY);
+            const double m3_5 = dq_rint((zb[5][j] - cb[3][5][j]) * 0.15915494309189533577);
+            const double l3_5 = dq_ceil((dq_lim_lo[5] - cb[3][5][j]) * 0.15915494309189533577);
+            const double h3_5 = dq_floor((dq_lim_hi[5] - cb[3][5][j]) * 0.15915494309189533577);
+            const double v3_5 = cb[3][5][j] + 6.28318530717958647693 * dq_sel(m3_5 < l3_5, l3_5, dq_sel(m3_5 > h3_5, h3_5, m3_5));
+            const double d3_5 = dq_sel(l3_5 <= h3_5, fabs(v3_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v2_1, d1 = d2_1;
+                const double v2 = v2_2, d2 = d2_2;
+                const double v3 = v3_3, d3 = d3_3;
+                const double v4 = v3_4, d4 = d3_4;
+                const double v5 = v3_5, d5 = d3_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[3][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 3.0, bb);
+                bs = dq_sel(better, (double)sb[3][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m4_0 = dq_rint((zb[0][j] - cb[4][0][j]) * 0.15915494309189533577);
+            const double l4_0 = dq_ceil((dq_lim_lo[0] - cb[4][0][j]) * 0.15915494309189533577);
+            const double h4_0 = dq_floor((dq_lim_hi[0] - cb[4][0][j]) * 0.15915494309189533577);
+            const double v4_0 = cb[4][0][j] + 6.28318530717958647693 * dq_sel(m4_0 < l4_0, l4_0, dq_sel(m4_0 > h4_0, h4_0, m4_0));
+            const double d4_0 = dq_sel(l4_0 <= h4_0, fabs(v4_0 - zb[0][j]), INFINITY);
+            const double m4_1 = dq_rint((zb[1][j] - cb[4][1][j]) * 0.15915494309189533577);
+            const double l4_1 = dq_ceil((dq_lim_lo[1] - cb[4][1][j]) * 0.15915494309189533577);
+            const double h4_1 = dq_floor((dq_lim_hi[1] - cb[4][1][j]) * 0.15915494309189533577);
+            const double v4_1 = cb[4][1][j] + 6.28318530717958647693 * dq_sel(m4_1 < l4_1, l4_1, dq_sel(m4_1 > h4_1, h4_1, m4_1));
+            const double d4_1 = dq_sel(l4_1 <= h4_1, fabs(v4_1 - zb[1][j]), INFINITY);
+            const double m4_2 = dq_rint((zb[2][j] - cb[4][2][j]) * 0.15915494309189533577);
+            const double l4_2 = dq_ceil((dq_lim_lo[2] - cb[4][2][j]) * 0.15915494309189533577);
+            const double h4_2 = dq_floor((dq_lim_hi[2] - cb[4][2][j]) * 0.15915494309189533577);
+            const double v4_2 = cb[4][2][j] + 6.28318530717958647693 * dq_sel(m4_2 < l4_2, l4_2, dq_sel(m4_2 > h4_2, h4_2, m4_2));
+            const double d4_2 = dq_sel(l4_2 <= h4_2, fabs(v4_2 - zb[2][j]), INFINITY);
+            const double m4_3 = dq_rint((zb[3][j] - cb[4][3][j]) * 0.15915494309189533577);
+            const double l4_3 = dq_ceil((dq_lim_lo[3] - cb[4][3][j]) * 0.15915494309189533577);
+            const double h4_3 = dq_floor((dq_lim_hi[3] - cb[4][3][j]) * 0.15915494309189533577);
+            const double v4_3 = cb[4][3][j] + 6.28318530717958647693 * dq_sel(m4_3 < l4_3, l4_3, dq_sel(m4_3 > h4_3, h4_3, m4_3));
+            const double d4_3 = dq_sel(l4_3 <= h4_3, fabs(v4_3 - zb[3][j]), INFINITY);
+            const double m4_4 = dq_rint((zb[4][j] - cb[4][4][j]) * 0.15915494309189533577);
+            const double l4_4 = dq_ceil((dq_lim_lo[4] - cb[4][4][j]) * 0.15915494309189533577);
+            const double h4_4 = dq_floor((dq_lim_hi[4] - cb[4][4][j]) * 0.15915494309189533577);
+            const double v4_4 = cb[4][4][j] + 6.28318530717958647693 * dq_sel(m4_4 < l4_4, l4_4, dq_sel(m4_4 > h4_4, h4_4, m4_4));
+            const double d4_4 = dq_sel(l4_4 <= h4_4, fabs(v4_4 - zb[4][j]), INFINITY);
+            const double m4_5 = dq_rint((zb[5][j] - cb[4][5][j]) * 0.15915494309189533577);
+            const double l4_5 = dq_ceil((dq_lim_lo[5] - cb[4][5][j]) * 0.15915494309189533577);
+            const double h4_5 = dq_floor((dq_lim_hi[5] - cb[4][5][j]) * 0.15915494309189533577);
+            const double v4_5 = cb[4][5][j] + 6.28318530717958647693 * dq_sel(m4_5 < l4_5, l4_5, dq_sel(m4_5 > h4_5, h4_5, m4_5));
+            const double d4_5 = dq_sel(l4_5 <= h4_5, fabs(v4_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v4_1, d1 = d4_1;
+                const double v2 = v4_2, d2 = d4_2;
+                const double v3 = v4_3, d3 = d4_3;
+                const double v4 = v4_4, d4 = d4_4;
+                const double v5 = v4_5, d5 = d4_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[4][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 4.0, bb);
+                bs = dq_sel(better, (double)sb[4][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m5_3 = dq_rint((zb[3][j] - cb[5][3][j]) * 0.15915494309189533577);
+            const double l5_3 = dq_ceil((dq_lim_lo[3] - cb[5][3][j]) * 0.15915494309189533577);
+            const double h5_3 = dq_floor((dq_lim_hi[3] - cb[5][3][j]) * 0.15915494309189533577);
+            const double v5_3 = cb[5][3][j] + 6.28318530717958647693 * dq_sel(m5_3 < l5_3, l5_3, dq_sel(m5_3 > h5_3, h5_3, m5_3));
+            const double d5_3 = dq_sel(l5_3 <= h5_3, fabs(v5_3 - zb[3][j]), INFINITY);
+            const double m5_4 = dq_rint((zb[4][j] - cb[5][4][j]) * 0.15915494309189533577);
+            const double l5_4 = dq_ceil((dq_lim_lo[4] - cb[5][4][j]) * 0.15915494309189533577);
+            const double h5_4 = dq_floor((dq_lim_hi[4] - cb[5][4][j]) * 0.15915494309189533577);
+            const double v5_4 = cb[5][4][j] + 6.28318530717958647693 * dq_sel(m5_4 < l5_4, l5_4, dq_sel(m5_4 > h5_4, h5_4, m5_4));
+            const double d5_4 = dq_sel(l5_4 <= h5_4, fabs(v5_4 - zb[4][j]), INFINITY);
+            const double m5_5 = dq_rint((zb[5][j] - cb[5][5][j]) * 0.15915494309189533577);
+            const double l5_5 = dq_ceil((dq_lim_lo[5] - cb[5][5][j]) * 0.15915494309189533577);
+            const double h5_5 = dq_floor((dq_lim_hi[5] - cb[5][5][j]) * 0.15915494309189533577);
+            const double v5_5 = cb[5][5][j] + 6.28318530717958647693 * dq_sel(m5_5 < l5_5, l5_5, dq_sel(m5_5 > h5_5, h5_5, m5_5));
+            const double d5_5 = dq_sel(l5_5 <= h5_5, fabs(v5_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v4_1, d1 = d4_1;
+                const double v2 = v4_2, d2 = d4_2;
+                const double v3 = v5_3, d3 = d5_3;
+                const double v4 = v5_4, d4 = d5_4;
+                const double v5 = v5_5, d5 = d5_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[5][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 5.0, bb);
+                bs = dq_sel(better, (double)sb[5][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m6_1 = dq_rint((zb[1][j] - cb[6][1][j]) * 0.15915494309189533577);
+            const double l6_1 = dq_ceil((dq_lim_lo[1] - cb[6][1][j]) * 0.15915494309189533577);
+            const double h6_1 = dq_floor((dq_lim_hi[1] - cb[6][1][j]) * 0.15915494309189533577);
+            const double v6_1 = cb[6][1][j] + 6.28318530717958647693 * dq_sel(m6_1 < l6_1, l6_1, dq_sel(m6_1 > h6_1, h6_1, m6_1));
+            const double d6_1 = dq_sel(l6_1 <= h6_1, fabs(v6_1 - zb[1][j]), INFINITY);
+            const double m6_2 = dq_rint((zb[2][j] - cb[6][2][j]) * 0.15915494309189533577);
+            const double l6_2 = dq_ceil((dq_lim_lo[2] - cb[6][2][j]) * 0.15915494309189533577);
+            const double h6_2 = dq_floor((dq_lim_hi[2] - cb[6][2][j]) * 0.15915494309189533577);
+            const double v6_2 = cb[6][2][j] + 6.28318530717958647693 * dq_sel(m6_2 < l6_2, l6_2, dq_sel(m6_2 > h6_2, h6_2, m6_2));
+            const double d6_2 = dq_sel(l6_2 <= h6_2, fabs(v6_2 - zb[2][j]), INFINITY);
+            const double m6_3 = dq_rint((zb[3][j] - cb[6][3][j]) * 0.15915494309189533577);
+            const double l6_3 = dq_ceil((dq_lim_lo[3] - cb[6][3][j]) * 0.15915494309189533577);
+            const double h6_3 = dq_floor((dq_lim_hi[3] - cb[6][3][j]) * 0.15915494309189533577);
+            const double v6_3 = cb[6][3][j] + 6.28318530717958647693 * dq_sel(m6_3 < l6_3, l6_3, dq_sel(m6_3 > h6_3, h6_3, m6_3));
+            const double d6_3 = dq_sel(l6_3 <= h6_3, fabs(v6_3 - zb[3][j]), INFINITY);
+            const double m6_4 = dq_rint((zb[4][j] - cb[6][4][j]) * 0.15915494309189533577);
+            const double l6_4 = dq_ceil((dq_lim_lo[4] - cb[6][4][j]) * 0.15915494309189533577);
+            const double h6_4 = dq_floor((dq_lim_hi[4] - cb[6][4][j]) * 0.15915494309189533577);
+            const double v6_4 = cb[6][4][j] + 6.28318530717958647693 * dq_sel(m6_4 < l6_4, l6_4, dq_sel(m6_4 > h6_4, h6_4, m6_4));
+            const double d6_4 = dq_sel(l6_4 <= h6_4, fabs(v6_4 - zb[4][j]), INFINITY);
+            const double m6_5 = dq_rint((zb[5][j] - cb[6][5][j]) * 0.15915494309189533577);
+            const double l6_5 = dq_ceil((dq_lim_lo[5] - cb[6][5][j]) * 0.15915494309189533577);
+            const double h6_5 = dq_floor((dq_lim_hi[5] - cb[6][5][j]) * 0.15915494309189533577);
+            const double v6_5 = cb[6][5][j] + 6.28318530717958647693 * dq_sel(m6_5 < l6_5, l6_5, dq_sel(m6_5 > h6_5, h6_5, m6_5));
+            const double d6_5 = dq_sel(l6_5 <= h6_5, fabs(v6_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v6_1, d1 = d6_1;
+                const double v2 = v6_2, d2 = d6_2;
+                const double v3 = v6_3, d3 = d6_3;
+                const double v4 = v6_4, d4 = d6_4;
+                const double v5 = v6_5, d5 = d6_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[6][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 6.0, bb);
+                bs = dq_sel(better, (double)sb[6][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m7_3 = dq_rint((zb[3][j] - cb[7][3][j]) * 0.15915494309189533577);
+            const double l7_3 = dq_ceil((dq_lim_lo[3] - cb[7][3][j]) * 0.15915494309189533577);
+            const double h7_3 = dq_floor((dq_lim_hi[3] - cb[7][3][j]) * 0.15915494309189533577);
+            const double v7_3 = cb[7][3][j] + 6.28318530717958647693 * dq_sel(m7_3 < l7_3, l7_3, dq_sel(m7_3 > h7_3, h7_3, m7_3));
+            const double d7_3 = dq_sel(l7_3 <= h7_3, fabs(v7_3 - zb[3][j]), INFINITY);
+            const double m7_4 = dq_rint((zb[4][j] - cb[7][4][j]) * 0.15915494309189533577);
+            const double l7_4 = dq_ceil((dq_lim_lo[4] - cb[7][4][j]) * 0.15915494309189533577);
+            const double h7_4 = dq_floor((dq_lim_hi[4] - cb[7][4][j]) * 0.15915494309189533577);
+            const double v7_4 = cb[7][4][j] + 6.28318530717958647693 * dq_sel(m7_4 < l7_4, l7_4, dq_sel(m7_4 > h7_4, h7_4, m7_4));
+            const double d7_4 = dq_sel(l7_4 <= h7_4, fabs(v7_4 - zb[4][j]), INFINITY);
+            const double m7_5 = dq_rint((zb[5][j] - cb[7][5][j]) * 0.15915494309189533577);
+            const double l7_5 = dq_ceil((dq_lim_lo[5] - cb[7][5][j]) * 0.15915494309189533577);
+            const double h7_5 = dq_floor((dq_lim_hi[5] - cb[7][5][j]) * 0.15915494309189533577);
+            const double v7_5 = cb[7][5][j] + 6.28318530717958647693 * dq_sel(m7_5 < l7_5, l7_5, dq_sel(m7_5 > h7_5, h7_5, m7_5));
+            const double d7_5 = dq_sel(l7_5 <= h7_5, fabs(v7_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v6_1, d1 = d6_1;
+                const double v2 = v6_2, d2 = d6_2;
+                const double v3 = v7_3, d3 = d7_3;
+                const double v4 = v7_4, d4 = d7_4;
+                const double v5 = v7_5, d5 = d7_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[7][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 7.0, bb);
+                bs = dq_sel(better, (double)sb[7][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            oq[0][j] = bq0;
+            oq[1][j] = bq1;
+            oq[2][j] = bq2;
+            oq[3][j] = bq3;
+            oq[4][j] = bq4;
+            oq[5][j] = bq5;
+            omx[j] = mv;
+            ott[j] = tv;
+            obr[j] = bb;
+            osg[j] = bs;
+        }
+        for (size_t j = 0; j < m; ++j) {
+            for (int k = 0; k < 6; ++k) {
+                q[(i0 + j) * 6 + k] = oq[k][j];
+            }
+            max_move[i0 + j] = omx[j];
+            total_move[i0 + j] = ott[j];
+            branch[i0 + j] = (int)obr[j];
+            singular[i0 + j] = (int)osg[j];
+        }
     }
 }
 

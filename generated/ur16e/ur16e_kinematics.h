@@ -37,10 +37,21 @@ int ur16e_ik(const double *restrict pose, double *restrict sols);
 void ur16e_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
 
 /* As ur16e_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
- * index of the closed form's branch it comes from, index = 4 x (theta1: 1 for the second root) + 2 x (theta5 sign: 1 for the second root) + 1 x (theta3: 1 for the second root), the same for the same
+ * index of the closed form's branch it comes from, index = 16 x (theta1: 1 for the second root) + 8 x (theta5 sign: 1 for the second root) + 4 x (theta3: 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
  * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
 void ur16e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
                         int *restrict branch, int *restrict singular);
+
+/* n poses (n x 8) and n seed configurations (n x 6): per pose the solution nearest to its seed
+ * among those inside the joint limits compiled in from the description ([-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319]),
+ * each revolute joint at the 2 pi winding nearest to the seed: the smallest largest single-joint
+ * move, then the smallest summed move (both compared in steps of 1e-9; on a tie the first in branch
+ * order). Writes q (n x 6, NaN where no solution is inside the
+ * limits), max_move and total_move (n, NaN there), branch (n, the index as above, -1 there) and
+ * singular (n). The seeds obey the input contract too. */
+void ur16e_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
+                               double *restrict q, double *restrict max_move, double *restrict total_move,
+                               int *restrict branch, int *restrict singular);
 
 #endif

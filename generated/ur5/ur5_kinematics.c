@@ -244,10 +244,18 @@ DQ_INLINE double dq_wrap(double x)
     return dq_sel(r <= -3.14159265358979311600, r + 6.28318530717958647693, r);
 }
 
-static inline int dq_close(double a, double b)
+/* The distance of two wrapped angles, |a - b| or 2 pi - |a - b| when that is smaller. */
+DQ_INLINE double dq_adist(double a, double b)
 {
     const double d = fabs(a - b);
-    return d < 1e-06 || d > 6.28318530717958647693 - 1e-06;
+    const double e = 6.28318530717958647693 - d;
+    return dq_sel(e < d, e, d);
+}
+
+/* The larger of a and b (a select, which vectorises; both are finite here). */
+DQ_INLINE double dq_max(double a, double b)
+{
+    return dq_sel(a > b, a, b);
 }
 
 /* Candidates without near-duplicates (the first of each group kept), packed into sols; where
@@ -262,7 +270,7 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
         }
         int dup = 0;
         for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_close(cand[i][0], cand[j][0]) && dq_close(cand[i][1], cand[j][1]) && dq_close(cand[i][2], cand[j][2]) && dq_close(cand[i][3], cand[j][3]) && dq_close(cand[i][4], cand[j][4]) && dq_close(cand[i][5], cand[j][5])) {
+            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_adist(cand[i][5], cand[j][5])))))) < 1e-06) {
                 dup = 1;
             }
         }
@@ -279,10 +287,15 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
     return count;
 }
 
-int ur5_ik(const double *restrict pose, double *restrict sols)
+/* The IK program on one pose, its branches as nested loops: each leaf's candidate, whether it
+ * is valid, and its singular flag (valid and sing cleared first). */
+static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
+                             int valid[8], int sing[8])
 {
-    double cand[8][6];
-    int valid[8] = {0};
+    for (int b = 0; b < 8; ++b) {
+        valid[b] = 0;
+        sing[b] = 0;
+    }
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
     const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
     const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
@@ -310,7 +323,7 @@ int ur5_ik(const double *restrict pose, double *restrict sols)
     const double k5 = dq_atan2(k2, k1);
     const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
     if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return 0;
+        return;
     }
     for (int b1 = 0; b1 < 2; ++b1) {
         const double sg1 = b1 ? -1.0 : 1.0;
@@ -372,33 +385,346 @@ int ur5_ik(const double *restrict pose, double *restrict sols)
                     cq[4] = dq_wrap(theta5);
                     cq[5] = dq_wrap(theta6);
                     valid[4*b1 + 2*b2 + b3] = 1;
+                    sing[4*b1 + 2*b2 + b3] = singular;
                 }
             }
         }
     }
+}
+
+int ur5_ik(const double *restrict pose, double *restrict sols)
+{
+    double cand[8][6];
+    int valid[8], sing[8];
+    dq_ik_candidates(pose, cand, valid, sing);
     return dq_merge((const double (*)[6])cand, valid, sols, NULL);
 }
 
-/* The scalar pass after the vectorised loop of the batch IK: the candidates of each of the m
- * poses of a block merged (dq_merge) and NaN-padded, with their count, and (where branch is not
- * NULL) each solution's branch index and singular flag (-1 and 0 in the padding). Kept out of
- * the batch function so that its loops are the vectorised ones only. */
-static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK], int sb[][DQ_BLOCK],
-                           double *restrict sols, int *restrict counts, int *restrict branch,
-                           int *restrict singular)
+/* The whole unrolled program on one pose (the singular arms of the selects included): every
+ * leaf's candidate, valid or not, as the vectorised loop writes it. */
+static void dq_ik_full(const double *restrict pose, double cand[8][6],
+                       int valid[8], int sing[8])
+{
+    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
+    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
+        int ok = 1;
+        const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
+        const double a = -0.7071067811865476*p0 + 0.7071067811865476*p1;
+        const double b = 0.7071067811865476*p2 - 0.7071067811865476*p3;
+        const double c = 0.7071067811865476*p2 + 0.7071067811865476*p3;
+        const double r11 = -2.0*b*b - 2.0*c*c + 1.0;
+        const double r12 = 2.0*a*b - 2.0*c*w;
+        const double r13 = 2.0*a*c + 2.0*b*w;
+        const double r21 = 2.0*a*b + 2.0*c*w;
+        const double r22 = -2.0*a*a - 2.0*c*c + 1.0;
+        const double r23 = -2.0*a*w + 2.0*b*c;
+        const double r31 = 2.0*a*c - 2.0*b*w;
+        const double r32 = 2.0*a*w + 2.0*b*c;
+        const double r33 = -2.0*a*a - 2.0*b*b + 1.0;
+        const double x = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
+        const double y = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
+        const double z = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
+        const double y5 = 0.0823*r22 + y;
+        const double x5 = 0.0823*r12 + x;
+        const double k1 = -y5;
+        const double k2 = x5;
+        const double k3 = -0.10915;
+        const double k4 = k1*k1 + k2*k2 - k3*k3;
+        const double k5 = dq_atan2(k2, k1);
+        const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
+        ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
+        int ok_0 = ok;
+        const double sg1_0 = 1.0;
+        const double theta1_0 = k5 + k6*sg1_0;
+        double s1_0, c1_0;
+        dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
+        const double h7_0 = sqrt((a*c1_0 + b*s1_0)*(a*c1_0 + b*s1_0) + (-c*c1_0 + s1_0*w)*(-c*c1_0 + s1_0*w));
+        const double h8_0 = sqrt((-a*s1_0 + b*c1_0)*(-a*s1_0 + b*c1_0) + (-c*s1_0 - c1_0*w)*(-c*s1_0 - c1_0*w));
+        const double h9_0 = dq_atan2(h7_0, h8_0);
+        const double h10_0 = 2.0*h7_0*h8_0/(h7_0*h7_0 + h8_0*h8_0);
+        const double h11_0 = dq_atan2(a*s1_0 - b*c1_0, c*s1_0 + c1_0*w);
+        const double h12_0 = dq_atan2(a*c1_0 + b*s1_0, -c*c1_0 + s1_0*w);
+        const double s2_0 = 2.0*s1_0*c1_0;
+        const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
+        const double f13_0 = 0.0823*c2_0*r12 + c2_0*x + 0.0823*r22*s2_0 + s2_0*y;
+        const double f14_0 = 0.09465*c2_0*r11 + 0.09465*r21*s2_0;
+        const double f15_0 = 0.09465*c2_0*r13 + 0.09465*r23*s2_0;
+        const double f16_0 = 0.0823*r32 + z - 0.089159;
+        const double f17_0 = 0.09465*r31;
+        const double f18_0 = 0.09465*r33;
+        const double f19_0 = 2.99928766917857*f13_0*f13_0 + 1.499643834589285*f14_0*f14_0 + 1.499643834589285*f15_0*f15_0 + 2.99928766917857*f16_0*f16_0 + 1.499643834589285*f17_0*f17_0 + 1.499643834589285*f18_0*f18_0 - 1.0032169234806734;
+        const double f20_0 = 5.99857533835714*f13_0*f15_0 + 5.99857533835714*f16_0*f18_0;
+        const double f21_0 = 5.99857533835714*f13_0*f14_0 + 5.99857533835714*f16_0*f17_0;
+        const double f22_0 = -f19_0*f19_0 + f20_0*f20_0 + f21_0*f21_0;
+        const double f23_0 = dq_atan2(f21_0, f20_0) + dq_atan2(sqrt(dq_sel((f22_0) > 0.0, f22_0, 0.0)), -f19_0);
+        const int singular_0 = h10_0 < 1e-11;
+        const int cos_small_0 = h8_0 < h7_0;
+        int ok_00 = ok_0;
+        const double sg2_00 = 1.0;
+        const double theta5_singular_00 = dq_sel(cos_small_0, 3.141592653589793, 0);
+        const double theta5_00 = dq_sel(singular_0, theta5_singular_00, 2.0*h9_0*sg2_00);
+        const double h24_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
+        const double sigma1_00 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_00);
+        const double sigma2_00 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_00, h11_0);
+        const double theta6_00 = -sigma1_00 + sigma2_00;
+        double s3_00, c3_00;
+        dq_sincos(theta6_00, &s3_00, &c3_00);
+        const double x4_00 = 0.09465*c2_0*c3_00*r13 + 0.09465*c2_0*r11*s3_00 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_00*r23*s2_0 + 0.09465*r21*s2_0*s3_00 + 0.0823*r22*s2_0 + s2_0*y;
+        const double z4_00 = 0.09465*c3_00*r33 + 0.09465*r31*s3_00 + 0.0823*r32 + z - 0.089159;
+        const double k25_00 = 2.99928766917857*x4_00*x4_00 + 2.99928766917857*z4_00*z4_00 - 1.0032169234806734;
+        ok_00 = ok_00 & (fabs(k25_00) <= 1.0000000001);
+        const double k26_00 = sqrt(dq_sel((1 - k25_00*k25_00) > 0.0, 1 - k25_00*k25_00, 0.0));
+        const double k27_00 = dq_atan2(k26_00, k25_00);
+        int ok_000 = ok_00;
+        const double sg3_000 = 1.0;
+        const double theta3_000 = k27_00*sg3_000;
+        const double k28_000 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+        const double sigma3_000 = dq_atan2(k28_000*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_000*x4_00 + 0.39225*z4_00), k28_000*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_000*z4_00 + 0.39225*x4_00));
+        const double theta2_000 = sigma3_000 - theta3_000;
+        const double theta4_000 = sigma1_00 + sigma2_00 - sigma3_000;
+        cand[0][0] = dq_wrap(theta1_0);
+        cand[0][1] = dq_wrap(theta2_000);
+        cand[0][2] = dq_wrap(theta3_000);
+        cand[0][3] = dq_wrap(theta4_000);
+        cand[0][4] = dq_wrap(theta5_00);
+        cand[0][5] = dq_wrap(theta6_00);
+        valid[0] = ok_000;
+        sing[0] = singular_0;
+        int ok_001 = ok_00;
+        const double sg3_001 = -1.0;
+        const double theta3_001 = k27_00*sg3_001;
+        const double k28_001 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+        const double sigma3_001 = dq_atan2(k28_001*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_001*x4_00 + 0.39225*z4_00), k28_001*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_001*z4_00 + 0.39225*x4_00));
+        const double theta2_001 = sigma3_001 - theta3_001;
+        const double theta4_001 = sigma1_00 + sigma2_00 - sigma3_001;
+        cand[1][0] = dq_wrap(theta1_0);
+        cand[1][1] = dq_wrap(theta2_001);
+        cand[1][2] = dq_wrap(theta3_001);
+        cand[1][3] = dq_wrap(theta4_001);
+        cand[1][4] = dq_wrap(theta5_00);
+        cand[1][5] = dq_wrap(theta6_00);
+        valid[1] = ok_001;
+        sing[1] = singular_0;
+        int ok_01 = ok_0;
+        const double sg2_01 = -1.0;
+        const double theta5_singular_01 = dq_sel(cos_small_0, 3.141592653589793, 0);
+        const double theta5_01 = dq_sel(singular_0, theta5_singular_01, 2.0*h9_0*sg2_01);
+        const double h24_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
+        const double sigma1_01 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_01);
+        const double sigma2_01 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_01, h11_0);
+        const double theta6_01 = -sigma1_01 + sigma2_01;
+        double s3_01, c3_01;
+        dq_sincos(theta6_01, &s3_01, &c3_01);
+        const double x4_01 = 0.09465*c2_0*c3_01*r13 + 0.09465*c2_0*r11*s3_01 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_01*r23*s2_0 + 0.09465*r21*s2_0*s3_01 + 0.0823*r22*s2_0 + s2_0*y;
+        const double z4_01 = 0.09465*c3_01*r33 + 0.09465*r31*s3_01 + 0.0823*r32 + z - 0.089159;
+        const double k25_01 = 2.99928766917857*x4_01*x4_01 + 2.99928766917857*z4_01*z4_01 - 1.0032169234806734;
+        ok_01 = ok_01 & (fabs(k25_01) <= 1.0000000001);
+        const double k26_01 = sqrt(dq_sel((1 - k25_01*k25_01) > 0.0, 1 - k25_01*k25_01, 0.0));
+        const double k27_01 = dq_atan2(k26_01, k25_01);
+        int ok_010 = ok_01;
+        const double sg3_010 = 1.0;
+        const double theta3_010 = k27_01*sg3_010;
+        const double k28_010 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+        const double sigma3_010 = dq_atan2(k28_010*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_010*x4_01 + 0.39225*z4_01), k28_010*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_010*z4_01 + 0.39225*x4_01));
+        const double theta2_010 = sigma3_010 - theta3_010;
+        const double theta4_010 = sigma1_01 + sigma2_01 - sigma3_010;
+        cand[2][0] = dq_wrap(theta1_0);
+        cand[2][1] = dq_wrap(theta2_010);
+        cand[2][2] = dq_wrap(theta3_010);
+        cand[2][3] = dq_wrap(theta4_010);
+        cand[2][4] = dq_wrap(theta5_01);
+        cand[2][5] = dq_wrap(theta6_01);
+        valid[2] = ok_010;
+        sing[2] = singular_0;
+        int ok_011 = ok_01;
+        const double sg3_011 = -1.0;
+        const double theta3_011 = k27_01*sg3_011;
+        const double k28_011 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+        const double sigma3_011 = dq_atan2(k28_011*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_011*x4_01 + 0.39225*z4_01), k28_011*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_011*z4_01 + 0.39225*x4_01));
+        const double theta2_011 = sigma3_011 - theta3_011;
+        const double theta4_011 = sigma1_01 + sigma2_01 - sigma3_011;
+        cand[3][0] = dq_wrap(theta1_0);
+        cand[3][1] = dq_wrap(theta2_011);
+        cand[3][2] = dq_wrap(theta3_011);
+        cand[3][3] = dq_wrap(theta4_011);
+        cand[3][4] = dq_wrap(theta5_01);
+        cand[3][5] = dq_wrap(theta6_01);
+        valid[3] = ok_011;
+        sing[3] = singular_0;
+        int ok_1 = ok;
+        const double sg1_1 = -1.0;
+        const double theta1_1 = k5 + k6*sg1_1;
+        double s1_1, c1_1;
+        dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
+        const double h7_1 = sqrt((a*c1_1 + b*s1_1)*(a*c1_1 + b*s1_1) + (-c*c1_1 + s1_1*w)*(-c*c1_1 + s1_1*w));
+        const double h8_1 = sqrt((-a*s1_1 + b*c1_1)*(-a*s1_1 + b*c1_1) + (-c*s1_1 - c1_1*w)*(-c*s1_1 - c1_1*w));
+        const double h9_1 = dq_atan2(h7_1, h8_1);
+        const double h10_1 = 2.0*h7_1*h8_1/(h7_1*h7_1 + h8_1*h8_1);
+        const double h11_1 = dq_atan2(a*s1_1 - b*c1_1, c*s1_1 + c1_1*w);
+        const double h12_1 = dq_atan2(a*c1_1 + b*s1_1, -c*c1_1 + s1_1*w);
+        const double s2_1 = 2.0*s1_1*c1_1;
+        const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
+        const double f13_1 = 0.0823*c2_1*r12 + c2_1*x + 0.0823*r22*s2_1 + s2_1*y;
+        const double f14_1 = 0.09465*c2_1*r11 + 0.09465*r21*s2_1;
+        const double f15_1 = 0.09465*c2_1*r13 + 0.09465*r23*s2_1;
+        const double f16_1 = 0.0823*r32 + z - 0.089159;
+        const double f17_1 = 0.09465*r31;
+        const double f18_1 = 0.09465*r33;
+        const double f19_1 = 2.99928766917857*f13_1*f13_1 + 1.499643834589285*f14_1*f14_1 + 1.499643834589285*f15_1*f15_1 + 2.99928766917857*f16_1*f16_1 + 1.499643834589285*f17_1*f17_1 + 1.499643834589285*f18_1*f18_1 - 1.0032169234806734;
+        const double f20_1 = 5.99857533835714*f13_1*f15_1 + 5.99857533835714*f16_1*f18_1;
+        const double f21_1 = 5.99857533835714*f13_1*f14_1 + 5.99857533835714*f16_1*f17_1;
+        const double f22_1 = -f19_1*f19_1 + f20_1*f20_1 + f21_1*f21_1;
+        const double f23_1 = dq_atan2(f21_1, f20_1) + dq_atan2(sqrt(dq_sel((f22_1) > 0.0, f22_1, 0.0)), -f19_1);
+        const int singular_1 = h10_1 < 1e-11;
+        const int cos_small_1 = h8_1 < h7_1;
+        int ok_10 = ok_1;
+        const double sg2_10 = 1.0;
+        const double theta5_singular_10 = dq_sel(cos_small_1, 3.141592653589793, 0);
+        const double theta5_10 = dq_sel(singular_1, theta5_singular_10, 2.0*h9_1*sg2_10);
+        const double h24_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
+        const double sigma1_10 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_10);
+        const double sigma2_10 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_10, h11_1);
+        const double theta6_10 = -sigma1_10 + sigma2_10;
+        double s3_10, c3_10;
+        dq_sincos(theta6_10, &s3_10, &c3_10);
+        const double x4_10 = 0.09465*c2_1*c3_10*r13 + 0.09465*c2_1*r11*s3_10 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_10*r23*s2_1 + 0.09465*r21*s2_1*s3_10 + 0.0823*r22*s2_1 + s2_1*y;
+        const double z4_10 = 0.09465*c3_10*r33 + 0.09465*r31*s3_10 + 0.0823*r32 + z - 0.089159;
+        const double k25_10 = 2.99928766917857*x4_10*x4_10 + 2.99928766917857*z4_10*z4_10 - 1.0032169234806734;
+        ok_10 = ok_10 & (fabs(k25_10) <= 1.0000000001);
+        const double k26_10 = sqrt(dq_sel((1 - k25_10*k25_10) > 0.0, 1 - k25_10*k25_10, 0.0));
+        const double k27_10 = dq_atan2(k26_10, k25_10);
+        int ok_100 = ok_10;
+        const double sg3_100 = 1.0;
+        const double theta3_100 = k27_10*sg3_100;
+        const double k28_100 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+        const double sigma3_100 = dq_atan2(k28_100*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_100*x4_10 + 0.39225*z4_10), k28_100*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_100*z4_10 + 0.39225*x4_10));
+        const double theta2_100 = sigma3_100 - theta3_100;
+        const double theta4_100 = sigma1_10 + sigma2_10 - sigma3_100;
+        cand[4][0] = dq_wrap(theta1_1);
+        cand[4][1] = dq_wrap(theta2_100);
+        cand[4][2] = dq_wrap(theta3_100);
+        cand[4][3] = dq_wrap(theta4_100);
+        cand[4][4] = dq_wrap(theta5_10);
+        cand[4][5] = dq_wrap(theta6_10);
+        valid[4] = ok_100;
+        sing[4] = singular_1;
+        int ok_101 = ok_10;
+        const double sg3_101 = -1.0;
+        const double theta3_101 = k27_10*sg3_101;
+        const double k28_101 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+        const double sigma3_101 = dq_atan2(k28_101*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_101*x4_10 + 0.39225*z4_10), k28_101*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_101*z4_10 + 0.39225*x4_10));
+        const double theta2_101 = sigma3_101 - theta3_101;
+        const double theta4_101 = sigma1_10 + sigma2_10 - sigma3_101;
+        cand[5][0] = dq_wrap(theta1_1);
+        cand[5][1] = dq_wrap(theta2_101);
+        cand[5][2] = dq_wrap(theta3_101);
+        cand[5][3] = dq_wrap(theta4_101);
+        cand[5][4] = dq_wrap(theta5_10);
+        cand[5][5] = dq_wrap(theta6_10);
+        valid[5] = ok_101;
+        sing[5] = singular_1;
+        int ok_11 = ok_1;
+        const double sg2_11 = -1.0;
+        const double theta5_singular_11 = dq_sel(cos_small_1, 3.141592653589793, 0);
+        const double theta5_11 = dq_sel(singular_1, theta5_singular_11, 2.0*h9_1*sg2_11);
+        const double h24_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
+        const double sigma1_11 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_11);
+        const double sigma2_11 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_11, h11_1);
+        const double theta6_11 = -sigma1_11 + sigma2_11;
+        double s3_11, c3_11;
+        dq_sincos(theta6_11, &s3_11, &c3_11);
+        const double x4_11 = 0.09465*c2_1*c3_11*r13 + 0.09465*c2_1*r11*s3_11 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_11*r23*s2_1 + 0.09465*r21*s2_1*s3_11 + 0.0823*r22*s2_1 + s2_1*y;
+        const double z4_11 = 0.09465*c3_11*r33 + 0.09465*r31*s3_11 + 0.0823*r32 + z - 0.089159;
+        const double k25_11 = 2.99928766917857*x4_11*x4_11 + 2.99928766917857*z4_11*z4_11 - 1.0032169234806734;
+        ok_11 = ok_11 & (fabs(k25_11) <= 1.0000000001);
+        const double k26_11 = sqrt(dq_sel((1 - k25_11*k25_11) > 0.0, 1 - k25_11*k25_11, 0.0));
+        const double k27_11 = dq_atan2(k26_11, k25_11);
+        int ok_110 = ok_11;
+        const double sg3_110 = 1.0;
+        const double theta3_110 = k27_11*sg3_110;
+        const double k28_110 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+        const double sigma3_110 = dq_atan2(k28_110*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_110*x4_11 + 0.39225*z4_11), k28_110*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_110*z4_11 + 0.39225*x4_11));
+        const double theta2_110 = sigma3_110 - theta3_110;
+        const double theta4_110 = sigma1_11 + sigma2_11 - sigma3_110;
+        cand[6][0] = dq_wrap(theta1_1);
+        cand[6][1] = dq_wrap(theta2_110);
+        cand[6][2] = dq_wrap(theta3_110);
+        cand[6][3] = dq_wrap(theta4_110);
+        cand[6][4] = dq_wrap(theta5_11);
+        cand[6][5] = dq_wrap(theta6_11);
+        valid[6] = ok_110;
+        sing[6] = singular_1;
+        int ok_111 = ok_11;
+        const double sg3_111 = -1.0;
+        const double theta3_111 = k27_11*sg3_111;
+        const double k28_111 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+        const double sigma3_111 = dq_atan2(k28_111*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_111*x4_11 + 0.39225*z4_11), k28_111*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_111*z4_11 + 0.39225*x4_11));
+        const double theta2_111 = sigma3_111 - theta3_111;
+        const double theta4_111 = sigma1_11 + sigma2_11 - sigma3_111;
+        cand[7][0] = dq_wrap(theta1_1);
+        cand[7][1] = dq_wrap(theta2_111);
+        cand[7][2] = dq_wrap(theta3_111);
+        cand[7][3] = dq_wrap(theta4_111);
+        cand[7][4] = dq_wrap(theta5_11);
+        cand[7][5] = dq_wrap(theta6_11);
+        valid[7] = ok_111;
+        sing[7] = singular_1;
+}
+
+/* The scalar pass after the vectorised loop of the batch IK: that loop computes every pose as
+ * if no step were singular (the singular arms of the selects are left out, so their extra
+ * transcendentals cost nothing on the common path); the poses of a block with a singular flag
+ * set are computed again here by the whole unrolled program (dq_ik_full), every leaf (valid or
+ * not) as the loop would write it, so that values several leaves share stay shared. */
+static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6][DQ_BLOCK],
+                              int vb[][DQ_BLOCK], int sb[][DQ_BLOCK])
 {
     for (size_t j = 0; j < m; ++j) {
-        double cand[8][6];
-        int valid[8];
-        int ids[8];
+        int any = 0;
         for (int b = 0; b < 8; ++b) {
-            valid[b] = vb[b][j];
-            for (int k = 0; k < 6; ++k) {
-                cand[b][k] = cb[b][k][j];
-            }
+            any |= sb[b][j];
         }
+        if (!any) {
+            continue;
+        }
+        double pose[8], cand[8][6];
+        int valid[8], sing[8];
+        for (int k = 0; k < 8; ++k) {
+            pose[k] = pb[k][j];
+        }
+        dq_ik_full(pose, cand, valid, sing);
+        for (int b = 0; b < 8; ++b) {
+            for (int k = 0; k < 6; ++k) {
+                cb[b][k][j] = cand[b][k];
+            }
+            vb[b][j] = valid[b];
+            sb[b][j] = sing[b];
+        }
+    }
+}
+
+/* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
+ * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
+ * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
+ * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
+ * are the vectorised ones only. */
+static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
+                          double *restrict sols, int *restrict counts, int *restrict branch,
+                          int *restrict singular)
+{
+    for (size_t j = 0; j < m; ++j) {
         double *const s = sols + j * 48;
-        const int c = dq_merge((const double (*)[6])cand, valid, s, ids);
+        int ids[8];
+        int c = 0;
+        for (int b = 0; b < 8; ++b) {
+            for (int k = 0; k < 6; ++k) {
+                s[c * 6 + k] = cb[b][k][j];
+            }
+            ids[c] = b;
+            c += kb[b][j];
+        }
         for (int k = c * 6; k < 48; ++k) {
             s[k] = NAN;
         }
@@ -412,15 +738,274 @@ static void dq_merge_block(size_t m, double cb[][6][DQ_BLOCK], int vb[][DQ_BLOCK
     }
 }
 
-/* n poses (n x 8) in blocks of DQ_BLOCK: the IK program with its branches unrolled runs over
- * the poses of a block with unit stride (vectorisable), then each pose's candidates are merged. */
+/* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
+ * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
+ * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
+ * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
+ * loops over them). */
+DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6][DQ_BLOCK],
+                        int vb[][DQ_BLOCK], int sb[][DQ_BLOCK], int kb[][DQ_BLOCK])
+{
+    for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
+        const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
+        const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
+        int ok = 1;
+        const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
+        const double a = -0.7071067811865476*p0 + 0.7071067811865476*p1;
+        const double b = 0.7071067811865476*p2 - 0.7071067811865476*p3;
+        const double c = 0.7071067811865476*p2 + 0.7071067811865476*p3;
+        const double r11 = -2.0*b*b - 2.0*c*c + 1.0;
+        const double r12 = 2.0*a*b - 2.0*c*w;
+        const double r13 = 2.0*a*c + 2.0*b*w;
+        const double r21 = 2.0*a*b + 2.0*c*w;
+        const double r22 = -2.0*a*a - 2.0*c*c + 1.0;
+        const double r23 = -2.0*a*w + 2.0*b*c;
+        const double r31 = 2.0*a*c - 2.0*b*w;
+        const double r32 = 2.0*a*w + 2.0*b*c;
+        const double r33 = -2.0*a*a - 2.0*b*b + 1.0;
+        const double x = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
+        const double y = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
+        const double z = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
+        const double y5 = 0.0823*r22 + y;
+        const double x5 = 0.0823*r12 + x;
+        const double k1 = -y5;
+        const double k2 = x5;
+        const double k3 = -0.10915;
+        const double k4 = k1*k1 + k2*k2 - k3*k3;
+        const double k5 = dq_atan2(k2, k1);
+        const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
+        ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
+        int ok_0 = ok;
+        const double sg1_0 = 1.0;
+        const double theta1_0 = k5 + k6*sg1_0;
+        double s1_0, c1_0;
+        dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
+        const double h7_0 = sqrt((a*c1_0 + b*s1_0)*(a*c1_0 + b*s1_0) + (-c*c1_0 + s1_0*w)*(-c*c1_0 + s1_0*w));
+        const double h8_0 = sqrt((-a*s1_0 + b*c1_0)*(-a*s1_0 + b*c1_0) + (-c*s1_0 - c1_0*w)*(-c*s1_0 - c1_0*w));
+        const double h9_0 = dq_atan2(h7_0, h8_0);
+        const double h10_0 = 2.0*h7_0*h8_0/(h7_0*h7_0 + h8_0*h8_0);
+        const double h11_0 = dq_atan2(a*s1_0 - b*c1_0, c*s1_0 + c1_0*w);
+        const double h12_0 = dq_atan2(a*c1_0 + b*s1_0, -c*c1_0 + s1_0*w);
+        const double s2_0 = 2.0*s1_0*c1_0;
+        const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
+        const int singular_0 = h10_0 < 1e-11;
+        int ok_00 = ok_0;
+        const double sg2_00 = 1.0;
+        const double theta5_00 = 2.0*h9_0*sg2_00;   /* singular_0 is 0 here (dq_singular_block) */
+        const double h24_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
+        const double sigma1_00 = h24_00;   /* (singular_0) & (!(cos_small_0)) is 0 here (dq_singular_block) */
+        const double sigma2_00 = h11_0;   /* (cos_small_0) & (singular_0) is 0 here (dq_singular_block) */
+        const double theta6_00 = -sigma1_00 + sigma2_00;
+        double s3_00, c3_00;
+        dq_sincos(theta6_00, &s3_00, &c3_00);
+        const double x4_00 = 0.09465*c2_0*c3_00*r13 + 0.09465*c2_0*r11*s3_00 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_00*r23*s2_0 + 0.09465*r21*s2_0*s3_00 + 0.0823*r22*s2_0 + s2_0*y;
+        const double z4_00 = 0.09465*c3_00*r33 + 0.09465*r31*s3_00 + 0.0823*r32 + z - 0.089159;
+        const double k25_00 = 2.99928766917857*x4_00*x4_00 + 2.99928766917857*z4_00*z4_00 - 1.0032169234806734;
+        ok_00 = ok_00 & (fabs(k25_00) <= 1.0000000001);
+        const double k26_00 = sqrt(dq_sel((1 - k25_00*k25_00) > 0.0, 1 - k25_00*k25_00, 0.0));
+        const double k27_00 = dq_atan2(k26_00, k25_00);
+        int ok_000 = ok_00;
+        const double sg3_000 = 1.0;
+        const double theta3_000 = k27_00*sg3_000;
+        const double k28_000 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+        const double sigma3_000 = dq_atan2(k28_000*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_000*x4_00 + 0.39225*z4_00), k28_000*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_000*z4_00 + 0.39225*x4_00));
+        const double theta2_000 = sigma3_000 - theta3_000;
+        const double theta4_000 = sigma1_00 + sigma2_00 - sigma3_000;
+        cb[0][0][j] = dq_wrap(theta1_0);
+        cb[0][1][j] = dq_wrap(theta2_000);
+        cb[0][2][j] = dq_wrap(theta3_000);
+        cb[0][3][j] = dq_wrap(theta4_000);
+        cb[0][4][j] = dq_wrap(theta5_00);
+        cb[0][5][j] = dq_wrap(theta6_00);
+        vb[0][j] = ok_000;
+        sb[0][j] = singular_0;
+        int ok_001 = ok_00;
+        const double sg3_001 = -1.0;
+        const double theta3_001 = k27_00*sg3_001;
+        const double k28_001 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
+        const double sigma3_001 = dq_atan2(k28_001*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_001*x4_00 + 0.39225*z4_00), k28_001*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_001*z4_00 + 0.39225*x4_00));
+        const double theta2_001 = sigma3_001 - theta3_001;
+        const double theta4_001 = sigma1_00 + sigma2_00 - sigma3_001;
+        cb[1][0][j] = dq_wrap(theta1_0);
+        cb[1][1][j] = dq_wrap(theta2_001);
+        cb[1][2][j] = dq_wrap(theta3_001);
+        cb[1][3][j] = dq_wrap(theta4_001);
+        cb[1][4][j] = dq_wrap(theta5_00);
+        cb[1][5][j] = dq_wrap(theta6_00);
+        vb[1][j] = ok_001;
+        sb[1][j] = singular_0;
+        int ok_01 = ok_0;
+        const double sg2_01 = -1.0;
+        const double theta5_01 = 2.0*h9_0*sg2_01;   /* singular_0 is 0 here (dq_singular_block) */
+        const double h24_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
+        const double sigma1_01 = h24_01;   /* (singular_0) & (!(cos_small_0)) is 0 here (dq_singular_block) */
+        const double sigma2_01 = h11_0;   /* (cos_small_0) & (singular_0) is 0 here (dq_singular_block) */
+        const double theta6_01 = -sigma1_01 + sigma2_01;
+        double s3_01, c3_01;
+        dq_sincos(theta6_01, &s3_01, &c3_01);
+        const double x4_01 = 0.09465*c2_0*c3_01*r13 + 0.09465*c2_0*r11*s3_01 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_01*r23*s2_0 + 0.09465*r21*s2_0*s3_01 + 0.0823*r22*s2_0 + s2_0*y;
+        const double z4_01 = 0.09465*c3_01*r33 + 0.09465*r31*s3_01 + 0.0823*r32 + z - 0.089159;
+        const double k25_01 = 2.99928766917857*x4_01*x4_01 + 2.99928766917857*z4_01*z4_01 - 1.0032169234806734;
+        ok_01 = ok_01 & (fabs(k25_01) <= 1.0000000001);
+        const double k26_01 = sqrt(dq_sel((1 - k25_01*k25_01) > 0.0, 1 - k25_01*k25_01, 0.0));
+        const double k27_01 = dq_atan2(k26_01, k25_01);
+        int ok_010 = ok_01;
+        const double sg3_010 = 1.0;
+        const double theta3_010 = k27_01*sg3_010;
+        const double k28_010 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+        const double sigma3_010 = dq_atan2(k28_010*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_010*x4_01 + 0.39225*z4_01), k28_010*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_010*z4_01 + 0.39225*x4_01));
+        const double theta2_010 = sigma3_010 - theta3_010;
+        const double theta4_010 = sigma1_01 + sigma2_01 - sigma3_010;
+        cb[2][0][j] = dq_wrap(theta1_0);
+        cb[2][1][j] = dq_wrap(theta2_010);
+        cb[2][2][j] = dq_wrap(theta3_010);
+        cb[2][3][j] = dq_wrap(theta4_010);
+        cb[2][4][j] = dq_wrap(theta5_01);
+        cb[2][5][j] = dq_wrap(theta6_01);
+        vb[2][j] = ok_010;
+        sb[2][j] = singular_0;
+        int ok_011 = ok_01;
+        const double sg3_011 = -1.0;
+        const double theta3_011 = k27_01*sg3_011;
+        const double k28_011 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
+        const double sigma3_011 = dq_atan2(k28_011*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_011*x4_01 + 0.39225*z4_01), k28_011*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_011*z4_01 + 0.39225*x4_01));
+        const double theta2_011 = sigma3_011 - theta3_011;
+        const double theta4_011 = sigma1_01 + sigma2_01 - sigma3_011;
+        cb[3][0][j] = dq_wrap(theta1_0);
+        cb[3][1][j] = dq_wrap(theta2_011);
+        cb[3][2][j] = dq_wrap(theta3_011);
+        cb[3][3][j] = dq_wrap(theta4_011);
+        cb[3][4][j] = dq_wrap(theta5_01);
+        cb[3][5][j] = dq_wrap(theta6_01);
+        vb[3][j] = ok_011;
+        sb[3][j] = singular_0;
+        int ok_1 = ok;
+        const double sg1_1 = -1.0;
+        const double theta1_1 = k5 + k6*sg1_1;
+        double s1_1, c1_1;
+        dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
+        const double h7_1 = sqrt((a*c1_1 + b*s1_1)*(a*c1_1 + b*s1_1) + (-c*c1_1 + s1_1*w)*(-c*c1_1 + s1_1*w));
+        const double h8_1 = sqrt((-a*s1_1 + b*c1_1)*(-a*s1_1 + b*c1_1) + (-c*s1_1 - c1_1*w)*(-c*s1_1 - c1_1*w));
+        const double h9_1 = dq_atan2(h7_1, h8_1);
+        const double h10_1 = 2.0*h7_1*h8_1/(h7_1*h7_1 + h8_1*h8_1);
+        const double h11_1 = dq_atan2(a*s1_1 - b*c1_1, c*s1_1 + c1_1*w);
+        const double h12_1 = dq_atan2(a*c1_1 + b*s1_1, -c*c1_1 + s1_1*w);
+        const double s2_1 = 2.0*s1_1*c1_1;
+        const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
+        const int singular_1 = h10_1 < 1e-11;
+        int ok_10 = ok_1;
+        const double sg2_10 = 1.0;
+        const double theta5_10 = 2.0*h9_1*sg2_10;   /* singular_1 is 0 here (dq_singular_block) */
+        const double h24_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
+        const double sigma1_10 = h24_10;   /* (singular_1) & (!(cos_small_1)) is 0 here (dq_singular_block) */
+        const double sigma2_10 = h11_1;   /* (cos_small_1) & (singular_1) is 0 here (dq_singular_block) */
+        const double theta6_10 = -sigma1_10 + sigma2_10;
+        double s3_10, c3_10;
+        dq_sincos(theta6_10, &s3_10, &c3_10);
+        const double x4_10 = 0.09465*c2_1*c3_10*r13 + 0.09465*c2_1*r11*s3_10 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_10*r23*s2_1 + 0.09465*r21*s2_1*s3_10 + 0.0823*r22*s2_1 + s2_1*y;
+        const double z4_10 = 0.09465*c3_10*r33 + 0.09465*r31*s3_10 + 0.0823*r32 + z - 0.089159;
+        const double k25_10 = 2.99928766917857*x4_10*x4_10 + 2.99928766917857*z4_10*z4_10 - 1.0032169234806734;
+        ok_10 = ok_10 & (fabs(k25_10) <= 1.0000000001);
+        const double k26_10 = sqrt(dq_sel((1 - k25_10*k25_10) > 0.0, 1 - k25_10*k25_10, 0.0));
+        const double k27_10 = dq_atan2(k26_10, k25_10);
+        int ok_100 = ok_10;
+        const double sg3_100 = 1.0;
+        const double theta3_100 = k27_10*sg3_100;
+        const double k28_100 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+        const double sigma3_100 = dq_atan2(k28_100*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_100*x4_10 + 0.39225*z4_10), k28_100*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_100*z4_10 + 0.39225*x4_10));
+        const double theta2_100 = sigma3_100 - theta3_100;
+        const double theta4_100 = sigma1_10 + sigma2_10 - sigma3_100;
+        cb[4][0][j] = dq_wrap(theta1_1);
+        cb[4][1][j] = dq_wrap(theta2_100);
+        cb[4][2][j] = dq_wrap(theta3_100);
+        cb[4][3][j] = dq_wrap(theta4_100);
+        cb[4][4][j] = dq_wrap(theta5_10);
+        cb[4][5][j] = dq_wrap(theta6_10);
+        vb[4][j] = ok_100;
+        sb[4][j] = singular_1;
+        int ok_101 = ok_10;
+        const double sg3_101 = -1.0;
+        const double theta3_101 = k27_10*sg3_101;
+        const double k28_101 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
+        const double sigma3_101 = dq_atan2(k28_101*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_101*x4_10 + 0.39225*z4_10), k28_101*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_101*z4_10 + 0.39225*x4_10));
+        const double theta2_101 = sigma3_101 - theta3_101;
+        const double theta4_101 = sigma1_10 + sigma2_10 - sigma3_101;
+        cb[5][0][j] = dq_wrap(theta1_1);
+        cb[5][1][j] = dq_wrap(theta2_101);
+        cb[5][2][j] = dq_wrap(theta3_101);
+        cb[5][3][j] = dq_wrap(theta4_101);
+        cb[5][4][j] = dq_wrap(theta5_10);
+        cb[5][5][j] = dq_wrap(theta6_10);
+        vb[5][j] = ok_101;
+        sb[5][j] = singular_1;
+        int ok_11 = ok_1;
+        const double sg2_11 = -1.0;
+        const double theta5_11 = 2.0*h9_1*sg2_11;   /* singular_1 is 0 here (dq_singular_block) */
+        const double h24_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
+        const double sigma1_11 = h24_11;   /* (singular_1) & (!(cos_small_1)) is 0 here (dq_singular_block) */
+        const double sigma2_11 = h11_1;   /* (cos_small_1) & (singular_1) is 0 here (dq_singular_block) */
+        const double theta6_11 = -sigma1_11 + sigma2_11;
+        double s3_11, c3_11;
+        dq_sincos(theta6_11, &s3_11, &c3_11);
+        const double x4_11 = 0.09465*c2_1*c3_11*r13 + 0.09465*c2_1*r11*s3_11 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_11*r23*s2_1 + 0.09465*r21*s2_1*s3_11 + 0.0823*r22*s2_1 + s2_1*y;
+        const double z4_11 = 0.09465*c3_11*r33 + 0.09465*r31*s3_11 + 0.0823*r32 + z - 0.089159;
+        const double k25_11 = 2.99928766917857*x4_11*x4_11 + 2.99928766917857*z4_11*z4_11 - 1.0032169234806734;
+        ok_11 = ok_11 & (fabs(k25_11) <= 1.0000000001);
+        const double k26_11 = sqrt(dq_sel((1 - k25_11*k25_11) > 0.0, 1 - k25_11*k25_11, 0.0));
+        const double k27_11 = dq_atan2(k26_11, k25_11);
+        int ok_110 = ok_11;
+        const double sg3_110 = 1.0;
+        const double theta3_110 = k27_11*sg3_110;
+        const double k28_110 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+        const double sigma3_110 = dq_atan2(k28_110*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_110*x4_11 + 0.39225*z4_11), k28_110*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_110*z4_11 + 0.39225*x4_11));
+        const double theta2_110 = sigma3_110 - theta3_110;
+        const double theta4_110 = sigma1_11 + sigma2_11 - sigma3_110;
+        cb[6][0][j] = dq_wrap(theta1_1);
+        cb[6][1][j] = dq_wrap(theta2_110);
+        cb[6][2][j] = dq_wrap(theta3_110);
+        cb[6][3][j] = dq_wrap(theta4_110);
+        cb[6][4][j] = dq_wrap(theta5_11);
+        cb[6][5][j] = dq_wrap(theta6_11);
+        vb[6][j] = ok_110;
+        sb[6][j] = singular_1;
+        int ok_111 = ok_11;
+        const double sg3_111 = -1.0;
+        const double theta3_111 = k27_11*sg3_111;
+        const double k28_111 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
+        const double sigma3_111 = dq_atan2(k28_111*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_111*x4_11 + 0.39225*z4_11), k28_111*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_111*z4_11 + 0.39225*x4_11));
+        const double theta2_111 = sigma3_111 - theta3_111;
+        const double theta4_111 = sigma1_11 + sigma2_11 - sigma3_111;
+        cb[7][0][j] = dq_wrap(theta1_1);
+        cb[7][1][j] = dq_wrap(theta2_111);
+        cb[7][2][j] = dq_wrap(theta3_111);
+        cb[7][3][j] = dq_wrap(theta4_111);
+        cb[7][4][j] = dq_wrap(theta5_11);
+        cb[7][5][j] = dq_wrap(theta6_11);
+        vb[7][j] = ok_111;
+        sb[7][j] = singular_1;
+    }
+    dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
+    for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicates */
+        kb[0][j] = vb[0][j];
+        kb[1][j] = vb[1][j] & !((vb[0][j] & (dq_max(dq_adist(cb[1][0][j], cb[0][0][j]), dq_max(dq_adist(cb[1][1][j], cb[0][1][j]), dq_max(dq_adist(cb[1][2][j], cb[0][2][j]), dq_max(dq_adist(cb[1][3][j], cb[0][3][j]), dq_max(dq_adist(cb[1][4][j], cb[0][4][j]), dq_adist(cb[1][5][j], cb[0][5][j])))))) < 1e-06)));
+        kb[2][j] = vb[2][j] & !((vb[0][j] & (dq_max(dq_adist(cb[2][0][j], cb[0][0][j]), dq_max(dq_adist(cb[2][1][j], cb[0][1][j]), dq_max(dq_adist(cb[2][2][j], cb[0][2][j]), dq_max(dq_adist(cb[2][3][j], cb[0][3][j]), dq_max(dq_adist(cb[2][4][j], cb[0][4][j]), dq_adist(cb[2][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[2][0][j], cb[1][0][j]), dq_max(dq_adist(cb[2][1][j], cb[1][1][j]), dq_max(dq_adist(cb[2][2][j], cb[1][2][j]), dq_max(dq_adist(cb[2][3][j], cb[1][3][j]), dq_max(dq_adist(cb[2][4][j], cb[1][4][j]), dq_adist(cb[2][5][j], cb[1][5][j])))))) < 1e-06)));
+        kb[3][j] = vb[3][j] & !((vb[0][j] & (dq_max(dq_adist(cb[3][0][j], cb[0][0][j]), dq_max(dq_adist(cb[3][1][j], cb[0][1][j]), dq_max(dq_adist(cb[3][2][j], cb[0][2][j]), dq_max(dq_adist(cb[3][3][j], cb[0][3][j]), dq_max(dq_adist(cb[3][4][j], cb[0][4][j]), dq_adist(cb[3][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[3][0][j], cb[1][0][j]), dq_max(dq_adist(cb[3][1][j], cb[1][1][j]), dq_max(dq_adist(cb[3][2][j], cb[1][2][j]), dq_max(dq_adist(cb[3][3][j], cb[1][3][j]), dq_max(dq_adist(cb[3][4][j], cb[1][4][j]), dq_adist(cb[3][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[3][0][j], cb[2][0][j]), dq_max(dq_adist(cb[3][1][j], cb[2][1][j]), dq_max(dq_adist(cb[3][2][j], cb[2][2][j]), dq_max(dq_adist(cb[3][3][j], cb[2][3][j]), dq_max(dq_adist(cb[3][4][j], cb[2][4][j]), dq_adist(cb[3][5][j], cb[2][5][j])))))) < 1e-06)));
+        kb[4][j] = vb[4][j] & !((vb[0][j] & (dq_max(dq_adist(cb[4][0][j], cb[0][0][j]), dq_max(dq_adist(cb[4][1][j], cb[0][1][j]), dq_max(dq_adist(cb[4][2][j], cb[0][2][j]), dq_max(dq_adist(cb[4][3][j], cb[0][3][j]), dq_max(dq_adist(cb[4][4][j], cb[0][4][j]), dq_adist(cb[4][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[4][0][j], cb[1][0][j]), dq_max(dq_adist(cb[4][1][j], cb[1][1][j]), dq_max(dq_adist(cb[4][2][j], cb[1][2][j]), dq_max(dq_adist(cb[4][3][j], cb[1][3][j]), dq_max(dq_adist(cb[4][4][j], cb[1][4][j]), dq_adist(cb[4][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[4][0][j], cb[2][0][j]), dq_max(dq_adist(cb[4][1][j], cb[2][1][j]), dq_max(dq_adist(cb[4][2][j], cb[2][2][j]), dq_max(dq_adist(cb[4][3][j], cb[2][3][j]), dq_max(dq_adist(cb[4][4][j], cb[2][4][j]), dq_adist(cb[4][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[4][0][j], cb[3][0][j]), dq_max(dq_adist(cb[4][1][j], cb[3][1][j]), dq_max(dq_adist(cb[4][2][j], cb[3][2][j]), dq_max(dq_adist(cb[4][3][j], cb[3][3][j]), dq_max(dq_adist(cb[4][4][j], cb[3][4][j]), dq_adist(cb[4][5][j], cb[3][5][j])))))) < 1e-06)));
+        kb[5][j] = vb[5][j] & !((vb[0][j] & (dq_max(dq_adist(cb[5][0][j], cb[0][0][j]), dq_max(dq_adist(cb[5][1][j], cb[0][1][j]), dq_max(dq_adist(cb[5][2][j], cb[0][2][j]), dq_max(dq_adist(cb[5][3][j], cb[0][3][j]), dq_max(dq_adist(cb[5][4][j], cb[0][4][j]), dq_adist(cb[5][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[5][0][j], cb[1][0][j]), dq_max(dq_adist(cb[5][1][j], cb[1][1][j]), dq_max(dq_adist(cb[5][2][j], cb[1][2][j]), dq_max(dq_adist(cb[5][3][j], cb[1][3][j]), dq_max(dq_adist(cb[5][4][j], cb[1][4][j]), dq_adist(cb[5][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[5][0][j], cb[2][0][j]), dq_max(dq_adist(cb[5][1][j], cb[2][1][j]), dq_max(dq_adist(cb[5][2][j], cb[2][2][j]), dq_max(dq_adist(cb[5][3][j], cb[2][3][j]), dq_max(dq_adist(cb[5][4][j], cb[2][4][j]), dq_adist(cb[5][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[5][0][j], cb[3][0][j]), dq_max(dq_adist(cb[5][1][j], cb[3][1][j]), dq_max(dq_adist(cb[5][2][j], cb[3][2][j]), dq_max(dq_adist(cb[5][3][j], cb[3][3][j]), dq_max(dq_adist(cb[5][4][j], cb[3][4][j]), dq_adist(cb[5][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[5][0][j], cb[4][0][j]), dq_max(dq_adist(cb[5][1][j], cb[4][1][j]), dq_max(dq_adist(cb[5][2][j], cb[4][2][j]), dq_max(dq_adist(cb[5][3][j], cb[4][3][j]), dq_max(dq_adist(cb[5][4][j], cb[4][4][j]), dq_adist(cb[5][5][j], cb[4][5][j])))))) < 1e-06)));
+        kb[6][j] = vb[6][j] & !((vb[0][j] & (dq_max(dq_adist(cb[6][0][j], cb[0][0][j]), dq_max(dq_adist(cb[6][1][j], cb[0][1][j]), dq_max(dq_adist(cb[6][2][j], cb[0][2][j]), dq_max(dq_adist(cb[6][3][j], cb[0][3][j]), dq_max(dq_adist(cb[6][4][j], cb[0][4][j]), dq_adist(cb[6][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[6][0][j], cb[1][0][j]), dq_max(dq_adist(cb[6][1][j], cb[1][1][j]), dq_max(dq_adist(cb[6][2][j], cb[1][2][j]), dq_max(dq_adist(cb[6][3][j], cb[1][3][j]), dq_max(dq_adist(cb[6][4][j], cb[1][4][j]), dq_adist(cb[6][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[6][0][j], cb[2][0][j]), dq_max(dq_adist(cb[6][1][j], cb[2][1][j]), dq_max(dq_adist(cb[6][2][j], cb[2][2][j]), dq_max(dq_adist(cb[6][3][j], cb[2][3][j]), dq_max(dq_adist(cb[6][4][j], cb[2][4][j]), dq_adist(cb[6][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[6][0][j], cb[3][0][j]), dq_max(dq_adist(cb[6][1][j], cb[3][1][j]), dq_max(dq_adist(cb[6][2][j], cb[3][2][j]), dq_max(dq_adist(cb[6][3][j], cb[3][3][j]), dq_max(dq_adist(cb[6][4][j], cb[3][4][j]), dq_adist(cb[6][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[6][0][j], cb[4][0][j]), dq_max(dq_adist(cb[6][1][j], cb[4][1][j]), dq_max(dq_adist(cb[6][2][j], cb[4][2][j]), dq_max(dq_adist(cb[6][3][j], cb[4][3][j]), dq_max(dq_adist(cb[6][4][j], cb[4][4][j]), dq_adist(cb[6][5][j], cb[4][5][j])))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[6][0][j], cb[5][0][j]), dq_max(dq_adist(cb[6][1][j], cb[5][1][j]), dq_max(dq_adist(cb[6][2][j], cb[5][2][j]), dq_max(dq_adist(cb[6][3][j], cb[5][3][j]), dq_max(dq_adist(cb[6][4][j], cb[5][4][j]), dq_adist(cb[6][5][j], cb[5][5][j])))))) < 1e-06)));
+        kb[7][j] = vb[7][j] & !((vb[0][j] & (dq_max(dq_adist(cb[7][0][j], cb[0][0][j]), dq_max(dq_adist(cb[7][1][j], cb[0][1][j]), dq_max(dq_adist(cb[7][2][j], cb[0][2][j]), dq_max(dq_adist(cb[7][3][j], cb[0][3][j]), dq_max(dq_adist(cb[7][4][j], cb[0][4][j]), dq_adist(cb[7][5][j], cb[0][5][j])))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[7][0][j], cb[1][0][j]), dq_max(dq_adist(cb[7][1][j], cb[1][1][j]), dq_max(dq_adist(cb[7][2][j], cb[1][2][j]), dq_max(dq_adist(cb[7][3][j], cb[1][3][j]), dq_max(dq_adist(cb[7][4][j], cb[1][4][j]), dq_adist(cb[7][5][j], cb[1][5][j])))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[7][0][j], cb[2][0][j]), dq_max(dq_adist(cb[7][1][j], cb[2][1][j]), dq_max(dq_adist(cb[7][2][j], cb[2][2][j]), dq_max(dq_adist(cb[7][3][j], cb[2][3][j]), dq_max(dq_adist(cb[7][4][j], cb[2][4][j]), dq_adist(cb[7][5][j], cb[2][5][j])))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[7][0][j], cb[3][0][j]), dq_max(dq_adist(cb[7][1][j], cb[3][1][j]), dq_max(dq_adist(cb[7][2][j], cb[3][2][j]), dq_max(dq_adist(cb[7][3][j], cb[3][3][j]), dq_max(dq_adist(cb[7][4][j], cb[3][4][j]), dq_adist(cb[7][5][j], cb[3][5][j])))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[7][0][j], cb[4][0][j]), dq_max(dq_adist(cb[7][1][j], cb[4][1][j]), dq_max(dq_adist(cb[7][2][j], cb[4][2][j]), dq_max(dq_adist(cb[7][3][j], cb[4][3][j]), dq_max(dq_adist(cb[7][4][j], cb[4][4][j]), dq_adist(cb[7][5][j], cb[4][5][j])))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[7][0][j], cb[5][0][j]), dq_max(dq_adist(cb[7][1][j], cb[5][1][j]), dq_max(dq_adist(cb[7][2][j], cb[5][2][j]), dq_max(dq_adist(cb[7][3][j], cb[5][3][j]), dq_max(dq_adist(cb[7][4][j], cb[5][4][j]), dq_adist(cb[7][5][j], cb[5][5][j])))))) < 1e-06)) | (vb[6][j] & (dq_max(dq_adist(cb[7][0][j], cb[6][0][j]), dq_max(dq_adist(cb[7][1][j], cb[6][1][j]), dq_max(dq_adist(cb[7][2][j], cb[6][2][j]), dq_max(dq_adist(cb[7][3][j], cb[6][3][j]), dq_max(dq_adist(cb[7][4][j], cb[6][4][j]), dq_adist(cb[7][5][j], cb[6][5][j])))))) < 1e-06)));
+    }
+}
+
+/* n poses (n x 8) in blocks of DQ_BLOCK: dq_ik_block, then dq_pack_block. */
 void ur5_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
                         int *restrict branch, int *restrict singular)
 {
     double pb[8][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
-    int vb[8][DQ_BLOCK];
-    int sb[8][DQ_BLOCK];
+    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -428,274 +1013,452 @@ void ur5_ik_batch_ex(size_t n, const double *restrict poses, double *restrict so
                 pb[k][j] = poses[(i0 + j) * 8 + k];
             }
         }
-        for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
-            const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
-            const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
-            int ok = 1;
-            const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
-            const double a = -0.7071067811865476*p0 + 0.7071067811865476*p1;
-            const double b = 0.7071067811865476*p2 - 0.7071067811865476*p3;
-            const double c = 0.7071067811865476*p2 + 0.7071067811865476*p3;
-            const double r11 = -2.0*b*b - 2.0*c*c + 1.0;
-            const double r12 = 2.0*a*b - 2.0*c*w;
-            const double r13 = 2.0*a*c + 2.0*b*w;
-            const double r21 = 2.0*a*b + 2.0*c*w;
-            const double r22 = -2.0*a*a - 2.0*c*c + 1.0;
-            const double r23 = -2.0*a*w + 2.0*b*c;
-            const double r31 = 2.0*a*c - 2.0*b*w;
-            const double r32 = 2.0*a*w + 2.0*b*c;
-            const double r33 = -2.0*a*a - 2.0*b*b + 1.0;
-            const double x = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-            const double y = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
-            const double z = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
-            const double y5 = 0.0823*r22 + y;
-            const double x5 = 0.0823*r12 + x;
-            const double k1 = -y5;
-            const double k2 = x5;
-            const double k3 = -0.10915;
-            const double k4 = k1*k1 + k2*k2 - k3*k3;
-            const double k5 = dq_atan2(k2, k1);
-            const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
-            ok = ok & (k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3));
-            int ok_0 = ok;
-            const double sg1_0 = 1.0;
-            int ok_1 = ok;
-            const double sg1_1 = -1.0;
-            const double theta1_0 = k5 + k6*sg1_0;
-            const double theta1_1 = k5 + k6*sg1_1;
-            double s1_0, c1_0;
-            dq_sincos(0.5*theta1_0, &s1_0, &c1_0);
-            double s1_1, c1_1;
-            dq_sincos(0.5*theta1_1, &s1_1, &c1_1);
-            const double h7_0 = sqrt((a*c1_0 + b*s1_0)*(a*c1_0 + b*s1_0) + (-c*c1_0 + s1_0*w)*(-c*c1_0 + s1_0*w));
-            const double h7_1 = sqrt((a*c1_1 + b*s1_1)*(a*c1_1 + b*s1_1) + (-c*c1_1 + s1_1*w)*(-c*c1_1 + s1_1*w));
-            const double h8_0 = sqrt((-a*s1_0 + b*c1_0)*(-a*s1_0 + b*c1_0) + (-c*s1_0 - c1_0*w)*(-c*s1_0 - c1_0*w));
-            const double h8_1 = sqrt((-a*s1_1 + b*c1_1)*(-a*s1_1 + b*c1_1) + (-c*s1_1 - c1_1*w)*(-c*s1_1 - c1_1*w));
-            const double h9_0 = dq_atan2(h7_0, h8_0);
-            const double h9_1 = dq_atan2(h7_1, h8_1);
-            const double h10_0 = 2.0*h7_0*h8_0/(h7_0*h7_0 + h8_0*h8_0);
-            const double h10_1 = 2.0*h7_1*h8_1/(h7_1*h7_1 + h8_1*h8_1);
-            const double h11_0 = dq_atan2(a*s1_0 - b*c1_0, c*s1_0 + c1_0*w);
-            const double h11_1 = dq_atan2(a*s1_1 - b*c1_1, c*s1_1 + c1_1*w);
-            const double h12_0 = dq_atan2(a*c1_0 + b*s1_0, -c*c1_0 + s1_0*w);
-            const double h12_1 = dq_atan2(a*c1_1 + b*s1_1, -c*c1_1 + s1_1*w);
-            const double s2_0 = 2.0*s1_0*c1_0;
-            const double c2_0 = 1.0 - 2.0*s1_0*s1_0;
-            const double s2_1 = 2.0*s1_1*c1_1;
-            const double c2_1 = 1.0 - 2.0*s1_1*s1_1;
-            const double f13_0 = 0.0823*c2_0*r12 + c2_0*x + 0.0823*r22*s2_0 + s2_0*y;
-            const double f13_1 = 0.0823*c2_1*r12 + c2_1*x + 0.0823*r22*s2_1 + s2_1*y;
-            const double f14_0 = 0.09465*c2_0*r11 + 0.09465*r21*s2_0;
-            const double f14_1 = 0.09465*c2_1*r11 + 0.09465*r21*s2_1;
-            const double f15_0 = 0.09465*c2_0*r13 + 0.09465*r23*s2_0;
-            const double f15_1 = 0.09465*c2_1*r13 + 0.09465*r23*s2_1;
-            const double f16_0 = 0.0823*r32 + z - 0.089159;
-            const double f16_1 = 0.0823*r32 + z - 0.089159;
-            const double f17_0 = 0.09465*r31;
-            const double f17_1 = 0.09465*r31;
-            const double f18_0 = 0.09465*r33;
-            const double f18_1 = 0.09465*r33;
-            const double f19_0 = 2.99928766917857*f13_0*f13_0 + 1.499643834589285*f14_0*f14_0 + 1.499643834589285*f15_0*f15_0 + 2.99928766917857*f16_0*f16_0 + 1.499643834589285*f17_0*f17_0 + 1.499643834589285*f18_0*f18_0 - 1.0032169234806734;
-            const double f19_1 = 2.99928766917857*f13_1*f13_1 + 1.499643834589285*f14_1*f14_1 + 1.499643834589285*f15_1*f15_1 + 2.99928766917857*f16_1*f16_1 + 1.499643834589285*f17_1*f17_1 + 1.499643834589285*f18_1*f18_1 - 1.0032169234806734;
-            const double f20_0 = 5.99857533835714*f13_0*f15_0 + 5.99857533835714*f16_0*f18_0;
-            const double f20_1 = 5.99857533835714*f13_1*f15_1 + 5.99857533835714*f16_1*f18_1;
-            const double f21_0 = 5.99857533835714*f13_0*f14_0 + 5.99857533835714*f16_0*f17_0;
-            const double f21_1 = 5.99857533835714*f13_1*f14_1 + 5.99857533835714*f16_1*f17_1;
-            const double f22_0 = -f19_0*f19_0 + f20_0*f20_0 + f21_0*f21_0;
-            const double f22_1 = -f19_1*f19_1 + f20_1*f20_1 + f21_1*f21_1;
-            const double f23_0 = dq_atan2(f21_0, f20_0) + dq_atan2(sqrt(dq_sel((f22_0) > 0.0, f22_0, 0.0)), -f19_0);
-            const double f23_1 = dq_atan2(f21_1, f20_1) + dq_atan2(sqrt(dq_sel((f22_1) > 0.0, f22_1, 0.0)), -f19_1);
-            const int singular_0 = h10_0 < 1e-11;
-            const int singular_1 = h10_1 < 1e-11;
-            const int cos_small_0 = h8_0 < h7_0;
-            const int cos_small_1 = h8_1 < h7_1;
-            int ok_00 = ok_0;
-            const double sg2_00 = 1.0;
-            int ok_01 = ok_0;
-            const double sg2_01 = -1.0;
-            int ok_10 = ok_1;
-            const double sg2_10 = 1.0;
-            int ok_11 = ok_1;
-            const double sg2_11 = -1.0;
-            const double theta5_singular_00 = dq_sel(cos_small_0, 3.141592653589793, 0);
-            const double theta5_singular_01 = dq_sel(cos_small_0, 3.141592653589793, 0);
-            const double theta5_singular_10 = dq_sel(cos_small_1, 3.141592653589793, 0);
-            const double theta5_singular_11 = dq_sel(cos_small_1, 3.141592653589793, 0);
-            const double theta5_00 = dq_sel(singular_0, theta5_singular_00, 2.0*h9_0*sg2_00);
-            const double theta5_01 = dq_sel(singular_0, theta5_singular_01, 2.0*h9_0*sg2_01);
-            const double theta5_10 = dq_sel(singular_1, theta5_singular_10, 2.0*h9_1*sg2_10);
-            const double theta5_11 = dq_sel(singular_1, theta5_singular_11, 2.0*h9_1*sg2_11);
-            const double h24_00 = h12_0 - 1.5707963267948966*sg2_00 + 1.5707963267948966;
-            const double h24_01 = h12_0 - 1.5707963267948966*sg2_01 + 1.5707963267948966;
-            const double h24_10 = h12_1 - 1.5707963267948966*sg2_10 + 1.5707963267948966;
-            const double h24_11 = h12_1 - 1.5707963267948966*sg2_11 + 1.5707963267948966;
-            const double sigma1_00 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_00);
-            const double sigma1_01 = dq_sel((singular_0) & (!(cos_small_0)), -f23_0 + h11_0, h24_01);
-            const double sigma1_10 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_10);
-            const double sigma1_11 = dq_sel((singular_1) & (!(cos_small_1)), -f23_1 + h11_1, h24_11);
-            const double sigma2_00 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_00, h11_0);
-            const double sigma2_01 = dq_sel((cos_small_0) & (singular_0), f23_0 + h24_01, h11_0);
-            const double sigma2_10 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_10, h11_1);
-            const double sigma2_11 = dq_sel((cos_small_1) & (singular_1), f23_1 + h24_11, h11_1);
-            const double theta6_00 = -sigma1_00 + sigma2_00;
-            const double theta6_01 = -sigma1_01 + sigma2_01;
-            const double theta6_10 = -sigma1_10 + sigma2_10;
-            const double theta6_11 = -sigma1_11 + sigma2_11;
-            double s3_00, c3_00;
-            dq_sincos(theta6_00, &s3_00, &c3_00);
-            double s3_01, c3_01;
-            dq_sincos(theta6_01, &s3_01, &c3_01);
-            double s3_10, c3_10;
-            dq_sincos(theta6_10, &s3_10, &c3_10);
-            double s3_11, c3_11;
-            dq_sincos(theta6_11, &s3_11, &c3_11);
-            const double x4_00 = 0.09465*c2_0*c3_00*r13 + 0.09465*c2_0*r11*s3_00 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_00*r23*s2_0 + 0.09465*r21*s2_0*s3_00 + 0.0823*r22*s2_0 + s2_0*y;
-            const double x4_01 = 0.09465*c2_0*c3_01*r13 + 0.09465*c2_0*r11*s3_01 + 0.0823*c2_0*r12 + c2_0*x + 0.09465*c3_01*r23*s2_0 + 0.09465*r21*s2_0*s3_01 + 0.0823*r22*s2_0 + s2_0*y;
-            const double x4_10 = 0.09465*c2_1*c3_10*r13 + 0.09465*c2_1*r11*s3_10 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_10*r23*s2_1 + 0.09465*r21*s2_1*s3_10 + 0.0823*r22*s2_1 + s2_1*y;
-            const double x4_11 = 0.09465*c2_1*c3_11*r13 + 0.09465*c2_1*r11*s3_11 + 0.0823*c2_1*r12 + c2_1*x + 0.09465*c3_11*r23*s2_1 + 0.09465*r21*s2_1*s3_11 + 0.0823*r22*s2_1 + s2_1*y;
-            const double z4_00 = 0.09465*c3_00*r33 + 0.09465*r31*s3_00 + 0.0823*r32 + z - 0.089159;
-            const double z4_01 = 0.09465*c3_01*r33 + 0.09465*r31*s3_01 + 0.0823*r32 + z - 0.089159;
-            const double z4_10 = 0.09465*c3_10*r33 + 0.09465*r31*s3_10 + 0.0823*r32 + z - 0.089159;
-            const double z4_11 = 0.09465*c3_11*r33 + 0.09465*r31*s3_11 + 0.0823*r32 + z - 0.089159;
-            const double k25_00 = 2.99928766917857*x4_00*x4_00 + 2.99928766917857*z4_00*z4_00 - 1.0032169234806734;
-            const double k25_01 = 2.99928766917857*x4_01*x4_01 + 2.99928766917857*z4_01*z4_01 - 1.0032169234806734;
-            const double k25_10 = 2.99928766917857*x4_10*x4_10 + 2.99928766917857*z4_10*z4_10 - 1.0032169234806734;
-            const double k25_11 = 2.99928766917857*x4_11*x4_11 + 2.99928766917857*z4_11*z4_11 - 1.0032169234806734;
-            ok_00 = ok_00 & (fabs(k25_00) <= 1.0000000001);
-            ok_01 = ok_01 & (fabs(k25_01) <= 1.0000000001);
-            ok_10 = ok_10 & (fabs(k25_10) <= 1.0000000001);
-            ok_11 = ok_11 & (fabs(k25_11) <= 1.0000000001);
-            const double k26_00 = sqrt(dq_sel((1 - k25_00*k25_00) > 0.0, 1 - k25_00*k25_00, 0.0));
-            const double k26_01 = sqrt(dq_sel((1 - k25_01*k25_01) > 0.0, 1 - k25_01*k25_01, 0.0));
-            const double k26_10 = sqrt(dq_sel((1 - k25_10*k25_10) > 0.0, 1 - k25_10*k25_10, 0.0));
-            const double k26_11 = sqrt(dq_sel((1 - k25_11*k25_11) > 0.0, 1 - k25_11*k25_11, 0.0));
-            const double k27_00 = dq_atan2(k26_00, k25_00);
-            const double k27_01 = dq_atan2(k26_01, k25_01);
-            const double k27_10 = dq_atan2(k26_10, k25_10);
-            const double k27_11 = dq_atan2(k26_11, k25_11);
-            int ok_000 = ok_00;
-            const double sg3_000 = 1.0;
-            int ok_001 = ok_00;
-            const double sg3_001 = -1.0;
-            int ok_010 = ok_01;
-            const double sg3_010 = 1.0;
-            int ok_011 = ok_01;
-            const double sg3_011 = -1.0;
-            int ok_100 = ok_10;
-            const double sg3_100 = 1.0;
-            int ok_101 = ok_10;
-            const double sg3_101 = -1.0;
-            int ok_110 = ok_11;
-            const double sg3_110 = 1.0;
-            int ok_111 = ok_11;
-            const double sg3_111 = -1.0;
-            const double theta3_000 = k27_00*sg3_000;
-            const double theta3_001 = k27_00*sg3_001;
-            const double theta3_010 = k27_01*sg3_010;
-            const double theta3_011 = k27_01*sg3_011;
-            const double theta3_100 = k27_10*sg3_100;
-            const double theta3_101 = k27_10*sg3_101;
-            const double theta3_110 = k27_11*sg3_110;
-            const double theta3_111 = k27_11*sg3_111;
-            const double k28_000 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
-            const double k28_001 = copysign(1.0, -x4_00*x4_00 - z4_00*z4_00);
-            const double k28_010 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
-            const double k28_011 = copysign(1.0, -x4_01*x4_01 - z4_01*z4_01);
-            const double k28_100 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
-            const double k28_101 = copysign(1.0, -x4_10*x4_10 - z4_10*z4_10);
-            const double k28_110 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
-            const double k28_111 = copysign(1.0, -x4_11*x4_11 - z4_11*z4_11);
-            const double sigma3_000 = dq_atan2(k28_000*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_000*x4_00 + 0.39225*z4_00), k28_000*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_000*z4_00 + 0.39225*x4_00));
-            const double sigma3_001 = dq_atan2(k28_001*(0.425*k25_00*z4_00 + 0.425*k26_00*sg3_001*x4_00 + 0.39225*z4_00), k28_001*(0.425*k25_00*x4_00 - 0.425*k26_00*sg3_001*z4_00 + 0.39225*x4_00));
-            const double sigma3_010 = dq_atan2(k28_010*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_010*x4_01 + 0.39225*z4_01), k28_010*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_010*z4_01 + 0.39225*x4_01));
-            const double sigma3_011 = dq_atan2(k28_011*(0.425*k25_01*z4_01 + 0.425*k26_01*sg3_011*x4_01 + 0.39225*z4_01), k28_011*(0.425*k25_01*x4_01 - 0.425*k26_01*sg3_011*z4_01 + 0.39225*x4_01));
-            const double sigma3_100 = dq_atan2(k28_100*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_100*x4_10 + 0.39225*z4_10), k28_100*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_100*z4_10 + 0.39225*x4_10));
-            const double sigma3_101 = dq_atan2(k28_101*(0.425*k25_10*z4_10 + 0.425*k26_10*sg3_101*x4_10 + 0.39225*z4_10), k28_101*(0.425*k25_10*x4_10 - 0.425*k26_10*sg3_101*z4_10 + 0.39225*x4_10));
-            const double sigma3_110 = dq_atan2(k28_110*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_110*x4_11 + 0.39225*z4_11), k28_110*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_110*z4_11 + 0.39225*x4_11));
-            const double sigma3_111 = dq_atan2(k28_111*(0.425*k25_11*z4_11 + 0.425*k26_11*sg3_111*x4_11 + 0.39225*z4_11), k28_111*(0.425*k25_11*x4_11 - 0.425*k26_11*sg3_111*z4_11 + 0.39225*x4_11));
-            const double theta2_000 = sigma3_000 - theta3_000;
-            const double theta2_001 = sigma3_001 - theta3_001;
-            const double theta2_010 = sigma3_010 - theta3_010;
-            const double theta2_011 = sigma3_011 - theta3_011;
-            const double theta2_100 = sigma3_100 - theta3_100;
-            const double theta2_101 = sigma3_101 - theta3_101;
-            const double theta2_110 = sigma3_110 - theta3_110;
-            const double theta2_111 = sigma3_111 - theta3_111;
-            const double theta4_000 = sigma1_00 + sigma2_00 - sigma3_000;
-            const double theta4_001 = sigma1_00 + sigma2_00 - sigma3_001;
-            const double theta4_010 = sigma1_01 + sigma2_01 - sigma3_010;
-            const double theta4_011 = sigma1_01 + sigma2_01 - sigma3_011;
-            const double theta4_100 = sigma1_10 + sigma2_10 - sigma3_100;
-            const double theta4_101 = sigma1_10 + sigma2_10 - sigma3_101;
-            const double theta4_110 = sigma1_11 + sigma2_11 - sigma3_110;
-            const double theta4_111 = sigma1_11 + sigma2_11 - sigma3_111;
-            cb[0][0][j] = dq_wrap(theta1_0);
-            cb[0][1][j] = dq_wrap(theta2_000);
-            cb[0][2][j] = dq_wrap(theta3_000);
-            cb[0][3][j] = dq_wrap(theta4_000);
-            cb[0][4][j] = dq_wrap(theta5_00);
-            cb[0][5][j] = dq_wrap(theta6_00);
-            vb[0][j] = ok_000;
-            sb[0][j] = singular_0;
-            cb[1][0][j] = dq_wrap(theta1_0);
-            cb[1][1][j] = dq_wrap(theta2_001);
-            cb[1][2][j] = dq_wrap(theta3_001);
-            cb[1][3][j] = dq_wrap(theta4_001);
-            cb[1][4][j] = dq_wrap(theta5_00);
-            cb[1][5][j] = dq_wrap(theta6_00);
-            vb[1][j] = ok_001;
-            sb[1][j] = singular_0;
-            cb[2][0][j] = dq_wrap(theta1_0);
-            cb[2][1][j] = dq_wrap(theta2_010);
-            cb[2][2][j] = dq_wrap(theta3_010);
-            cb[2][3][j] = dq_wrap(theta4_010);
-            cb[2][4][j] = dq_wrap(theta5_01);
-            cb[2][5][j] = dq_wrap(theta6_01);
-            vb[2][j] = ok_010;
-            sb[2][j] = singular_0;
-            cb[3][0][j] = dq_wrap(theta1_0);
-            cb[3][1][j] = dq_wrap(theta2_011);
-            cb[3][2][j] = dq_wrap(theta3_011);
-            cb[3][3][j] = dq_wrap(theta4_011);
-            cb[3][4][j] = dq_wrap(theta5_01);
-            cb[3][5][j] = dq_wrap(theta6_01);
-            vb[3][j] = ok_011;
-            sb[3][j] = singular_0;
-            cb[4][0][j] = dq_wrap(theta1_1);
-            cb[4][1][j] = dq_wrap(theta2_100);
-            cb[4][2][j] = dq_wrap(theta3_100);
-            cb[4][3][j] = dq_wrap(theta4_100);
-            cb[4][4][j] = dq_wrap(theta5_10);
-            cb[4][5][j] = dq_wrap(theta6_10);
-            vb[4][j] = ok_100;
-            sb[4][j] = singular_1;
-            cb[5][0][j] = dq_wrap(theta1_1);
-            cb[5][1][j] = dq_wrap(theta2_101);
-            cb[5][2][j] = dq_wrap(theta3_101);
-            cb[5][3][j] = dq_wrap(theta4_101);
-            cb[5][4][j] = dq_wrap(theta5_10);
-            cb[5][5][j] = dq_wrap(theta6_10);
-            vb[5][j] = ok_101;
-            sb[5][j] = singular_1;
-            cb[6][0][j] = dq_wrap(theta1_1);
-            cb[6][1][j] = dq_wrap(theta2_110);
-            cb[6][2][j] = dq_wrap(theta3_110);
-            cb[6][3][j] = dq_wrap(theta4_110);
-            cb[6][4][j] = dq_wrap(theta5_11);
-            cb[6][5][j] = dq_wrap(theta6_11);
-            vb[6][j] = ok_110;
-            sb[6][j] = singular_1;
-            cb[7][0][j] = dq_wrap(theta1_1);
-            cb[7][1][j] = dq_wrap(theta2_111);
-            cb[7][2][j] = dq_wrap(theta3_111);
-            cb[7][3][j] = dq_wrap(theta4_111);
-            cb[7][4][j] = dq_wrap(theta5_11);
-            cb[7][5][j] = dq_wrap(theta6_11);
-            vb[7][j] = ok_111;
-            sb[7][j] = singular_1;
+        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
+                      branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
+    }
+}
+
+/* rint, floor and ceil of x (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick and a select, which
+ * vectorise without SSE4.1's round instruction. */
+DQ_INLINE double dq_rint(double x)
+{
+    return (x + 6755399441055744.0) - 6755399441055744.0;
+}
+
+DQ_INLINE double dq_floor(double x)
+{
+    const double r = dq_rint(x);
+    return r - dq_sel(r > x, 1.0, 0.0);
+}
+
+DQ_INLINE double dq_ceil(double x)
+{
+    const double r = dq_rint(x);
+    return r + dq_sel(r < x, 1.0, 0.0);
+}
+
+/* The joint limits of the robot description (lower, upper; rad or m), with the slack of
+ * derive.ik.select (1e-12); +-inf where the description gives none. */
+static const double dq_lim_lo[6] = {-6.283185307180586, -6.283185307180586, -6.283185307180586, -6.283185307180586, -6.283185307180586, -6.283185307180586};
+static const double dq_lim_hi[6] = {6.283185307180586, 6.283185307180586, 6.283185307180586, 6.283185307180586, 6.283185307180586, 6.283185307180586};
+
+/* n poses and n seed configurations: per pose the solution inside the joint limits, each
+ * revolute joint at its 2 pi winding nearest to the seed, with the smallest largest single-joint
+ * move from the seed, then the smallest summed move (the first in branch order on a tie). The
+ * winding of joint k is m = rint((s - q) / 2 pi) clamped to the windings inside the limits,
+ * ceil((lo - q) / 2 pi) .. floor((hi - q) / 2 pi) (the distance is convex in m); a prismatic
+ * joint must lie inside its limits. Written per pose: q (n x DOF; NaN where none),
+ * max_move and total_move (n; NaN where none), branch (n; -1 where none) and singular (n). */
+void ur5_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
+                               double *restrict q, double *restrict max_move, double *restrict total_move,
+                               int *restrict branch, int *restrict singular)
+{
+    double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
+    double cb[8][6][DQ_BLOCK];
+    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
+    double oq[6][DQ_BLOCK], omx[DQ_BLOCK], ott[DQ_BLOCK], obr[DQ_BLOCK], osg[DQ_BLOCK];
+    for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
+        const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
+        for (size_t j = 0; j < m; ++j) {
+            for (int k = 0; k < 8; ++k) {
+                pb[k][j] = poses[(i0 + j) * 8 + k];
+            }
+            for (int k = 0; k < 6; ++k) {
+                zb[k][j] = seeds[(i0 + j) * 6 + k];
+            }
         }
-        dq_merge_block(m, cb, vb, sb, sols + i0 * 48, counts + i0,
-                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
+        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        for (size_t j = 0; j < m; ++j) {   /* vectorised: ik nearest */
+            double bm = INFINITY, bt = INFINITY, mv = NAN, tv = NAN, bb = -1.0, bs = 0.0;
+            double bq0 = NAN;
+            double bq1 = NAN;
+            double bq2 = NAN;
+            double bq3 = NAN;
+            double bq4 = NAN;
+            double bq5 = NAN;
+            const double m0_0 = dq_rint((zb[0][j] - cb[0][0][j]) * 0.15915494309189533577);
+            const double l0_0 = dq_ceil((dq_lim_lo[0] - cb[0][0][j]) * 0.15915494309189533577);
+            const double h0_0 = dq_floor((dq_lim_hi[0] - cb[0][0][j]) * 0.15915494309189533577);
+            const double v0_0 = cb[0][0][j] + 6.28318530717958647693 * dq_sel(m0_0 < l0_0, l0_0, dq_sel(m0_0 > h0_0, h0_0, m0_0));
+            const double d0_0 = dq_sel(l0_0 <= h0_0, fabs(v0_0 - zb[0][j]), INFINITY);
+            const double m0_1 = dq_rint((zb[1][j] - cb[0][1][j]) * 0.15915494309189533577);
+            const double l0_1 = dq_ceil((dq_lim_lo[1] - cb[0][1][j]) * 0.15915494309189533577);
+            const double h0_1 = dq_floor((dq_lim_hi[1] - cb[0][1][j]) * 0.15915494309189533577);
+            const double v0_1 = cb[0][1][j] + 6.28318530717958647693 * dq_sel(m0_1 < l0_1, l0_1, dq_sel(m0_1 > h0_1, h0_1, m0_1));
+            const double d0_1 = dq_sel(l0_1 <= h0_1, fabs(v0_1 - zb[1][j]), INFINITY);
+            const double m0_2 = dq_rint((zb[2][j] - cb[0][2][j]) * 0.15915494309189533577);
+            const double l0_2 = dq_ceil((dq_lim_lo[2] - cb[0][2][j]) * 0.15915494309189533577);
+            const double h0_2 = dq_floor((dq_lim_hi[2] - cb[0][2][j]) * 0.15915494309189533577);
+            const double v0_2 = cb[0][2][j] + 6.28318530717958647693 * dq_sel(m0_2 < l0_2, l0_2, dq_sel(m0_2 > h0_2, h0_2, m0_2));
+            const double d0_2 = dq_sel(l0_2 <= h0_2, fabs(v0_2 - zb[2][j]), INFINITY);
+            const double m0_3 = dq_rint((zb[3][j] - cb[0][3][j]) * 0.15915494309189533577);
+            const double l0_3 = dq_ceil((dq_lim_lo[3] - cb[0][3][j]) * 0.15915494309189533577);
+            const double h0_3 = dq_floor((dq_lim_hi[3] - cb[0][3][j]) * 0.15915494309189533577);
+            const double v0_3 = cb[0][3][j] + 6.28318530717958647693 * dq_sel(m0_3 < l0_3, l0_3, dq_sel(m0_3 > h0_3, h0_3, m0_3));
+            const double d0_3 = dq_sel(l0_3 <= h0_3, fabs(v0_3 - zb[3][j]), INFINITY);
+            const double m0_4 = dq_rint((zb[4][j] - cb[0][4][j]) * 0.15915494309189533577);
+            const double l0_4 = dq_ceil((dq_lim_lo[4] - cb[0][4][j]) * 0.15915494309189533577);
+            const double h0_4 = dq_floor((dq_lim_hi[4] - cb[0][4][j]) * 0.15915494309189533577);
+            const double v0_4 = cb[0][4][j] + 6.28318530717958647693 * dq_sel(m0_4 < l0_4, l0_4, dq_sel(m0_4 > h0_4, h0_4, m0_4));
+            const double d0_4 = dq_sel(l0_4 <= h0_4, fabs(v0_4 - zb[4][j]), INFINITY);
+            const double m0_5 = dq_rint((zb[5][j] - cb[0][5][j]) * 0.15915494309189533577);
+            const double l0_5 = dq_ceil((dq_lim_lo[5] - cb[0][5][j]) * 0.15915494309189533577);
+            const double h0_5 = dq_floor((dq_lim_hi[5] - cb[0][5][j]) * 0.15915494309189533577);
+            const double v0_5 = cb[0][5][j] + 6.28318530717958647693 * dq_sel(m0_5 < l0_5, l0_5, dq_sel(m0_5 > h0_5, h0_5, m0_5));
+            const double d0_5 = dq_sel(l0_5 <= h0_5, fabs(v0_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v0_1, d1 = d0_1;
+                const double v2 = v0_2, d2 = d0_2;
+                const double v3 = v0_3, d3 = d0_3;
+                const double v4 = v0_4, d4 = d0_4;
+                const double v5 = v0_5, d5 = d0_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[0][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 0.0, bb);
+                bs = dq_sel(better, (double)sb[0][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m1_1 = dq_rint((zb[1][j] - cb[1][1][j]) * 0.15915494309189533577);
+            const double l1_1 = dq_ceil((dq_lim_lo[1] - cb[1][1][j]) * 0.15915494309189533577);
+            const double h1_1 = dq_floor((dq_lim_hi[1] - cb[1][1][j]) * 0.15915494309189533577);
+            const double v1_1 = cb[1][1][j] + 6.28318530717958647693 * dq_sel(m1_1 < l1_1, l1_1, dq_sel(m1_1 > h1_1, h1_1, m1_1));
+            const double d1_1 = dq_sel(l1_1 <= h1_1, fabs(v1_1 - zb[1][j]), INFINITY);
+            const double m1_2 = dq_rint((zb[2][j] - cb[1][2][j]) * 0.15915494309189533577);
+            const double l1_2 = dq_ceil((dq_lim_lo[2] - cb[1][2][j]) * 0.15915494309189533577);
+            const double h1_2 = dq_floor((dq_lim_hi[2] - cb[1][2][j]) * 0.15915494309189533577);
+            const double v1_2 = cb[1][2][j] + 6.28318530717958647693 * dq_sel(m1_2 < l1_2, l1_2, dq_sel(m1_2 > h1_2, h1_2, m1_2));
+            const double d1_2 = dq_sel(l1_2 <= h1_2, fabs(v1_2 - zb[2][j]), INFINITY);
+            const double m1_3 = dq_rint((zb[3][j] - cb[1][3][j]) * 0.15915494309189533577);
+            const double l1_3 = dq_ceil((dq_lim_lo[3] - cb[1][3][j]) * 0.15915494309189533577);
+            const double h1_3 = dq_floor((dq_lim_hi[3] - cb[1][3][j]) * 0.15915494309189533577);
+            const double v1_3 = cb[1][3][j] + 6.28318530717958647693 * dq_sel(m1_3 < l1_3, l1_3, dq_sel(m1_3 > h1_3, h1_3, m1_3));
+            const double d1_3 = dq_sel(l1_3 <= h1_3, fabs(v1_3 - zb[3][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v1_1, d1 = d1_1;
+                const double v2 = v1_2, d2 = d1_2;
+                const double v3 = v1_3, d3 = d1_3;
+                const double v4 = v0_4, d4 = d0_4;
+                const double v5 = v0_5, d5 = d0_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[1][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 1.0, bb);
+                bs = dq_sel(better, (double)sb[1][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m2_1 = dq_rint((zb[1][j] - cb[2][1][j]) * 0.15915494309189533577);
+            const double l2_1 = dq_ceil((dq_lim_lo[1] - cb[2][1][j]) * 0.15915494309189533577);
+            const double h2_1 = dq_floor((dq_lim_hi[1] - cb[2][1][j]) * 0.15915494309189533577);
+            const double v2_1 = cb[2][1][j] + 6.28318530717958647693 * dq_sel(m2_1 < l2_1, l2_1, dq_sel(m2_1 > h2_1, h2_1, m2_1));
+            const double d2_1 = dq_sel(l2_1 <= h2_1, fabs(v2_1 - zb[1][j]), INFINITY);
+            const double m2_2 = dq_rint((zb[2][j] - cb[2][2][j]) * 0.15915494309189533577);
+            const double l2_2 = dq_ceil((dq_lim_lo[2] - cb[2][2][j]) * 0.15915494309189533577);
+            const double h2_2 = dq_floor((dq_lim_hi[2] - cb[2][2][j]) * 0.15915494309189533577);
+            const double v2_2 = cb[2][2][j] + 6.28318530717958647693 * dq_sel(m2_2 < l2_2, l2_2, dq_sel(m2_2 > h2_2, h2_2, m2_2));
+            const double d2_2 = dq_sel(l2_2 <= h2_2, fabs(v2_2 - zb[2][j]), INFINITY);
+            const double m2_3 = dq_rint((zb[3][j] - cb[2][3][j]) * 0.15915494309189533577);
+            const double l2_3 = dq_ceil((dq_lim_lo[3] - cb[2][3][j]) * 0.15915494309189533577);
+            const double h2_3 = dq_floor((dq_lim_hi[3] - cb[2][3][j]) * 0.15915494309189533577);
+            const double v2_3 = cb[2][3][j] + 6.28318530717958647693 * dq_sel(m2_3 < l2_3, l2_3, dq_sel(m2_3 > h2_3, h2_3, m2_3));
+            const double d2_3 = dq_sel(l2_3 <= h2_3, fabs(v2_3 - zb[3][j]), INFINITY);
+            const double m2_4 = dq_rint((zb[4][j] - cb[2][4][j]) * 0.15915494309189533577);
+            const double l2_4 = dq_ceil((dq_lim_lo[4] - cb[2][4][j]) * 0.15915494309189533577);
+            const double h2_4 = dq_floor((dq_lim_hi[4] - cb[2][4][j]) * 0.15915494309189533577);
+            const double v2_4 = cb[2][4][j] + 6.28318530717958647693 * dq_sel(m2_4 < l2_4, l2_4, dq_sel(m2_4 > h2_4, h2_4, m2_4));
+            const double d2_4 = dq_sel(l2_4 <= h2_4, fabs(v2_4 - zb[4][j]), INFINITY);
+            const double m2_5 = dq_rint((zb[5][j] - cb[2][5][j]) * 0.15915494309189533577);
+            const double l2_5 = dq_ceil((dq_lim_lo[5] - cb[2][5][j]) * 0.15915494309189533577);
+            const double h2_5 = dq_floor((dq_lim_hi[5] - cb[2][5][j]) * 0.15915494309189533577);
+            const double v2_5 = cb[2][5][j] + 6.28318530717958647693 * dq_sel(m2_5 < l2_5, l2_5, dq_sel(m2_5 > h2_5, h2_5, m2_5));
+            const double d2_5 = dq_sel(l2_5 <= h2_5, fabs(v2_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v2_1, d1 = d2_1;
+                const double v2 = v2_2, d2 = d2_2;
+                const double v3 = v2_3, d3 = d2_3;
+                const double v4 = v2_4, d4 = d2_4;
+                const double v5 = v2_5, d5 = d2_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[2][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 2.0, bb);
+                bs = dq_sel(better, (double)sb[2][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m3_1 = dq_rint((zb[1][j] - cb[3][1][j]) * 0.15915494309189533577);
+            const double l3_1 = dq_ceil((dq_lim_lo[1] - cb[3][1][j]) * 0.15915494309189533577);
+            const double h3_1 = dq_floor((dq_lim_hi[1] - cb[3][1][j]) * 0.15915494309189533577);
+            const double v3_1 = cb[3][1][j] + 6.28318530717958647693 * dq_sel(m3_1 < l3_1, l3_1, dq_sel(m3_1 > h3_1, h3_1, m3_1));
+            const double d3_1 = dq_sel(l3_1 <= h3_1, fabs(v3_1 - zb[1][j]), INFINITY);
+            const double m3_2 = dq_rint((zb[2][j] - cb[3][2][j]) * 0.15915494309189533577);
+            const double l3_2 = dq_ceil((dq_lim_lo[2] - cb[3][2][j]) * 0.15915494309189533577);
+            const double h3_2 = dq_floor((dq_lim_hi[2] - cb[3][2][j]) * 0.15915494309189533577);
+            const double v3_2 = cb[3][2][j] + 6.28318530717958647693 * dq_sel(m3_2 < l3_2, l3_2, dq_sel(m3_2 > h3_2, h3_2, m3_2));
+            const double d3_2 = dq_sel(l3_2 <= h3_2, fabs(v3_2 - zb[2][j]), INFINITY);
+            const double m3_3 = dq_rint((zb[3][j] - cb[3][3][j]) * 0.15915494309189533577);
+            const double l3_3 = dq_ceil((dq_lim_lo[3] - cb[3][3][j]) * 0.15915494309189533577);
+            const double h3_3 = dq_floor((dq_lim_hi[3] - cb[3][3][j]) * 0.15915494309189533577);
+            const double v3_3 = cb[3][3][j] + 6.28318530717958647693 * dq_sel(m3_3 < l3_3, l3_3, dq_sel(m3_3 > h3_3, h3_3, m3_3));
+            const double d3_3 = dq_sel(l3_3 <= h3_3, fabs(v3_3 - zb[3][j]), INFINITY);
+            {
+                const double v0 = v0_0, d0 = d0_0;
+                const double v1 = v3_1, d1 = d3_1;
+                const double v2 = v3_2, d2 = d3_2;
+                const double v3 = v3_3, d3 = d3_3;
+                const double v4 = v2_4, d4 = d2_4;
+                const double v5 = v2_5, d5 = d2_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[3][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 3.0, bb);
+                bs = dq_sel(better, (double)sb[3][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m4_0 = dq_rint((zb[0][j] - cb[4][0][j]) * 0.15915494309189533577);
+            const double l4_0 = dq_ceil((dq_lim_lo[0] - cb[4][0][j]) * 0.15915494309189533577);
+            const double h4_0 = dq_floor((dq_lim_hi[0] - cb[4][0][j]) * 0.15915494309189533577);
+            const double v4_0 = cb[4][0][j] + 6.28318530717958647693 * dq_sel(m4_0 < l4_0, l4_0, dq_sel(m4_0 > h4_0, h4_0, m4_0));
+            const double d4_0 = dq_sel(l4_0 <= h4_0, fabs(v4_0 - zb[0][j]), INFINITY);
+            const double m4_1 = dq_rint((zb[1][j] - cb[4][1][j]) * 0.15915494309189533577);
+            const double l4_1 = dq_ceil((dq_lim_lo[1] - cb[4][1][j]) * 0.15915494309189533577);
+            const double h4_1 = dq_floor((dq_lim_hi[1] - cb[4][1][j]) * 0.15915494309189533577);
+            const double v4_1 = cb[4][1][j] + 6.28318530717958647693 * dq_sel(m4_1 < l4_1, l4_1, dq_sel(m4_1 > h4_1, h4_1, m4_1));
+            const double d4_1 = dq_sel(l4_1 <= h4_1, fabs(v4_1 - zb[1][j]), INFINITY);
+            const double m4_2 = dq_rint((zb[2][j] - cb[4][2][j]) * 0.15915494309189533577);
+            const double l4_2 = dq_ceil((dq_lim_lo[2] - cb[4][2][j]) * 0.15915494309189533577);
+            const double h4_2 = dq_floor((dq_lim_hi[2] - cb[4][2][j]) * 0.15915494309189533577);
+            const double v4_2 = cb[4][2][j] + 6.28318530717958647693 * dq_sel(m4_2 < l4_2, l4_2, dq_sel(m4_2 > h4_2, h4_2, m4_2));
+            const double d4_2 = dq_sel(l4_2 <= h4_2, fabs(v4_2 - zb[2][j]), INFINITY);
+            const double m4_3 = dq_rint((zb[3][j] - cb[4][3][j]) * 0.15915494309189533577);
+            const double l4_3 = dq_ceil((dq_lim_lo[3] - cb[4][3][j]) * 0.15915494309189533577);
+            const double h4_3 = dq_floor((dq_lim_hi[3] - cb[4][3][j]) * 0.15915494309189533577);
+            const double v4_3 = cb[4][3][j] + 6.28318530717958647693 * dq_sel(m4_3 < l4_3, l4_3, dq_sel(m4_3 > h4_3, h4_3, m4_3));
+            const double d4_3 = dq_sel(l4_3 <= h4_3, fabs(v4_3 - zb[3][j]), INFINITY);
+            const double m4_4 = dq_rint((zb[4][j] - cb[4][4][j]) * 0.15915494309189533577);
+            const double l4_4 = dq_ceil((dq_lim_lo[4] - cb[4][4][j]) * 0.15915494309189533577);
+            const double h4_4 = dq_floor((dq_lim_hi[4] - cb[4][4][j]) * 0.15915494309189533577);
+            const double v4_4 = cb[4][4][j] + 6.28318530717958647693 * dq_sel(m4_4 < l4_4, l4_4, dq_sel(m4_4 > h4_4, h4_4, m4_4));
+            const double d4_4 = dq_sel(l4_4 <= h4_4, fabs(v4_4 - zb[4][j]), INFINITY);
+            const double m4_5 = dq_rint((zb[5][j] - cb[4][5][j]) * 0.15915494309189533577);
+            const double l4_5 = dq_ceil((dq_lim_lo[5] - cb[4][5][j]) * 0.15915494309189533577);
+            const double h4_5 = dq_floor((dq_lim_hi[5] - cb[4][5][j]) * 0.15915494309189533577);
+            const double v4_5 = cb[4][5][j] + 6.28318530717958647693 * dq_sel(m4_5 < l4_5, l4_5, dq_sel(m4_5 > h4_5, h4_5, m4_5));
+            const double d4_5 = dq_sel(l4_5 <= h4_5, fabs(v4_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v4_1, d1 = d4_1;
+                const double v2 = v4_2, d2 = d4_2;
+                const double v3 = v4_3, d3 = d4_3;
+                const double v4 = v4_4, d4 = d4_4;
+                const double v5 = v4_5, d5 = d4_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[4][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 4.0, bb);
+                bs = dq_sel(better, (double)sb[4][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m5_1 = dq_rint((zb[1][j] - cb[5][1][j]) * 0.15915494309189533577);
+            const double l5_1 = dq_ceil((dq_lim_lo[1] - cb[5][1][j]) * 0.15915494309189533577);
+            const double h5_1 = dq_floor((dq_lim_hi[1] - cb[5][1][j]) * 0.15915494309189533577);
+            const double v5_1 = cb[5][1][j] + 6.28318530717958647693 * dq_sel(m5_1 < l5_1, l5_1, dq_sel(m5_1 > h5_1, h5_1, m5_1));
+            const double d5_1 = dq_sel(l5_1 <= h5_1, fabs(v5_1 - zb[1][j]), INFINITY);
+            const double m5_2 = dq_rint((zb[2][j] - cb[5][2][j]) * 0.15915494309189533577);
+            const double l5_2 = dq_ceil((dq_lim_lo[2] - cb[5][2][j]) * 0.15915494309189533577);
+            const double h5_2 = dq_floor((dq_lim_hi[2] - cb[5][2][j]) * 0.15915494309189533577);
+            const double v5_2 = cb[5][2][j] + 6.28318530717958647693 * dq_sel(m5_2 < l5_2, l5_2, dq_sel(m5_2 > h5_2, h5_2, m5_2));
+            const double d5_2 = dq_sel(l5_2 <= h5_2, fabs(v5_2 - zb[2][j]), INFINITY);
+            const double m5_3 = dq_rint((zb[3][j] - cb[5][3][j]) * 0.15915494309189533577);
+            const double l5_3 = dq_ceil((dq_lim_lo[3] - cb[5][3][j]) * 0.15915494309189533577);
+            const double h5_3 = dq_floor((dq_lim_hi[3] - cb[5][3][j]) * 0.15915494309189533577);
+            const double v5_3 = cb[5][3][j] + 6.28318530717958647693 * dq_sel(m5_3 < l5_3, l5_3, dq_sel(m5_3 > h5_3, h5_3, m5_3));
+            const double d5_3 = dq_sel(l5_3 <= h5_3, fabs(v5_3 - zb[3][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v5_1, d1 = d5_1;
+                const double v2 = v5_2, d2 = d5_2;
+                const double v3 = v5_3, d3 = d5_3;
+                const double v4 = v4_4, d4 = d4_4;
+                const double v5 = v4_5, d5 = d4_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[5][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 5.0, bb);
+                bs = dq_sel(better, (double)sb[5][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m6_1 = dq_rint((zb[1][j] - cb[6][1][j]) * 0.15915494309189533577);
+            const double l6_1 = dq_ceil((dq_lim_lo[1] - cb[6][1][j]) * 0.15915494309189533577);
+            const double h6_1 = dq_floor((dq_lim_hi[1] - cb[6][1][j]) * 0.15915494309189533577);
+            const double v6_1 = cb[6][1][j] + 6.28318530717958647693 * dq_sel(m6_1 < l6_1, l6_1, dq_sel(m6_1 > h6_1, h6_1, m6_1));
+            const double d6_1 = dq_sel(l6_1 <= h6_1, fabs(v6_1 - zb[1][j]), INFINITY);
+            const double m6_2 = dq_rint((zb[2][j] - cb[6][2][j]) * 0.15915494309189533577);
+            const double l6_2 = dq_ceil((dq_lim_lo[2] - cb[6][2][j]) * 0.15915494309189533577);
+            const double h6_2 = dq_floor((dq_lim_hi[2] - cb[6][2][j]) * 0.15915494309189533577);
+            const double v6_2 = cb[6][2][j] + 6.28318530717958647693 * dq_sel(m6_2 < l6_2, l6_2, dq_sel(m6_2 > h6_2, h6_2, m6_2));
+            const double d6_2 = dq_sel(l6_2 <= h6_2, fabs(v6_2 - zb[2][j]), INFINITY);
+            const double m6_3 = dq_rint((zb[3][j] - cb[6][3][j]) * 0.15915494309189533577);
+            const double l6_3 = dq_ceil((dq_lim_lo[3] - cb[6][3][j]) * 0.15915494309189533577);
+            const double h6_3 = dq_floor((dq_lim_hi[3] - cb[6][3][j]) * 0.15915494309189533577);
+            const double v6_3 = cb[6][3][j] + 6.28318530717958647693 * dq_sel(m6_3 < l6_3, l6_3, dq_sel(m6_3 > h6_3, h6_3, m6_3));
+            const double d6_3 = dq_sel(l6_3 <= h6_3, fabs(v6_3 - zb[3][j]), INFINITY);
+            const double m6_4 = dq_rint((zb[4][j] - cb[6][4][j]) * 0.15915494309189533577);
+            const double l6_4 = dq_ceil((dq_lim_lo[4] - cb[6][4][j]) * 0.15915494309189533577);
+            const double h6_4 = dq_floor((dq_lim_hi[4] - cb[6][4][j]) * 0.15915494309189533577);
+            const double v6_4 = cb[6][4][j] + 6.28318530717958647693 * dq_sel(m6_4 < l6_4, l6_4, dq_sel(m6_4 > h6_4, h6_4, m6_4));
+            const double d6_4 = dq_sel(l6_4 <= h6_4, fabs(v6_4 - zb[4][j]), INFINITY);
+            const double m6_5 = dq_rint((zb[5][j] - cb[6][5][j]) * 0.15915494309189533577);
+            const double l6_5 = dq_ceil((dq_lim_lo[5] - cb[6][5][j]) * 0.15915494309189533577);
+            const double h6_5 = dq_floor((dq_lim_hi[5] - cb[6][5][j]) * 0.15915494309189533577);
+            const double v6_5 = cb[6][5][j] + 6.28318530717958647693 * dq_sel(m6_5 < l6_5, l6_5, dq_sel(m6_5 > h6_5, h6_5, m6_5));
+            const double d6_5 = dq_sel(l6_5 <= h6_5, fabs(v6_5 - zb[5][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v6_1, d1 = d6_1;
+                const double v2 = v6_2, d2 = d6_2;
+                const double v3 = v6_3, d3 = d6_3;
+                const double v4 = v6_4, d4 = d6_4;
+                const double v5 = v6_5, d5 = d6_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[6][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 6.0, bb);
+                bs = dq_sel(better, (double)sb[6][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            const double m7_1 = dq_rint((zb[1][j] - cb[7][1][j]) * 0.15915494309189533577);
+            const double l7_1 = dq_ceil((dq_lim_lo[1] - cb[7][1][j]) * 0.15915494309189533577);
+            const double h7_1 = dq_floor((dq_lim_hi[1] - cb[7][1][j]) * 0.15915494309189533577);
+            const double v7_1 = cb[7][1][j] + 6.28318530717958647693 * dq_sel(m7_1 < l7_1, l7_1, dq_sel(m7_1 > h7_1, h7_1, m7_1));
+            const double d7_1 = dq_sel(l7_1 <= h7_1, fabs(v7_1 - zb[1][j]), INFINITY);
+            const double m7_2 = dq_rint((zb[2][j] - cb[7][2][j]) * 0.15915494309189533577);
+            const double l7_2 = dq_ceil((dq_lim_lo[2] - cb[7][2][j]) * 0.15915494309189533577);
+            const double h7_2 = dq_floor((dq_lim_hi[2] - cb[7][2][j]) * 0.15915494309189533577);
+            const double v7_2 = cb[7][2][j] + 6.28318530717958647693 * dq_sel(m7_2 < l7_2, l7_2, dq_sel(m7_2 > h7_2, h7_2, m7_2));
+            const double d7_2 = dq_sel(l7_2 <= h7_2, fabs(v7_2 - zb[2][j]), INFINITY);
+            const double m7_3 = dq_rint((zb[3][j] - cb[7][3][j]) * 0.15915494309189533577);
+            const double l7_3 = dq_ceil((dq_lim_lo[3] - cb[7][3][j]) * 0.15915494309189533577);
+            const double h7_3 = dq_floor((dq_lim_hi[3] - cb[7][3][j]) * 0.15915494309189533577);
+            const double v7_3 = cb[7][3][j] + 6.28318530717958647693 * dq_sel(m7_3 < l7_3, l7_3, dq_sel(m7_3 > h7_3, h7_3, m7_3));
+            const double d7_3 = dq_sel(l7_3 <= h7_3, fabs(v7_3 - zb[3][j]), INFINITY);
+            {
+                const double v0 = v4_0, d0 = d4_0;
+                const double v1 = v7_1, d1 = d7_1;
+                const double v2 = v7_2, d2 = d7_2;
+                const double v3 = v7_3, d3 = d7_3;
+                const double v4 = v6_4, d4 = d6_4;
+                const double v5 = v6_5, d5 = d6_5;
+                const double mx = dq_max(d0, dq_max(d1, dq_max(d2, dq_max(d3, dq_max(d4, d5)))));
+                const double tt = d0 + d1 + d2 + d3 + d4 + d5;
+                const double mq = dq_rint(mx * 1e9), tq = dq_rint(tt * 1e9);   /* moves to 1e-9 */
+                const int better = kb[7][j] & (mx < INFINITY) & ((mq < bm) | ((mq == bm) & (tq < bt)));
+                bm = dq_sel(better, mq, bm);
+                bt = dq_sel(better, tq, bt);
+                mv = dq_sel(better, mx, mv);
+                tv = dq_sel(better, tt, tv);
+                bb = dq_sel(better, 7.0, bb);
+                bs = dq_sel(better, (double)sb[7][j], bs);
+                bq0 = dq_sel(better, v0, bq0);
+                bq1 = dq_sel(better, v1, bq1);
+                bq2 = dq_sel(better, v2, bq2);
+                bq3 = dq_sel(better, v3, bq3);
+                bq4 = dq_sel(better, v4, bq4);
+                bq5 = dq_sel(better, v5, bq5);
+            }
+            oq[0][j] = bq0;
+            oq[1][j] = bq1;
+            oq[2][j] = bq2;
+            oq[3][j] = bq3;
+            oq[4][j] = bq4;
+            oq[5][j] = bq5;
+            omx[j] = mv;
+            ott[j] = tv;
+            obr[j] = bb;
+            osg[j] = bs;
+        }
+        for (size_t j = 0; j < m; ++j) {
+            for (int k = 0; k < 6; ++k) {
+                q[(i0 + j) * 6 + k] = oq[k][j];
+            }
+            max_move[i0 + j] = omx[j];
+            total_move[i0 + j] = ott[j];
+            branch[i0 + j] = (int)obr[j];
+            singular[i0 + j] = (int)osg[j];
+        }
     }
 }
 
