@@ -35,8 +35,8 @@ from derive import reference
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.bench.machine import machine
-from derive.codegen.emit import identifier, render_kernels
-from derive.codegen.loader import c_flags, kernels
+from derive.codegen.emit import identifier
+from derive.codegen.loader import c_flags, kernel_folder, kernels
 from derive.errors import DeriveError
 from derive.ik.closed_form import spherical_class
 from derive.model.geometry import numeric_chain
@@ -70,8 +70,9 @@ def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict
     ident = identifier(robot)
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        for name, text in render_kernels(robot).values():
-            (tmp / name).write_text(text)
+        folder, manifest = kernel_folder(robot)      # the shipped or cached sources: no derivation
+        for name in manifest["files"].values():
+            shutil.copy(folder / name, tmp / name)
         src = resources.files("derive.data").joinpath("bench_harness.c").read_text()
         (tmp / "harness.c").write_text(src)
         try:
@@ -270,6 +271,13 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
         rep = 3 if backend == "c" else 1
         out[backend]["fk_single_ns"] = _time(lambda: [k.fk(row) for row in q[:s]], rep) / s * 1e9
         out[backend]["ik_single_ns"] = _time(lambda: [k.ik(row) for row in poses[:s]], rep) / s * 1e9
+    k = kernels(robot, "c")
+    if k.has_ik:
+        seeds = q + 0.01
+        k.nearest(poses[:10], seeds[:10])
+        out["c"]["nearest_batch_ns"] = _time(lambda: k.nearest(poses, seeds), repeats) / n * 1e9
+        chunks = [poses[i:i + 1000] for i in range(0, n - 999, 1000)]
+        out["c"]["ik_batch_chunked_ns"] = _time(lambda: [k.ik(c) for c in chunks], repeats) / (1000 * len(chunks)) * 1e9
     out["harness"] = _harness(robot, q, poses, repeats)
     pin = _pinocchio_fk(robot, q, 20_000) if load_robot(robot).convention == "standard_dh" else None
     if pin:
@@ -338,6 +346,12 @@ def report(r: dict) -> str:
         x = r[b]
         lines.append(f"  {b:<6} via kernels()  {x['fk_batch_ns']:9.1f} {x['fk_single_ns']:10.1f} "
                      f"{x['ik_batch_ns']:10.1f} {x['ik_single_ns']:10.1f}")
+    if "error" not in h and "nearest_batch_ns" in h:
+        lines.append(f"IK batch in chunks of 1000 poses (output in cache): C harness {h['ik_batch_chunked_ns']:.1f}, "
+                     f"via kernels() {r['c'].get('ik_batch_chunked_ns', float('nan')):.1f} ns per pose")
+        lines.append(f"nearest solution to a seed (IK + selection, one batch): C harness {h['nearest_batch_ns']:.1f}, "
+                     f"via kernels() {r['c'].get('nearest_batch_ns', float('nan')):.1f} ns per pose "
+                     f"({100 * (h['nearest_batch_ns'] / h['ik_batch_ns'] - 1):+.0f} % on the C IK batch)")
     if "error" not in h and "matrix_fk_ns" in h:
         lines.append(f"plain 4x4-matrix C FK: {h['matrix_fk_ns']:.1f} ns per pose "
                      f"(max error {h['matrix_fk_max_error']:.1e}); generated C FK batch is "
