@@ -207,6 +207,16 @@ def transform_point(a, v) -> np.ndarray:
     return _mul(_mul(a, point), hat)[..., 5:]
 
 
+def tidy(d) -> np.ndarray:
+    """A unit dual quaternion (8,) with its rotation and translation rounded to 1e-13 (the
+    noise of a numeric construction), the real part's first non-zero entry positive."""
+    r, t = to_rt(d)
+    r = np.round(r, 13)
+    r = r / np.linalg.norm(r)
+    lead = r[np.argmax(np.abs(r) > 0)]
+    return from_rt(r if lead > 0 else -r, np.round(t, 13) + 0.0)
+
+
 def to_matrix(a) -> np.ndarray:
     """4x4 homogeneous matrix of a unit dual quaternion."""
     a = check_unit(a, "Q")

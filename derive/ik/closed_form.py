@@ -34,6 +34,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
+from derive.algebra.rotations import rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import panda, select, spherical, srs
@@ -102,12 +103,6 @@ def _ur_geometry(robot) -> URGeometry:
 # --------------------------------------------------------------------------- #
 # Batch solver
 # --------------------------------------------------------------------------- #
-def _rz(t):
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
 def _rmy(t):
     """Rotation by t about -y."""
     c, s = np.cos(t), np.sin(t)
@@ -173,16 +168,16 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     def wrist1(t1, a, t5, t6):
         """t2+t3+t4 and the wrist-1 point (x4, z4) in the arm plane (C.19, C.21)."""
         # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
-        m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(_rz(-t5), -1, -2)
+        m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(rot_z(-t5), -1, -2)
         t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
-        p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", _rz(t1),
+        p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", rot_z(t1),
                                      np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
-        v = np.einsum("nji,nj->ni", _rz(t1), p3 - np.array([0.0, 0.0, geo.d1]))
+        v = np.einsum("nji,nj->ni", rot_z(t1), p3 - np.array([0.0, 0.0, geo.d1]))
         return t234, v[:, 0], v[:, 2]
 
     for i1, sgn1 in enumerate((1.0, -1.0)):
         t1 = phi + sgn1 * np.arctan2(root, -geo.d4)
-        a = np.einsum("nji,njk->nik", _rz(t1), r)          # A = Rz(t1)^T R
+        a = np.einsum("nji,njk->nik", rot_z(t1), r)          # A = Rz(t1)^T R
         c5 = a[:, 1, 1]
         s5abs = np.hypot(a[:, 0, 1], a[:, 2, 1])
         sing = s5abs < WRIST_SINGULAR

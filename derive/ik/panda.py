@@ -85,6 +85,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
+from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
@@ -270,8 +271,8 @@ def _panda_geometry(robot) -> PandaGeometry:
                   vals["a4"] * vals["d3"] - vals["a3"] * vals["d5"]) < 1e-9:
         fail("the elbow cannot change the shoulder-wrist distance (a3 = d3 = 0 or a4 = d5 = 0)")
     canon = robot_from_dict(canonical_description(vals, f"{name}-canonical"))
-    base = _tidy(dq.from_rt(quat.from_matrix(frame), origin))
-    tool = _tidy(dq._mul(dq.conj_quaternion(fk(canon, np.zeros(7)))[None],
+    base = dq.tidy(dq.from_rt(quat.from_matrix(frame), origin))
+    tool = dq.tidy(dq._mul(dq.conj_quaternion(fk(canon, np.zeros(7)))[None],
                          dq._mul(dq.conj_quaternion(base)[None], pose0[None]))[0])
     rng = np.random.default_rng(17)
     q = rng.uniform(-math.pi, math.pi, size=(32, 7))
@@ -285,25 +286,9 @@ def _panda_geometry(robot) -> PandaGeometry:
                          error=err)
 
 
-def _tidy(d: np.ndarray) -> np.ndarray:
-    """A unit dual quaternion with rotation and translation rounded to 1e-13 (noise of the
-    construction), the real part's first non-zero entry positive."""
-    r, t = dq.to_rt(d)
-    r = np.round(r, 13)
-    r = r / np.linalg.norm(r)
-    lead = r[np.argmax(np.abs(r) > 0)]
-    return dq.from_rt(r if lead > 0 else -r, np.round(t, 13) + 0.0)
-
-
 # --------------------------------------------------------------------------- #
 # The named steps (module docstring), vectorised over poses
 # --------------------------------------------------------------------------- #
-def _rz(t):
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
 #: Rx(-pi/2)
 _RX_M = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
@@ -312,7 +297,7 @@ def frame6(geo: PandaGeometry, r7, p, q7):
     """Step 1 (eq. F7): rotation R6 (n, 3, 3) and origin O6 (n, 3) from the canonical flange
     pose (R7, p) and q7."""
     o7 = p - geo.d7 * r7[:, :, 2]
-    r6 = r7 @ _rz(-q7) @ _RX_M
+    r6 = r7 @ rot_z(-q7) @ _RX_M
     return r6, o7 - geo.a6 * r6[:, :, 0]
 
 
@@ -364,16 +349,10 @@ def wrist5(v, x, q6, q5_free):
     return np.where(free, q5_free, q5), free
 
 
-def _ry(t):
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
-
-
 def frame3(r6, q4, q5, q6):
     """Step 6, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
     = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (Rx(-pi/2) Rz(t) Rx(pi/2) = Ry(t))."""
-    return r6 @ (_rz(-q6) @ _ry(-q5) @ _rz(-q4)) @ _RX_M
+    return r6 @ (rot_z(-q6) @ rot_y(-q5) @ rot_z(-q4)) @ _RX_M
 
 
 def shoulder(m, sign2, q1_free):
@@ -444,7 +423,7 @@ def canonical_fk(geo: PandaGeometry, q: np.ndarray):
         p = p + a * r[:, :, 0]
         if sx:
             r = np.stack([r[:, :, 0], sx * r[:, :, 2], -sx * r[:, :, 1]], -1)
-        r = r @ _rz(q[:, i])
+        r = r @ rot_z(q[:, i])
         p = p + d * r[:, :, 2]
     return r, p + geo.d7 * r[:, :, 2]
 

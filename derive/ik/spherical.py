@@ -48,6 +48,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
+from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError
 from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
@@ -275,8 +276,8 @@ def _sw_geometry(robot) -> SWGeometry:
     c0 = fk(canon, offsets)
     tool = dq._mul(dq.conj_quaternion(c0)[None],
                    dq._mul(dq.conj_quaternion(base)[None], pose0[None]))[0]
-    tool = _tidy(tool)
-    base = _tidy(base)
+    tool = dq.tidy(tool)
+    base = dq.tidy(base)
     geo = SWGeometry(name, **vals, base=base, tool=tool, signs=signs, offsets=offsets, error=0.0)
     rng = np.random.default_rng(11)
     q = rng.uniform(-math.pi, math.pi, size=(24, 6))
@@ -290,31 +291,9 @@ def _sw_geometry(robot) -> SWGeometry:
     return SWGeometry(name, **vals, base=base, tool=tool, signs=signs, offsets=offsets, error=err)
 
 
-def _tidy(d: np.ndarray) -> np.ndarray:
-    """A unit dual quaternion with rotation and translation rounded to 1e-13 (noise of the
-    construction), the real part's first non-zero entry positive."""
-    r, t = dq.to_rt(d)
-    r = np.round(r, 13)
-    r = r / np.linalg.norm(r)
-    lead = r[np.argmax(np.abs(r) > 0)]
-    return dq.from_rt(r if lead > 0 else -r, np.round(t, 13) + 0.0)
-
-
 # --------------------------------------------------------------------------- #
 # Numeric reference solver (rotation matrices, OPW paper section 3)
 # --------------------------------------------------------------------------- #
-def _batch_rz(t):
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
-
-
-def _batch_ry(t):
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
-
-
 def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -370,13 +349,13 @@ def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = 
             u = geo.c2 + k * np.cos(gamma)
             v = k * np.sin(gamma)
             t2 = np.arctan2(u * x - v * z, u * z + v * x)
-            m = np.swapaxes(_batch_rz(t1) @ _batch_ry(t2 + t3), -1, -2) @ r
+            m = np.swapaxes(rot_z(t1) @ rot_y(t2 + t3), -1, -2) @ r
             s5abs = np.hypot(m[:, 0, 2], m[:, 1, 2])
             sing = s5abs < WRIST_SINGULAR
             for i5, sg5 in enumerate((1.0, -1.0)):
                 t5 = np.where(sing, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), np.arctan2(sg5 * s5abs, m[:, 2, 2]))
                 t4 = np.where(sing, t4_free, np.arctan2(sg5 * m[:, 1, 2], sg5 * m[:, 0, 2]))
-                rest = np.swapaxes(_batch_rz(t4) @ _batch_ry(t5), -1, -2) @ m
+                rest = np.swapaxes(rot_z(t4) @ rot_y(t5), -1, -2) @ m
                 t6 = np.arctan2(rest[:, 1, 0], rest[:, 0, 0])
                 kk = 4 * i1 + 2 * i3 + i5
                 theta = np.stack([t1, t2, t3, t4, t5, t6], -1)

@@ -80,6 +80,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
+from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
@@ -254,22 +255,6 @@ def _srs_geometry(robot) -> SRSGeometry:
 # --------------------------------------------------------------------------- #
 # Rotations (batches)
 # --------------------------------------------------------------------------- #
-def _rz(t):
-    t = np.asarray(t, dtype=float)
-    c, s = np.cos(t), np.sin(t)
-    m = np.zeros(t.shape + (3, 3))
-    m[..., 0, 0], m[..., 0, 1], m[..., 1, 0], m[..., 1, 1], m[..., 2, 2] = c, -s, s, c, 1.0
-    return m
-
-
-def _ry(t):
-    t = np.asarray(t, dtype=float)
-    c, s = np.cos(t), np.sin(t)
-    m = np.zeros(t.shape + (3, 3))
-    m[..., 0, 0], m[..., 0, 2], m[..., 2, 0], m[..., 2, 2], m[..., 1, 1] = c, s, -s, c, 1.0
-    return m
-
-
 def _zyz_matrix(a, b, c):
     """Rz(a) Ry(b) Rz(c), written out."""
     ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
@@ -308,7 +293,7 @@ def _canonical_fk(geo: SRSGeometry, theta):
     t = [theta[..., i] for i in range(7)]
     rs = _zyz_matrix(t[0], t[1], t[2])
     w = (rs @ _forearm(geo, t[3])[..., None])[..., 0]
-    r = rs @ _ry(t[3]) @ _zyz_matrix(t[4], t[5], t[6])
+    r = rs @ rot_y(t[3]) @ _zyz_matrix(t[4], t[5], t[6])
     return r, w
 
 
@@ -379,7 +364,7 @@ def reference_shoulder(geo: SRSGeometry, w, t4):
     a = np.where(rho > AXIS_TOL, np.arctan2(w[..., 1], w[..., 0]), 0.0)
     b = np.arctan2(rho, w[..., 2])
     v = _forearm(geo, t4)
-    return _rz(a) @ _ry(b - np.arctan2(v[..., 0], v[..., 2]))
+    return rot_z(a) @ rot_y(b - np.arctan2(v[..., 0], v[..., 2]))
 
 
 def arm_angle_matrices(w, r0):
@@ -449,7 +434,7 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     t1, t2, t3, sing_s = _zyz(rs[:, :, None], sign, free1[:, None, None])     # step 4, (m, 2, 2)
     # step 5: the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R (from the rounded
     # shoulder angles, so that the wrist absorbs their rounding)
-    rw = _t(_zyz_matrix(t1, t2, t3) @ _ry(t4)[:, :, None]) @ rc[:, None, None]
+    rw = _t(_zyz_matrix(t1, t2, t3) @ rot_y(t4)[:, :, None]) @ rc[:, None, None]
     t5, t6, t7, sing_w = _zyz(rw[:, :, :, None], sign, free5[:, None, None, None])  # step 6
     shape = t5.shape                                             # (m, 2, 2, 2): i4, i2, i6
     theta = np.stack([np.broadcast_to(t[..., None], shape) for t in (t1, t2, t3)]
@@ -468,7 +453,6 @@ def _finish(geo: SRSGeometry, rc, w, cand, singular, reason) -> SRSSolutions:
     """Check every candidate by the canonical FK (ACCEPT_TOL), drop a branch that repeats the
     branch with one sign flipped to + (within MERGE_TOL: the coinciding branches of the
     singular sets), and compact."""
-    n = len(w)
     finite = np.all(np.isfinite(cand), -1)
     r, p = _canonical_fk(geo, np.where(finite[..., None], cand, 0.0) * geo.signs)
     dp = np.linalg.norm(p - w[:, None], axis=-1)
@@ -644,7 +628,7 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
         v = _forearm(geo, t4)
         if joint == 3:
             t3 = tg
-            wv = (_rz(t3) @ v[..., None])[..., 0]
+            wv = (rot_z(t3) @ v[..., None])[..., 0]
             r = np.hypot(wv[:, 0], wv[:, 2])
             cz = w[:, 2] / np.where(r > 0, r, 1.0)
             reach = (np.abs(cz) <= 1.0 + REACH_TOL) & (r > 0)
@@ -654,7 +638,7 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
             on_axis = np.hypot(w[:, 0], w[:, 1]) < AXIS_TOL
         else:
             t1 = tg
-            yv = (_t(_rz(t1)) @ w[..., None])[..., 0]
+            yv = (_t(rot_z(t1)) @ w[..., None])[..., 0]
             stretched = np.abs(v[:, 0]) < WRIST_SINGULAR * max(geo.d_ew, 1.0)
             s3 = yv[:, 1] / np.where(stretched, 1.0, v[:, 0])
             reach = np.where(stretched, np.abs(yv[:, 1]) <= REACH_TOL, np.abs(s3) <= 1.0 + REACH_TOL)
@@ -664,7 +648,7 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
         for i, root in enumerate(roots):
             if joint == 3:
                 t2 = root
-                u = (_ry(t2) @ wv[..., None])[..., 0]
+                u = (rot_y(t2) @ wv[..., None])[..., 0]
                 t1 = np.where(on_axis, free1, np.arctan2(w[:, 1], w[:, 0]) - np.arctan2(u[:, 1], u[:, 0]))
                 sing_s = on_axis
             else:
@@ -672,7 +656,7 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
                 t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
                 sing_s = stretched
             t1b, t3b = np.broadcast_to(t1, (n,)), np.broadcast_to(t3, (n,))
-            rw = _t(_zyz_matrix(t1b, t2, t3b) @ _ry(t4)) @ rc
+            rw = _t(_zyz_matrix(t1b, t2, t3b) @ rot_y(t4)) @ rc
             for i6, g6 in enumerate((1.0, -1.0)):
                 t5, t6, t7, sing_w = _zyz(rw, g6, free5)
                 k = 4 * i + 2 * i4 + i6
@@ -746,7 +730,7 @@ def psi_intervals(robot, pose) -> list[np.ndarray]:
         t4 = g4 * t4abs
         r0 = reference_shoulder(geo, w, t4)
         a_s, b_s, c_s = (m[0] for m in arm_angle_matrices(w, r0))
-        r4 = _ry(t4)[0]
+        r4 = rot_y(t4)[0]
         a_w, b_w, c_w = (_t(m @ r4) @ rc[0] for m in (a_s, b_s, c_s))
         coeffs = {}
         for mi, (a, b, c) in enumerate(((a_s, b_s, c_s), (a_w, b_w, c_w))):
