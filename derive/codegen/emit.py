@@ -146,7 +146,7 @@ def _context(robot, command: str) -> dict:
     outs = [code(e) for e in k.outputs]
     return {
         "version": __version__, "command": command, "robot": robot, "id": identifier(robot.name),
-        "dof": robot.dof, "parameters": [(str(p), v) for p, v in k.parameters.items()],
+        "dof": robot.dof, "parameters": [(str(p), f"{float(v):.12g}") for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
         "limits": _limit_context(robot),
