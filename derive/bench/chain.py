@@ -1,4 +1,5 @@
-"""The quaternion-versus-matrix claim of seed 000, measured (``dq-derive bench chain``).
+"""The quaternion-versus-matrix claim of the Spanish quaternion course notes (the source listed
+as seed 000 in docs/sources.md), measured (``dq-derive bench chain``).
 
 Seed 000 claims that forward kinematics with quaternions is 3 to 5 times faster than with DH
 matrices, with and without reuse of the partial products. Both methods compute every joint origin

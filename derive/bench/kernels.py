@@ -150,7 +150,7 @@ def _eaik(robot, mats):
     dh = dh_table(robot)
     bot = DhRobot(dh[:, 2], dh[:, 1], dh[:, 0])
     t = time.perf_counter()
-    res = bot.IK_batched(mats)
+    res = bot.IK_batched(mats, 1)              # one thread, as ours
     batch = (time.perf_counter() - t) / len(mats)
     t = time.perf_counter()
     for m in mats[:2000]:
@@ -362,7 +362,7 @@ def report(r: dict) -> str:
                      f"pose ({p['fk_loop_ns'] / r['c']['fk_batch_ns']:.0f}x the C kernel via kernels())")
     if "eaik" in r:
         e = r["eaik"]
-        lines.append(f"EAIK IK_batched: {e['batch_ns']:.0f} ns per pose, single IK {e['single_ns']:.0f} ns "
+        lines.append(f"EAIK IK_batched (1 thread): {e['batch_ns']:.0f} ns per pose, single IK {e['single_ns']:.0f} ns "
                      f"({e['batch_ns'] / h.get('ik_batch_ns', float('nan')):.0f}x the C IK batch)"
                      + (f", an exact solution for {100 * e['exact_fraction']:.2f} % of the poses"
                         if "exact_fraction" in e else ""))
