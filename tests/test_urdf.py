@@ -214,7 +214,7 @@ def test_ur5_urdf_gets_closed_form_kernels_related_to_the_library_ur5(tmp_path, 
 
 def test_cli_takes_urdf_with_base_and_tip(tmp_path, capsys):
     path = str(_data_root() / ARMS[1][0])
-    assert main(["fk", path, "--base", "base_link", "--tip", "tool0", "0", "0", "0", "0", "0", "0"]) == 0
+    assert main(["fk", path, "--base", "base_link", "--tip", "tool0", "--q", "0", "0", "0", "0", "0", "0"]) == 0
     out = capsys.readouterr().out
     assert "end frame 'tool0'" in out and "0.81725" in out
     assert main(["classify", path, "--base", "base_link", "--tip", "tool0"]) == 0
