@@ -357,15 +357,10 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
     return count;
 }
 
-/* The IK program on one pose, its branches as nested loops: each leaf's candidate, whether it
- * is valid, and its singular flag (valid and sing cleared first). */
-static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
-                             int valid[8], int sing[8])
+int kr6_r900_ik(const double *restrict pose, double *restrict sols)
 {
-    for (int b = 0; b < 8; ++b) {
-        valid[b] = 0;
-        sing[b] = 0;
-    }
+    double cand[8][6];
+    int valid[8] = {0};
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
     const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
     const double x_w = -0.18*p0*p2 + 2.0*p0*p5 - 0.18*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
@@ -376,7 +371,7 @@ static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
     const double k3 = 0;
     const double k4 = k1*k1 + k2*k2 - k3*k3;
     if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return;
+        return 0;
     }
     const double k5 = dq_atan2(k1, -k2);
     const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
@@ -436,18 +431,10 @@ static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
                     cq[4] = dq_wrap(theta5);
                     cq[5] = dq_wrap(-theta6);
                     valid[4*b1 + 2*b2 + b3] = 1;
-                    sing[4*b1 + 2*b2 + b3] = singular;
                 }
             }
         }
     }
-}
-
-int kr6_r900_ik(const double *restrict pose, double *restrict sols)
-{
-    double cand[8][6];
-    int valid[8], sing[8];
-    dq_ik_candidates(pose, cand, valid, sing);
     return dq_merge((const double (*)[6])cand, valid, sols, NULL);
 }
 

@@ -287,15 +287,10 @@ static int dq_merge(const double cand[8][6], const int valid[8], double *restric
     return count;
 }
 
-/* The IK program on one pose, its branches as nested loops: each leaf's candidate, whether it
- * is valid, and its singular flag (valid and sing cleared first). */
-static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
-                             int valid[8], int sing[8])
+int ur5_ik(const double *restrict pose, double *restrict sols)
 {
-    for (int b = 0; b < 8; ++b) {
-        valid[b] = 0;
-        sing[b] = 0;
-    }
+    double cand[8][6];
+    int valid[8] = {0};
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
     const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
     const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
@@ -323,7 +318,7 @@ static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
     const double k5 = dq_atan2(k2, k1);
     const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
     if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return;
+        return 0;
     }
     for (int b1 = 0; b1 < 2; ++b1) {
         const double sg1 = b1 ? -1.0 : 1.0;
@@ -385,18 +380,10 @@ static void dq_ik_candidates(const double *restrict pose, double cand[8][6],
                     cq[4] = dq_wrap(theta5);
                     cq[5] = dq_wrap(theta6);
                     valid[4*b1 + 2*b2 + b3] = 1;
-                    sing[4*b1 + 2*b2 + b3] = singular;
                 }
             }
         }
     }
-}
-
-int ur5_ik(const double *restrict pose, double *restrict sols)
-{
-    double cand[8][6];
-    int valid[8], sing[8];
-    dq_ik_candidates(pose, cand, valid, sing);
     return dq_merge((const double (*)[6])cand, valid, sols, NULL);
 }
 
