@@ -389,7 +389,6 @@ class Kernels:
             q, mx, tot, br, sg = out
             single = q.ndim == 1
             q, br, sg = np.atleast_2d(q), np.atleast_1d(br), np.atleast_1d(sg)
-            seeds = np.broadcast_to(np.asarray(q_seed, dtype=float), q.shape)
             found = br >= 0
             if tol is not None:
                 found &= mx <= tol
@@ -405,6 +404,7 @@ class Kernels:
             seeds = np.broadcast_to(seeds, (len(sols), self.dof))
             res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
         if np.any(res.singular):
+            seeds = np.broadcast_to(np.asarray(q_seed, dtype=float), res.q.shape)   # checked above
             at = np.nonzero(res.singular)[0]
             poses, _ = as_pose_batch(P)
             poses = np.broadcast_to(poses, (len(res.q), 8))[at]
