@@ -109,6 +109,9 @@ class _C(_Shared, C99CodePrinter):
     def _print_And(self, expr):         # flags are 0/1 ints: no short circuit, so loops vectorise
         return " & ".join(f"({self._print(a)})" for a in expr.args)
 
+    def _print_Or(self, expr):
+        return " | ".join(f"({self._print(a)})" for a in expr.args)
+
     def _print_Not(self, expr):
         return f"!({self._print(expr.args[0])})"
 
@@ -223,17 +226,18 @@ def _ik_context(robot) -> dict:
                    "free_joint": prog.free_joint, "free_rule": prog.free_rule,
                    "leaf": leaf or "0", "flat": flat, "flat_full": flat_full, "merge_tol": repr(MERGE_TOL), "steps": step_lines,
                    "singular_flag": any(op.kind == "flag" and op.name == "singular" for op in prog.ops),
-                   "same_as": same_as},
+                   "same_as": same_as, "free": prog.free, "free_doc": prog.free_doc},
             "ik_missing": ""}
 
 
 def _singular_only(cond) -> bool:
     """Whether a select's condition can hold only where the program's ``singular`` flag is set
-    (the flag itself, or a conjunction with it): the batch loop then takes the other arm and
+    (the flag itself or one of the flags ``singular_*`` it is the union of, alone or in a
+    conjunction): the batch loop then takes the other arm and
     leaves the singular poses to a scalar pass (``dq_singular_block`` in the C template)."""
     cond = sp.sympify(cond)
     terms = cond.args if isinstance(cond, sp.And) else (cond,)
-    return any(t.is_Symbol and t.name == "singular" for t in terms)
+    return any(t.is_Symbol and (t.name == "singular" or t.name.startswith("singular_")) for t in terms)
 
 
 def _flat_ops(prog, printer, numeric) -> list:
@@ -343,6 +347,11 @@ def _live(flat: list) -> list:
     return kept[::-1]
 
 
+#: The kernels' calling convention, recorded in each kernel manifest. The loader uses a kernel
+#: folder only when it records this one (2: the IK functions of 7-joint arms take the free
+#: parameter; kernels of an earlier convention in the user cache are derived again).
+KERNEL_FORMAT = 2
+
 FILES = {
     "python": ("kinematics.py.j2", "{id}_kinematics.py"),
     "numpy": ("kinematics_numpy.py.j2", "{id}_kinematics_numpy.py"),
@@ -363,14 +372,19 @@ def render_kernels(robot, command: str | None = None) -> dict:
 
 def kernel_manifest(robot) -> dict:
     """What a kernel folder's manifest records besides its files: the robot's identity and
-    name, the identifier stem of its functions and whether the kernels include the IK."""
+    name, the identifier stem of its functions, the IK's branch labels and, for a 7-joint arm,
+    the name of the free parameter its IK functions take (``free``: "psi" or "q7")."""
     robot = load_robot(robot)
     try:
-        labels = list(ik_program(robot).branch_labels)
+        prog = ik_program(robot)
     except DeriveError:
-        labels = []
-    return {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),
-            "dof": robot.dof, "dq_derive": __version__, "branch_labels": labels}
+        prog = None
+    out = {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),
+           "dof": robot.dof, "dq_derive": __version__, "format": KERNEL_FORMAT,
+           "branch_labels": list(prog.branch_labels) if prog else []}
+    if prog is not None and prog.free:
+        out["free"] = prog.free            # the IK functions take the free parameter fv
+    return out
 
 
 def write_kernels(robot, out_dir, command: str | None = None, force: bool = False) -> list:

@@ -45,11 +45,13 @@ from derive.cache import (
     task,
     user_folder,
 )
-from derive.codegen.emit import FILES, kernel_manifest, render_kernels
+from derive.codegen.emit import FILES, KERNEL_FORMAT, kernel_manifest, render_kernels
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
+from derive.ik import redundant
 from derive.ik.closed_form import ik_batch as reference_ik_batch
+from derive.ik.redundant import missing_free_message
 from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
@@ -83,14 +85,15 @@ KERNEL_ROLES = tuple(FILES)
 def kernel_folder(robot) -> tuple[Path, dict]:
     """(folder, manifest) of the kernel sources of a robot: the shipped ``generated/<robot>/``
     folder of its identity, else the user cache's, else they are derived now (progress on
-    stderr) and stored in the user cache. Never derives when an artifact exists."""
+    stderr) and stored in the user cache. Never derives when an artifact of
+    the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists."""
     robot = load_robot(robot)
     for folder in (shipped_index().get(robot.id), user_folder(robot.id)):
         if folder is None:
             continue
         manifest = read_manifest(folder)
         files = manifest.get("files", {})
-        if manifest.get("id") == robot.id and all(r in files and (folder / files[r]).is_file()
+        if manifest.get("id") == robot.id and manifest.get("format") == KERNEL_FORMAT and all(r in files and (folder / files[r]).is_file()
                                                  for r in KERNEL_ROLES):
             return folder, manifest
     with task(robot.name):
@@ -129,7 +132,7 @@ def _compile(source: Path, prefix: str) -> Path:
 Q_MAX = 1e6
 
 
-def _extension(robot, source: Path, prefix: str, has_ik: bool):
+def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None = None):
     # prefix: the kernels' identifier stem from the manifest (emit.identifier, not called here:
     # the load path does no code generation)
     """The CPython extension module of a C kernel source (templates/pyext.c.j2: input checks in
@@ -140,7 +143,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool):
         return None
     text = template_environment().get_template("pyext.c.j2").render(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
-        prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, q_max=repr(Q_MAX),
+        prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
         revolute=[j.type == "revolute" for j in robot.joints if not j.is_mimic],
         unit_tol=repr(UNIT_TOL), module="MODULE")
     digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
@@ -201,6 +204,7 @@ class Kernels:
         files = manifest["files"]
         ident = manifest["prefix"]
         self.folder = folder
+        self.free = manifest.get("free")   # the free parameter of a 7-joint arm's IK, else None
         if backend == "python":
             self._mod = _import(folder / files["python"], f"{ident}_kinematics_{self.robot.id}")
         elif backend == "numpy":
@@ -211,7 +215,7 @@ class Kernels:
             self._has_ik_c = "_ik_batch(" in text
             # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
             if not self._has_ik_c or "_ik_batch_ex(" in text:
-                self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c)
+                self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c, self.free)
             if self._ext is None:
                 self._load_ctypes()
         else:
@@ -242,7 +246,7 @@ class Kernels:
         self._fk_batch = f
         if hasattr(self._lib, f"{self._ident}_ik_batch"):
             g = getattr(self._lib, f"{self._ident}_ik_batch")
-            g.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+            g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * (4 if self.free else 3)
             g.restype = None
             self._ik_batch = g
 
@@ -291,7 +295,27 @@ class Kernels:
             raise DeriveError(f"{self.robot.name}: no closed-form IK kernel ({why}); "
                               "use derive.refine")
 
-    def ik(self, P, within_limits: bool = False, details: bool = False):
+    def _free_values(self, free, n: int):
+        """The free parameter per pose as a float64 array (n,) (7-joint arms; InputError without
+        it), or None for a 6-joint arm (InputError if one is given)."""
+        if not self.free:
+            if free is not None:
+                raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
+            return None
+        if free is None:
+            raise InputError(missing_free_message(self.robot))
+        arr = as_finite_array(free, "free", ndim_min=0)
+        if arr.ndim == 0 or arr.shape == (1,):
+            return np.full(n, float(arr.reshape(-1)[0]))
+        if arr.shape != (n,):
+            raise InputError(f"free: expected a number or shape ({n},) (one per pose), got {arr.shape}")
+        return np.ascontiguousarray(arr, dtype=np.float64)
+
+    def _ext_args(self, free) -> tuple:
+        """The trailing arguments of the extension's ik / nearest: the free parameter, if any."""
+        return (free,) if self.free else ()
+
+    def ik(self, P, within_limits: bool = False, details: bool = False, free=None):
         """All closed-form solutions: (solutions (n, 8, dof) NaN-padded, counts (n,)).
 
         P: unit dual quaternions (n, 8) / (8,) or matrices (n, 4, 4) / (4, 4) of the end frame
@@ -299,18 +323,23 @@ class Kernels:
         InputError. At the wrist singularity the free joint is chosen as the generated file's
         header says.
 
+        ``free``: a 7-joint arm's free parameter (:attr:`free`: the arm angle psi or q7, rad), a
+        number or one per pose; required for those arms, refused for the others.
+
         ``details`` (C backend): also the branch index of each solution (which root each
         closed-form step took, :attr:`branch_labels`; -1 in the padding) and its singular flag:
         (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
         call."""
+        if self.free and free is None:
+            raise InputError(missing_free_message(self.robot))
         if self._ext is not None and not (details or within_limits) and self.has_ik:
-            out = self._ext.ik(P, self._tool)          # the fast path: one C call, checks in C
+            out = self._ext.ik(P, self._tool, False, *self._ext_args(free))   # one C call, checks in C
             if out is not NotImplemented:
                 return out
         self._require_ik()
         if details or within_limits:
-            sols, counts, branch, sing = self._ik_details(P, need=details)
+            sols, counts, branch, sing = self._ik_details(P, need=details, free=free)
             single = sols.ndim == 2
             if within_limits:
                 s3, c1 = (sols[None], np.atleast_1d(counts)) if single else (sols, counts)
@@ -325,30 +354,31 @@ class Kernels:
                                               else (sols3, cnt, b3, g3))
             return (sols, counts, branch, sing) if details else (sols, counts)
         if self._ext is not None:
-            out = self._ext.ik(P, self._tool)
-            if out is not NotImplemented:
-                return out
             poses, single = as_pose_batch(P)
-            return self._ext.ik(poses[0] if single else poses, self._tool)
+            return self._ext.ik(poses[0] if single else poses, self._tool, False, *self._ext_args(free))
         poses, single = as_pose_batch(P)
         if self._tool is not None:
             poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
         poses = np.ascontiguousarray(poses, dtype=np.float64)
         n = poses.shape[0]
+        fv = self._free_values(free, n)
         if self.backend == "python":
             sols = np.full((n, 8, self.dof), np.nan)
             counts = np.zeros(n, dtype=np.int64)
             for i, row in enumerate(poses.tolist()):
-                found = self._mod.ik(row)
+                found = self._mod.ik(row) if fv is None else self._mod.ik(row, float(fv[i]))
                 counts[i] = len(found)
                 if found:
                     sols[i, :len(found)] = found
         elif self.backend == "numpy":
-            sols, counts = self._mod.ik(poses)
+            sols, counts = self._mod.ik(poses) if fv is None else self._mod.ik(poses, fv)
         else:
             sols = np.empty((n, 8, self.dof))
             c = np.empty(n, dtype=np.intc)
-            self._ik_batch(n, poses.ctypes.data, sols.ctypes.data, c.ctypes.data)
+            if fv is None:
+                self._ik_batch(n, poses.ctypes.data, sols.ctypes.data, c.ctypes.data)
+            else:
+                self._ik_batch(n, poses.ctypes.data, fv.ctypes.data, sols.ctypes.data, c.ctypes.data)
             counts = c.astype(np.int64)
         return (sols[0], int(counts[0])) if single else (sols, counts)
 
@@ -356,19 +386,57 @@ class Kernels:
     def _revolute(self) -> np.ndarray:
         return np.array([j.type == "revolute" for j in self.robot.joints if not j.is_mimic])
 
-    def _ik_details(self, P, need: bool):
+    def _ik_details(self, P, need: bool, free=None):
         if self._ext is None:
             if need:
                 raise DeriveError("ik(details=True) needs the C backend's extension "
                                   "(derive.kernels(robot, 'c') with the Python headers installed)")
-            sols, counts = self.ik(P)
+            sols, counts = self.ik(P, free=free)
             shape = sols.shape[:-1]
             return sols, counts, np.full(shape, -1), np.zeros(shape, dtype=bool)
-        out = self._ext.ik(P, self._tool, True)
+        out = self._ext.ik(P, self._tool, True, *self._ext_args(free))
         if out is NotImplemented:
             poses, single = as_pose_batch(P)
-            out = self._ext.ik(poses[0] if single else poses, self._tool, True)
+            out = self._ext.ik(poses[0] if single else poses, self._tool, True, *self._ext_args(free))
         return out
+
+    def _tool_free(self, P):
+        """Poses (n, 8) of the end frame for poses P of the tool frame (as P T^-1), and whether
+        P was one pose."""
+        poses, single = as_pose_batch(P)
+        if self._tool is not None:
+            poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
+        return np.ascontiguousarray(poses, dtype=np.float64), single
+
+    def _solver(self, branch_ids: bool):
+        """A 7-joint arm's IK at given free values as the solver of :mod:`derive.ik.redundant`:
+        (poses (m, 8) of the end frame, free (m,)) -> (q, counts, branch, singular). The C
+        extension gives branch ids; other backends give -1 there, and None when ``branch_ids``
+        is required (the numpy closed form then searches)."""
+        if self._ext is not None:
+            return lambda poses, f: self._ext.ik(poses, None, True, np.ascontiguousarray(f, dtype=np.float64))
+        if branch_ids:
+            return None
+        plain = self.with_tool(None)
+
+        def solve(poses, f):
+            q, counts = plain.ik(poses, free=f)
+            shape = q.shape[:-1]
+            return q, counts, np.full(shape, -1), np.zeros(shape, dtype=bool)
+        return solve
+
+    def ik_sweep(self, P, n: int, within_limits: bool = True) -> redundant.Sweep:
+        """A 7-joint arm's solutions at ``n`` values of its free parameter over the feasible
+        range of each pose (:func:`derive.ik.redundant.sweep_values`: joint 7's limits for the
+        Panda class, the union of the pose's feasible arm-angle intervals, computed in closed
+        form, for the SRS class), all values of all poses in one batch call of these kernels.
+        Returns :class:`derive.ik.redundant.Sweep` (``free`` (P, n), ``q`` (P, n, K, 7), ``counts``,
+        ``branch``, ``singular``); ``within_limits`` (default) keeps the in-limit windings only."""
+        if not self.free:
+            raise InputError(f"ik_sweep: {self.robot.name} has {self.dof} joints and no free parameter; use ik")
+        poses, single = self._tool_free(P)
+        return redundant.ik_sweep(self.robot, poses[0] if single else poses, n,
+                                  within_limits=within_limits, solver=self._solver(False))
 
     def nearest(self, P, q_seed, tol=None) -> select.Nearest:
         """Per pose the solution nearest to the seed configuration(s) ``q_seed`` ((dof,) or (n,
@@ -376,11 +444,19 @@ class Kernels:
         the summed move (:func:`derive.ik.select.nearest`); ``found`` is False where no solution
         is within ``tol`` (rad or m) of the seed, or none is inside the limits. Where the chosen
         solution lies on a singular set, the free joint is the seed's (the reference solver
-        re-solves those poses with the seed as reference configuration)."""
+        re-solves those poses with the seed as reference configuration).
+
+        A 7-joint arm's free parameter and branch are chosen by the 1-D search of
+        :func:`derive.ik.redundant.nearest` (which keeps a path continuous), run on these kernels'
+        batch IK with the C extension, else on the numpy closed form."""
         self._require_ik()
         if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
                                     and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
             raise InputError(f"tol: expected a finite number >= 0 (rad or m), got {tol!r}")
+        if self.free:       # 7 joints: the free parameter and the branch by derive.ik.redundant's search
+            poses, single = self._tool_free(P)
+            return redundant.nearest(self.robot, poses[0] if single else poses, q_seed, tol,
+                                     solver=self._solver(True))
         if self._ext is not None:               # IK and selection in one C pass (ik_nearest_batch)
             out = self._ext.nearest(P, q_seed, self._tool)
             if out is NotImplemented:

@@ -29,7 +29,7 @@ Reachability: an S1 step with A^2 + B^2 < C^2, or an acos argument beyond +-1, b
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import sympy as sp
 
@@ -38,6 +38,9 @@ from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError
 from derive.ik.closed_form import closed_form_relation, spherical_class, ur_geometry
+from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
+from derive.ik.program7 import seven_joint_program
+from derive.ik.redundant import redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.ik.spherical import SWGeometry, canonical_robot
 from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
@@ -45,130 +48,7 @@ from derive.model.robot import load_robot
 from derive.symbolic.chain import runs_quaternion
 from derive.symbolic.equations import POSES, derive_equations
 
-#: Functions the printers map to each language.
-sgn = sp.Function("sgn")        # copysign(1, x)
-pos = sp.Function("pos")        # max(x, 0)
-
-
-@dataclass
-class Op:
-    """One line of an IK program.
-
-    kind: "let" (name = expr), "sincos" (name, name2 = sin, cos of expr), "double"
-    (name, name2 = sin, cos of twice the angle whose sin, cos are args), "branch" (name = +1,
-    then -1, for everything after), "require" (drop the branch unless expr, a relational,
-    holds), "select" (name = expr if cond else other), "solution" (exprs, one per joint).
-    """
-
-    kind: str
-    name: str = ""
-    expr: object = None
-    name2: str = ""
-    cond: object = None
-    other: object = None
-    args: tuple = ()
-    depth: int = 0
-
-
-@dataclass
-class IKProgram:
-    robot: str
-    dof: int
-    ops: list = field(default_factory=list)
-    branches: int = 1
-    free_joint: int | None = None           # joint that is free at the singular set
-    free_rule: str = "set to 0"             # how the program chooses it there
-    steps: list = field(default_factory=list)   # (unknown, pattern, equations) for the header
-    parameters: dict = field(default_factory=dict)
-    branch_labels: list = field(default_factory=list)   # the unknown each branch bit chooses the root of
-
-
-class _Builder:
-    def __init__(self, values: dict):
-        self.ops: list = []
-        self.depth = 0
-        self.values = values
-        self.known: set = set()           # symbols with a value in the program
-        self.trig: dict = {}              # angle argument -> (sin symbol, cos symbol)
-        self.n_trig = 0
-        self.n_tmp = 0
-        self.labels: list = []
-
-    def _num(self, e):
-        """The robot's numbers substituted for the parameters."""
-        return sp.sympify(e).xreplace(self.values)
-
-    def let(self, name, expr) -> sp.Symbol:
-        expr = self._trig(self._num(expr))
-        sym = name if isinstance(name, sp.Symbol) else sp.Symbol(name, real=True)
-        self.ops.append(Op("let", str(sym), expr, depth=self.depth))
-        self.known.add(sym)
-        return sym
-
-    def tmp(self, expr, stem="k") -> sp.Symbol:
-        self.n_tmp += 1
-        return self.let(f"{stem}{self.n_tmp}", expr)
-
-    def branch(self, name, label: str = "") -> sp.Symbol:
-        self.labels.append(label or name)
-        self.depth += 1
-        sym = sp.Symbol(name, real=True)
-        self.ops.append(Op("branch", name, depth=self.depth))
-        self.known.add(sym)
-        return sym
-
-    def require(self, cond):
-        self.ops.append(Op("require", expr=self._trig(self._num(cond)), depth=self.depth))
-
-    def flag(self, name, cond) -> sp.Symbol:
-        sym = sp.Symbol(name)
-        self.ops.append(Op("flag", name, self._trig(self._num(cond)), depth=self.depth))
-        self.known.add(sym)
-        return sym
-
-    def select(self, name, cond, a, b) -> sp.Symbol:
-        sym = sp.Symbol(name, real=True)
-        self.ops.append(Op("select", name, self._trig(self._num(a)), cond=self._trig(self._num(cond)),
-                           other=self._trig(self._num(b)), depth=self.depth))
-        self.known.add(sym)
-        return sym
-
-    def set_trig(self, arg, s, c):
-        self.trig[sp.expand(arg)] = (s, c)
-
-    def _trig(self, expr):
-        """Replace sin/cos of known angles by symbols, emitting sincos (or double-angle) lines."""
-        expr = sp.sympify(expr)
-        atoms = expr.atoms(sp.sin, sp.cos)
-        if not atoms:
-            return expr
-        args = sorted({sp.expand(a.args[0]) for a in atoms}, key=lambda a: (sp.count_ops(a), sp.default_sort_key(a)))
-        for arg in args:
-            if arg in self.trig:
-                continue
-            if not arg.free_symbols <= self.known:
-                raise DeriveError(f"IK program: sin/cos of {arg} needed before its angle is known")
-            half = sp.expand(arg / 2)
-            if half in self.trig:
-                hs, hc = self.trig[half]
-                s, c = self._trig_names()
-                self.ops.append(Op("double", str(s), name2=str(c), args=(str(hs), str(hc)), depth=self.depth))
-            else:
-                s, c = self._trig_names()
-                self.ops.append(Op("sincos", str(s), arg, name2=str(c), depth=self.depth))
-            self.trig[arg] = (s, c)
-        rep = {}
-        for a in atoms:
-            s, c = self.trig[sp.expand(a.args[0])]
-            rep[a] = s if isinstance(a, sp.sin) else c
-        return expr.xreplace(rep)
-
-    def _trig_names(self):
-        self.n_trig += 1
-        return sp.Symbol(f"s{self.n_trig}", real=True), sp.Symbol(f"c{self.n_trig}", real=True)
-
-
-def _chain_pose(builder: _Builder, g):
+def _chain_pose(builder: Builder, g):
     """Lines for the chain pose (pose * G^-1) from the input p0..p7: w a b c, r_ij, x y z."""
     p = sp.symbols("p0:8", real=True)
     builder.known.update(p)
@@ -223,6 +103,9 @@ def ik_program(robot) -> IKProgram:
 
 
 def _ik_program(robot) -> IKProgram:
+    kind = redundant_kind(robot)
+    if kind is not None:
+        return seven_joint_program(robot, kind)
     geo = spherical_class(robot)
     if geo is not None:
         return _spherical_program(robot, geo)
@@ -244,7 +127,7 @@ def _ik_program(robot) -> IKProgram:
     loc = {str(t): t for t in thetas}
     values = {k: (sp.Integer(int(v)) if float(v).is_integer() else sp.Float(v, 17))
               for k, v in chain.parameters.items()}
-    bld = _Builder(values)
+    bld = Builder(values)
     _chain_pose(bld, chain.end_transform)
     defs = {k: v for k, v in ext.definitions.items()}
     emitted_defs: set = set()
@@ -403,7 +286,7 @@ def _related_program(robot, rel) -> IKProgram:
                      branch_labels=list(lib.branch_labels))
 
 
-def _free_for_reach(bld: _Builder, ext, free, defs: dict, with_defs):
+def _free_for_reach(bld: Builder, ext, free, defs: dict, with_defs):
     """Lines for the free joint's value at the singular set, chosen for reach.
 
     The later S3 step (theta3 from C.19, C.21) has cos u = v, where v depends on the free
@@ -538,7 +421,7 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     def num(e):
         return sp.sympify(e).xreplace(values)
 
-    bld = _Builder({})          # numbers substituted here: the builder's trig names c1, c2 ...
+    bld = Builder({})          # numbers substituted here: the builder's trig names c1, c2 ...
     p = sp.symbols("p0:8", real=True)
     bld.known.update(p)
     # 0. pose in the canonical frames, chain end frame (tool removed), wrist centre

@@ -295,11 +295,13 @@ def sweep_values(robot, poses, n: int) -> np.ndarray:
     return np.broadcast_to(lo + (hi - lo) * (np.arange(n) + 0.5) / n, (len(P), n)).copy()
 
 
-def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sweep:
+def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solver=None) -> Sweep:
     """The solutions of P poses at n values of the free parameter over its feasible range
     (:func:`sweep_values`). ``within_limits`` (default): only the solutions inside the joint
     limits, each at its in-limit winding (:func:`derive.ik.select.within_limits`); else every
-    solution (:func:`solve`). One pose (8,) / (4, 4) gives the arrays without the leading axis."""
+    solution (:func:`solve`). One pose (8,) / (4, 4) gives the arrays without the leading axis.
+    ``solver(poses (m, 8), free (m,))`` -> (q, counts, branch, singular) replaces :func:`solve`
+    (the generated kernels' batch IK: ``derive.kernels(robot, "c").ik_sweep``)."""
     robot = load_robot(robot)
     values = sweep_values(robot, poses, n)
     P, single = as_pose_batch(poses)
@@ -312,8 +314,11 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sw
     have = np.isfinite(values)
     if np.any(have):
         rows = np.nonzero(have)[0]
-        r = solve(robot, P[rows], values[have], None if qr is None else qr[rows])
-        sq, sc, sb, sg = r.q, r.counts, r.branch, r.singular
+        if solver is None:
+            r = solve(robot, P[rows], values[have], None if qr is None else qr[rows])
+            sq, sc, sb, sg = r.q, r.counts, r.branch, r.singular
+        else:
+            sq, sc, sb, sg = solver(P[rows], values[have])
         if within_limits:
             sq, sc, sb, sg = select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
             width = max(BRANCHES, sq.shape[1])
@@ -333,8 +338,9 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sw
 class _Problem:
     """The unchecked closed form of one call, evaluated at free values per pose."""
 
-    def __init__(self, robot, kind, poses, seeds):
+    def __init__(self, robot, kind, poses, seeds, solver=None):
         self.robot, self.kind, self.poses, self.seeds = robot, kind, poses, seeds
+        self.solver = solver
         self.lo, self.hi = robot.limits[:, 0], robot.limits[:, 1]
         if kind == "panda":
             self.geo = panda.panda_geometry(robot)
@@ -347,6 +353,8 @@ class _Problem:
     def candidates(self, rows, f):
         """Candidates (len(rows), 8, 7), indexed by branch id, and their singular flags (len(rows),
         8) at free values f for the poses ``rows``; not checked by FK, NaN where a root is missing."""
+        if self.solver is not None:
+            return _by_branch(*self.solver(self.poses[rows], f))
         if self.kind == "panda":
             cand, sing, _ = panda.canonical_candidates(self.geo, self.r7[rows], self.p[rows], f,
                                                        self.seeds[rows])
@@ -390,6 +398,18 @@ class _Problem:
         return mx[:, 0], tot[:, 0]
 
 
+def _by_branch(q, counts, branch, singular):
+    """Solutions packed in branch order with their branch ids (a solver's output) as candidates
+    indexed by branch id: (q (n, 8, 7), singular (n, 8)), NaN and False for a missing branch."""
+    n = len(q)
+    cand = np.full((n, BRANCHES, 7), np.nan)
+    sing = np.zeros((n, BRANCHES), dtype=bool)
+    i, k = np.nonzero(branch[:, :BRANCHES] >= 0)
+    cand[i, branch[i, k]] = q[i, k]
+    sing[i, branch[i, k]] = singular[i, k]
+    return cand, sing
+
+
 def _better(mx1, t1, mx2, t2):
     """(mx1, t1) strictly before (mx2, t2) in the order largest move, then summed move."""
     return (mx1 < mx2 - TIE) | ((np.abs(mx1 - mx2) <= TIE) & (t1 < t2))
@@ -430,13 +450,18 @@ def _refine(prob, kind, rows, a, b, br, f_best, m_best, t_best, flo, fhi):
     return f_best, m_best, t_best
 
 
-def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
+def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
     branch chosen by the 1D search of the module docstring; ``q_seed`` (7,) or (n, 7). The
     record of :func:`derive.ik.select.nearest`: ``q`` at the winding nearest to the seed inside
     the limits, ``found`` (False where no solution inside the limits was found, or its largest
     move exceeds ``tol``), ``max_move``, ``total_move``, ``branch``, ``singular``. The joints a
-    singular set leaves free are the seed's. One pose and one seed give scalars."""
+    singular set leaves free are the seed's. One pose and one seed give scalars.
+
+    ``solver(poses (m, 8), free (m,))`` -> (q, counts, branch, singular), solutions packed with
+    their branch ids, replaces the numpy closed form in the search (the generated kernels' batch
+    IK: ``derive.kernels(robot, "c").nearest``); a chosen solution on a singular set is then
+    solved again by :func:`solve` with the seed as reference."""
     robot = load_robot(robot)
     kind = _kind(robot)
     if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
@@ -449,7 +474,7 @@ def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
     single = single and seeds_in.ndim == 1
     n = len(P)
     seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
-    prob = _Problem(robot, kind, P, seeds)
+    prob = _Problem(robot, kind, P, seeds, solver)
     _, (flo, fhi) = free_parameter(robot)
     if kind == "panda" and not (math.isfinite(flo) and math.isfinite(fhi)):
         flo, fhi = -math.pi, math.pi
@@ -494,6 +519,8 @@ def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
         best, mx, tot = prob.moves(at, cand[k, branch[at]][:, None])
         dp, dr = prob.residual(at, np.nan_to_num(best[:, 0]))
         ok = np.isfinite(mx[:, 0]) & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
+        if solver is not None:          # the kernels set a free joint to 0, not the seed's
+            ok &= ~sing[k, branch[at]]
         q[at[ok]] = best[ok, 0]
         mx_out[at[ok]], tot_out[at[ok]] = mx[ok, 0], tot[ok, 0]
         br_out[at[ok]], sg_out[at[ok]] = branch[at[ok]], sing[k[ok], branch[at[ok]]]

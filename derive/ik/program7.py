@@ -1,0 +1,351 @@
+"""IK programs of the two 7-joint classes, the free parameter an input: the KUKA iiwa class (SRS,
+arm angle psi, :mod:`derive.ik.srs`) and the Franka Panda class (q7, :mod:`derive.ik.panda`).
+
+The programs are written in the language of :mod:`derive.ik.ir`, so the emitters print them as
+pure Python, numpy and C exactly as the 6R programs, with one more input: ``fv``, the free
+parameter's value (one per pose in the batch functions). Each program is the closed form of its
+numpy module step by step (the docstrings there cite Shimizu et al. 2008 and He & Liu 2021), with
+the robot's numbers substituted, written so that it is total and needs few transcendentals:
+
+* **no trigonometry of known angles**: where a joint angle is the atan2 of two numbers (a ZYZ
+  decomposition, the elbow root), its cosine and sine are those numbers divided by their norm,
+  not dq_sincos of the angle;
+* **ZYZ without division by zero**: Rz(a) Ry(b) Rz(c) = m gives |sin b| = hypot(m02, m12); below
+  :data:`~derive.ik.tolerances.WRIST_SINGULAR` the first angle is free and set to 0 (flag
+  ``singular_*``; the batch kernels redo such poses with the whole program), and the last angle
+  is computed from the rounded first two, c = atan2(row_y . m e_x, row_x . m e_x) of
+  Ry(b)^T Rz(a)^T m (:func:`derive.ik.srs._zyz`), so the product stays exact;
+* **double roots snapped**: an acos argument within STRETCH_TOL (SRS elbow) or DOUBLE_ROOT
+  (Panda elbow and q6) of +-1 is +-1, so the two roots coincide exactly and merge;
+* reach: an acos argument beyond +-1 by more than :data:`~derive.ik.tolerances.REACH_TOL` drops
+  the branch (the pose is out of reach for this value of the free parameter).
+
+Branch numbering equals the numpy modules': SRS k = 4 GC2 + 2 GC4 + GC6 (shoulder, elbow,
+wrist), Panda b = 4 i4 + 2 i6 + i2 (elbow, wrist q6, shoulder), bit 1 for the - root.
+"""
+
+from __future__ import annotations
+
+import sympy as sp
+
+from derive.algebra import dualquat as dq
+from derive.algebra.quaternion import dual_hamilton, hamilton
+from derive.ik import panda, srs
+from derive.ik.extract import _rot
+from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
+from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
+
+#: The free parameter's input symbol in every program (a C / Python identifier).
+FV = sp.Symbol("fv", real=True)
+
+#: Entries of the fixed transforms within this of an integer are that integer (the canonical
+#: frames are signed permutations up to rounding of the description's numbers).
+SNAP = 1e-12
+
+
+def _number(x: float):
+    x = float(x)
+    r = round(x)
+    return sp.Integer(r) if abs(x - r) < SNAP else sp.Float(x, 17)
+
+
+def _inputs(bld: Builder) -> tuple:
+    p = sp.symbols("p0:8", real=True)
+    bld.known.update(p)
+    bld.known.add(FV)
+    return p
+
+
+def _rotation_and_translation(bld: Builder, q, stem: str):
+    """Lets for the rotation matrix (3x3 list) and translation (3 list) of the unit dual
+    quaternion q (8 symbols): t = 2 vec(dual real^*)."""
+    r = _rot(q[:4])
+    rows = [[bld.let(f"{stem}r{i}{j}", sp.expand(r[i, j])) for j in range(3)] for i in range(3)]
+    t = [2 * e for e in hamilton(q[4:], (q[0], -q[1], -q[2], -q[3]))[1:]]
+    return rows, [bld.let(f"{stem}t{i}", sp.expand(t[i])) for i in range(3)]
+
+
+def _let_matrix(bld: Builder, name: str, m) -> list:
+    return [[bld.let(f"{name}{i}{j}", sp.expand(m[i][j])) for j in range(3)] for i in range(3)]
+
+
+def _snap_select(bld: Builder, name: str, c, tol: float):
+    """c within tol of +-1 taken as +-1 (a double root of the acos)."""
+    inner = bld.select(f"{name}_lo", c <= -1 + tol, -1, c)
+    return bld.select(name, c >= 1 - tol, 1, inner)
+
+
+def _zyz_magnitude(bld: Builder, m, stem: str, flag: str):
+    """Before the sign branch: |sin b| = hypot(m02, m12) of m = Rz(a) Ry(b) Rz(c), its flag
+    ``flag`` (below WRIST_SINGULAR: a is free) and a divisor that is 1 on the singular set."""
+    hs = bld.let(f"{stem}_hs", sp.sqrt(m[0][2] ** 2 + m[1][2] ** 2))
+    sing = bld.flag(flag, hs < WRIST_SINGULAR)
+    safe = bld.select(f"{stem}_hd", sing, 1, hs)
+    return hs, safe, sing
+
+
+def _zyz_angles(bld: Builder, m, sign, mag, stem: str, names: tuple, trig: bool):
+    """After the sign branch (sign = +-1, the sign of sin b): the angles a, b, c (let names
+    ``names``) of m = Rz(a) Ry(b) Rz(c) (module docstring), a = 0 on the singular set; with
+    ``trig`` also their cosines and sines (ca, sa, cb, sb, cc, sc) for a later product."""
+    hs, safe, sing = mag
+    na, nb, nc = names
+    a = bld.select(na, sing, 0, sp.atan2(sign * m[1][2], sign * m[0][2]))
+    ca = bld.select(f"{stem}_ca", sing, 1, sign * m[0][2] / safe)
+    sa = bld.select(f"{stem}_sa", sing, 0, sign * m[1][2] / safe)
+    b_sing = bld.select(f"{stem}_bs", m[2][2] >= 0, 0, sp.pi)
+    b = bld.select(nb, sing, b_sing, sp.atan2(sign * hs, m[2][2]))
+    cb = bld.select(f"{stem}_cb", sing, sgn(m[2][2]), m[2][2])
+    sb = bld.select(f"{stem}_sb", sing, 0, sign * hs)
+    # Rz(c) = Ry(b)^T Rz(a)^T m, column 0: (cos c, sin c, 0)
+    ny = bld.let(f"{stem}_ny", -sa * m[0][0] + ca * m[1][0])
+    nx = bld.let(f"{stem}_nx", cb * (ca * m[0][0] + sa * m[1][0]) - sb * m[2][0])
+    c = bld.let(nc, sp.atan2(ny, nx))
+    if not trig:
+        return a, b, c, None
+    nn = bld.let(f"{stem}_nn", sp.sqrt(nx * nx + ny * ny))
+    return a, b, c, (ca, sa, cb, sb, bld.let(f"{stem}_cc", nx / nn), bld.let(f"{stem}_sc", ny / nn))
+
+
+def _rz_rows(m, c, s):
+    """Rz(-t) m (t with cos c, sin s): rows 0 and 1 turned."""
+    return [[c * m[0][k] + s * m[1][k] for k in range(3)], [-s * m[0][k] + c * m[1][k] for k in range(3)], m[2]]
+
+
+def _ry_rows(m, c, s):
+    """Ry(-t) m: rows 0 and 2 turned."""
+    return [[c * m[0][k] - s * m[2][k] for k in range(3)], m[1], [s * m[0][k] + c * m[2][k] for k in range(3)]]
+
+
+def _cols(m):
+    return [[m[i][k] for i in range(3)] for k in range(3)]
+
+
+def _from_cols(cols):
+    return [[cols[k][i] for k in range(3)] for i in range(3)]
+
+
+def _rz_cols(m, c, s):
+    """m Rz(-t): columns 0 and 1 turned."""
+    k = _cols(m)
+    return _from_cols([[c * x - s * y for x, y in zip(k[0], k[1])], [s * x + c * y for x, y in zip(k[0], k[1])], k[2]])
+
+
+def _ry_cols(m, c, s):
+    """m Ry(-t): columns 0 and 2 turned."""
+    k = _cols(m)
+    return _from_cols([[c * x + s * z for x, z in zip(k[0], k[2])], k[1], [-s * x + c * z for x, z in zip(k[0], k[2])]])
+
+
+def _rx_minus_half_pi(m):
+    """m Rx(-pi/2): columns (c0, -c2, c1)."""
+    k = _cols(m)
+    return _from_cols([k[0], [-x for x in k[2]], k[1]])
+
+
+# --------------------------------------------------------------------------- #
+# SRS (iiwa): arm angle psi
+# --------------------------------------------------------------------------- #
+def srs_program(robot) -> IKProgram:
+    """The IK program of an SRS arm with the arm angle psi as input ``fv``
+    (:mod:`derive.ik.srs`, Shimizu sec. III). Steps:
+
+    0. the pose's rotation R and translation t; R_c = F^T R T_R^T and the wrist centre
+       W = F^T (t - S) - R_c t_T in the canonical frame (F, S the canonical frame and shoulder,
+       (T_R, t_T) the end frame in the wrist frame: :func:`derive.ik.srs.srs_geometry`);
+    1. the elbow: cos t4 = (|W|^2 - d_se^2 - d_ew^2) / (2 d_se d_ew), unreachable beyond +-1;
+    2. the shoulder rotation about x = W/|W| by psi, R_psi (Rodrigues), before the branches;
+    3. branch GC2 (the shoulder's sign), branch GC4 (t4 = +-acos): the reference configuration
+       R0 = Rz(a) Ry(b - phi) from the directions of W and of v(t4), all cosines and sines
+       algebraic; R_s = R_psi R0; t1, t2, t3 from R_s (ZYZ, sign GC2);
+    4. the wrist rotation R_w = Ry(t4)^T Rz(t3)^T Ry(t2)^T Rz(t1)^T R_c from the rounded shoulder
+       angles; branch GC6: t5, t6, t7 from R_w (ZYZ);
+    5. q = s theta (s the axis signs).
+    """
+    geo = srs.srs_geometry(robot)
+    bld = Builder({})
+    p = _inputs(bld)
+    rot, tr = _rotation_and_translation(bld, p, "p")
+    frame = [[_number(x) for x in row] for row in geo.frame.tolist()]
+    tool_r = [[_number(x) for x in row] for row in geo.tool_rotation.tolist()]
+    shoulder = [_number(x) for x in geo.shoulder]
+    tool_t = [_number(x) for x in geo.tool_translation]
+    # 0. R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T
+    fr = [[sum(frame[k][i] * rot[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    rc = _let_matrix(bld, "rc", [[sum(fr[i][k] * tool_r[j][k] for k in range(3)) for j in range(3)]
+                                 for i in range(3)])
+    w = [bld.let(f"w{i}", sum(frame[k][i] * (tr[k] - shoulder[k]) for k in range(3))
+                 - sum(rc[i][k] * tool_t[k] for k in range(3))) for i in range(3)]
+    dse, dew = _number(geo.d_se), _number(geo.d_ew)
+    # 1. the elbow
+    ww = bld.let("ww", w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+    bld.require(ww > srs.CLASS_TOL ** 2)                      # wrist centre not at the shoulder
+    ce = bld.let("ce", (ww - dse ** 2 - dew ** 2) / (2 * dse * dew))
+    bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
+    c4 = _snap_select(bld, "ct4", ce, srs.STRETCH_TOL)
+    s4a = bld.let("st4a", sp.sqrt(pos(1 - c4 * c4)))
+    # 2. R_psi = cos psi I + sin psi [x]x + (1 - cos psi) x x^T, x = W/|W|
+    nw = bld.let("nw", sp.sqrt(ww))
+    x = [bld.let(f"x{i}", w[i] / nw) for i in range(3)]
+    cp, sp_ = sp.cos(FV), sp.sin(FV)
+    skew = [[0, -x[2], x[1]], [x[2], 0, -x[0]], [-x[1], x[0], 0]]
+    rpsi = _let_matrix(bld, "rq", [[(cp if i == j else 0) + sp_ * skew[i][j] + (1 - cp) * x[i] * x[j]
+                                    for j in range(3)] for i in range(3)])
+    rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
+    axis = rho > srs.AXIS_TOL
+    rho_d = bld.select("rho_d", axis, rho, 1)
+    ca0 = bld.select("ca0", axis, w[0] / rho_d, 1)
+    sa0 = bld.select("sa0", axis, w[1] / rho_d, 0)
+    cb0, sb0 = bld.let("cb0", w[2] / nw), bld.let("sb0", rho / nw)
+    # 3. shoulder sign, elbow root
+    g2 = bld.branch("sg1", "shoulder GC2 = sign of sin q2 (+ / -)")
+    g4 = bld.branch("sg2", "elbow GC4 = sign of q4 (+ / -)")
+    s4 = bld.let("st4", g4 * s4a)
+    t4 = bld.let("t4", sp.atan2(s4, c4))
+    vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)
+    nv = bld.let("nv", sp.sqrt(vx * vx + vz * vz))
+    cphi, sphi = bld.let("cphi", vz / nv), bld.let("sphi", vx / nv)
+    cbe = bld.let("cbe", cb0 * cphi + sb0 * sphi)             # cos(b - phi)
+    sbe = bld.let("sbe", sb0 * cphi - cb0 * sphi)
+    r0 = [[ca0 * cbe, -sa0, ca0 * sbe], [sa0 * cbe, ca0, sa0 * sbe], [-sbe, 0, cbe]]
+    rs = _let_matrix(bld, "rs", [[sum(rpsi[i][k] * r0[k][j] for k in range(3)) for j in range(3)]
+                                 for i in range(3)])
+    mag = _zyz_magnitude(bld, rs, "sh", "singular_sh")
+    t1, t2, t3, (c1, s1, c2, s2, c3, s3) = _zyz_angles(bld, rs, g2, mag, "sh", ("t1", "t2", "t3"), True)
+    # 4. R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c
+    m = _let_matrix(bld, "ma", _rz_rows(rc, c1, s1))
+    m = _let_matrix(bld, "mb", _ry_rows(m, c2, s2))
+    m = _let_matrix(bld, "mc", _rz_rows(m, c3, s3))
+    rw = _let_matrix(bld, "rw", _ry_rows(m, c4, s4))
+    magw = _zyz_magnitude(bld, rw, "wr", "singular_wr")
+    g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
+    t5, t6, t7, _ = _zyz_angles(bld, rw, g6, magw, "wr", ("t5", "t6", "t7"), False)
+    bld.flag("singular", sp.Or(mag[2], magw[2], s4a < WRIST_SINGULAR))
+    thetas = (t1, t2, t3, t4, t5, t6, t7)
+    bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
+    steps = [
+        ("pose in the canonical frame, wrist centre W", "R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T",
+         [f"SRS class, relation mismatch {geo.error:.1g}"]),
+        ("theta4", "cosine law", ["|W|^2 = d_se^2 + d_ew^2 + 2 d_se d_ew cos t4"]),
+        ("R_psi", "Rodrigues", ["rotation by psi about W/|W|"]),
+        ("theta1, theta2, theta3", "ZYZ of R_psi R0", ["R0 = Rz(a) Ry(b - phi), the reference plane"]),
+        ("theta5, theta6, theta7", "ZYZ of R_w", ["R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c"]),
+    ]
+    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0,
+                     free_rule=("set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the "
+                                "wrist's, sin q6 = 0), the next joint taking the rest"),
+                     steps=steps, parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
+                     branch_labels=list(bld.labels), free="psi",
+                     free_doc="psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, "
+                              "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
+
+
+# --------------------------------------------------------------------------- #
+# Panda / FR3: q7
+# --------------------------------------------------------------------------- #
+def panda_program(robot) -> IKProgram:
+    """The IK program of a Panda-class arm with q7 as input ``fv`` (:mod:`derive.ik.panda`, He &
+    Liu's construction). Steps (the numpy module's eq. labels):
+
+    0. the canonical flange pose B^-1 P T^-1, its rotation R7 and position p;
+    1. frame 6 (eq. F7): R6 = R7 Rz(-q7) Rx(-pi/2), O6 = p - d7 z7 - a6 x6;
+    2. v = R6^T (S - O6), the shoulder S = (0, 0, d1) in frame 6;
+    3. branch on the elbow root (eq. E2): q4 = atan2(B, A) +- acos(K / hypot(A, B)); X, Z (eq. E1);
+    4. branch on the q6 root (eq. W2): q6 = atan2(vx, vy) +- acos(Z / hypot(vx, vy)); q5 (eq. W3);
+    5. R3 = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (eq. S1); branch on the sign of sin q2: q1, q2,
+       q3 by ZYZ (eq. S2).
+
+    Free joints on singular sets (S on axis 6: q6; S on axis 5, X = 0: q5; sin q2 = 0: q1) are
+    set to 0 and flagged.
+    """
+    geo = panda.panda_geometry(robot)
+    bld = Builder({})
+    p = _inputs(bld)
+    conj_b = [_number(x) for x in dq.conj_quaternion(geo.base)]
+    conj_t = [_number(x) for x in dq.conj_quaternion(geo.tool)]
+    moved = [sp.expand(e) for e in dual_hamilton(dual_hamilton(conj_b, p), conj_t)]
+    pc = list(p) if moved == list(p) else [bld.let(f"pc{i}", e) for i, e in enumerate(moved)]
+    r7, pos7 = _rotation_and_translation(bld, pc, "f")
+    v = {k: _number(getattr(geo, k)) for k in panda.PARAMETERS}
+    # 1. frame 6
+    c7, s7 = sp.cos(FV), sp.sin(FV)
+    col0 = [bld.let(f"x6_{i}", c7 * r7[i][0] - s7 * r7[i][1]) for i in range(3)]
+    col2 = [bld.let(f"z6_{i}", s7 * r7[i][0] + c7 * r7[i][1]) for i in range(3)]
+    r6 = [[col0[i], -r7[i][2], col2[i]] for i in range(3)]
+    o6 = [bld.let(f"o6_{i}", pos7[i] - v["d7"] * r7[i][2] - v["a6"] * col0[i]) for i in range(3)]
+    # 2. the shoulder in frame 6
+    d = [-o6[0], -o6[1], v["d1"] - o6[2]]
+    vv = [bld.let(f"v{k}", sum(r6[i][k] * d[i] for i in range(3))) for k in range(3)]
+    # 3. the elbow (eq. E2)
+    a = v["a3"] * v["a4"] + v["d3"] * v["d5"]
+    b = v["a4"] * v["d3"] - v["a3"] * v["d5"]
+    rab = sp.sqrt(a * a + b * b)
+    k = (vv[0] ** 2 + vv[1] ** 2 + vv[2] ** 2 - v["a3"] ** 2 - v["d3"] ** 2 - v["a4"] ** 2 - v["d5"] ** 2) / 2
+    ce = bld.let("ce", k / rab)
+    bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
+    cang = _snap_select(bld, "ca4", ce, panda.DOUBLE_ROOT)
+    sang = bld.let("sa4", sp.sqrt(pos(1 - cang * cang)))
+    cphi, sphi = _number(float(a / rab)), _number(float(b / rab))
+    phi = _number(float(sp.atan2(b, a)))
+    ang = bld.let("an4", sp.atan2(sang, cang))
+    # q6 data that does not depend on the elbow: S on axis 6 when hypot(vx, vy) = 0
+    rho6 = bld.let("rho6", sp.sqrt(vv[0] ** 2 + vv[1] ** 2))
+    free6 = bld.flag("singular_q6", rho6 < panda.SINGULAR_TOL)
+    rho6d = bld.select("rho6_d", free6, 1, rho6)
+    cps, sps = bld.let("cps6", vv[1] / rho6d), bld.let("sps6", vv[0] / rho6d)
+    psi6 = bld.let("ps6", sp.atan2(vv[0], vv[1]))
+    g4 = bld.branch("sg1", "elbow q4 root (eq. E2, + / -)")
+    q4 = bld.let("q4", phi + g4 * ang)
+    c4 = bld.let("cq4", cphi * cang - g4 * sphi * sang)
+    s4 = bld.let("sq4", sphi * cang + g4 * cphi * sang)
+    xx = bld.let("xe", -(v["a3"] * c4 + v["d3"] * s4 + v["a4"]))
+    zz = bld.let("ze", v["a3"] * s4 - v["d3"] * c4 - v["d5"])
+    # 4. q6 (eq. W2): vx s6 + vy c6 = Z
+    c6a = bld.let("ce6", zz / rho6d)
+    bld.require(sp.And(sp.Abs(c6a) <= 1 + REACH_TOL,
+                       sp.Or(sp.Not(free6), sp.Abs(zz) <= panda.SINGULAR_TOL)))
+    cang6 = _snap_select(bld, "ca6", c6a, panda.DOUBLE_ROOT)
+    sang6 = bld.let("sa6", sp.sqrt(pos(1 - cang6 * cang6)))
+    ang6 = bld.let("an6", sp.atan2(sang6, cang6))
+    g6 = bld.branch("sg2", "wrist q6 root (eq. W2, + / -)")
+    q6 = bld.select("q6", free6, 0, psi6 + g6 * ang6)
+    c6 = bld.select("cq6", free6, 1, cps * cang6 - g6 * sps * sang6)
+    s6 = bld.select("sq6", free6, 0, sps * cang6 + g6 * cps * sang6)
+    # q5 (eq. W3): X c5 = vx c6 - vy s6, X s5 = vz
+    free5 = bld.flag("singular_q5", sp.Abs(xx) < panda.SINGULAR_TOL)
+    sx = bld.let("sgx", sgn(xx))
+    u5 = bld.let("u5", sx * (vv[0] * c6 - vv[1] * s6))
+    w5 = bld.let("w5", sx * vv[2])
+    n5 = bld.select("n5", free5, 1, sp.sqrt(u5 * u5 + w5 * w5))
+    q5 = bld.select("q5", free5, 0, sp.atan2(w5, u5))
+    c5 = bld.select("cq5", free5, 1, u5 / n5)
+    s5 = bld.select("sq5", free5, 0, w5 / n5)
+    # 5. R3 (eq. S1), the shoulder (eq. S2)
+    m = _let_matrix(bld, "ra", _rz_cols(r6, c6, s6))
+    m = _let_matrix(bld, "rb", _ry_cols(m, c5, s5))
+    m = _rx_minus_half_pi(_rz_cols(m, c4, s4))
+    r3 = _let_matrix(bld, "r3", m)
+    mag = _zyz_magnitude(bld, r3, "sh", "singular_q1")
+    g2 = bld.branch("sg3", "shoulder sign of sin q2 (+ / -)")
+    q1, q2, q3, _ = _zyz_angles(bld, r3, g2, mag, "sh", ("q1", "q2", "q3"), False)
+    bld.flag("singular", sp.Or(mag[2], free5, free6))
+    bld.ops.append(Op("solution", args=(q1, q2, q3, q4, q5, q6, FV), depth=bld.depth))
+    steps = [
+        ("pose in the canonical chain's frames", "B^-1 P T^-1", [f"Panda class, relation mismatch {geo.error:.1g}"]),
+        ("frame 6", "F7", ["R6 = R7 Rz(-q7) Rx(-pi/2), O6 = p - d7 z7 - a6 x6"]),
+        ("theta4", "S1", ["E2: A c4 + B s4 = K"]),
+        ("theta6", "S1", ["W2: vx s6 + vy c6 = Z(q4)"]),
+        ("theta5", "S2", ["W3: X c5 = vx c6 - vy s6, X s5 = vz"]),
+        ("theta1, theta2, theta3", "ZYZ", ["S1, S2: R3 = Rz(q1) Ry(q2) Rz(q3)"]),
+    ]
+    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0,
+                     free_rule=("set to 0 (q1 where sin q2 = 0, q5 where the shoulder is on axis 5, q6 "
+                                "where it is on axis 6), the joint after it taking the rest"),
+                     steps=steps, parameters=dict(geo.values), branch_labels=list(bld.labels),
+                     free="q7", free_doc="q7, the value of joint 7 (rad), returned as given in (-pi, pi]")
+
+
+def seven_joint_program(robot, kind: str) -> IKProgram:
+    """The program of a 7R arm of class ``kind`` ("srs" or "panda", :func:`derive.ik.redundant.redundant_kind`)."""
+    return srs_program(robot) if kind == "srs" else panda_program(robot)
+
