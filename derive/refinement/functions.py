@@ -52,6 +52,7 @@ from derive.codegen.emit import identifier
 from derive.codegen.fk import fk_kernel
 from derive.errors import DeriveError
 from derive.ik.closed_form import has_closed_form
+from derive.ik.redundant import redundant_kind
 from derive.ik.program import ik_program
 from derive.model.robot import LIBRARY_DIR, load_robot
 
@@ -266,7 +267,9 @@ def functions(robot, source: str | None = None) -> dict:
 
 def _load_or_build(robot) -> dict:
     found = {name: find_artifact(robot.id, f"casadi/{name}") for name in SAVED}
-    if all(found[name] is not None for name in REQUIRED):
+    # a 7-joint arm's functions stored before its IK program existed are built again
+    if all(found[name] is not None for name in REQUIRED) and (found["ik"] is not None
+                                                              or redundant_kind(robot) is None):
         return {name: ca.Function.load(str(path)) for name, path in found.items() if path is not None}
     source = "derived" if is_library_robot(robot) and robot.exact else "product"
     with task(robot.name):
@@ -335,8 +338,10 @@ def homotopy_function(robot, nominal):
 
 
 def _ik_function(robot):
-    """The IK program's 8 branches in SX (None when the robot has no closed form)."""
-    if not has_closed_form(robot):          # the extraction is used on the UR family only
+    """The IK program's 8 branches in SX (None when the robot has no closed form):
+    ``ik(pose) -> (Q, valid)``, and for a 7-joint arm ``ik(pose, free) -> (Q, valid)`` with its
+    free parameter (the arm angle psi or q7, :mod:`derive.ik.program7`)."""
+    if not has_closed_form(robot) and redundant_kind(robot) is None:
         return None
     try:
         prog = ik_program(robot)
@@ -344,11 +349,17 @@ def _ik_function(robot):
         return None
     pose = ca.SX.sym("pose", 8)
     env = {f"p{i}": pose[i] for i in range(8)}
+    free = ca.SX.sym("free") if prog.free else None
+    if free is not None:
+        env["fv"] = free
     sols, valid = [], []
     _run(prog.ops, 0, dict(env), ca.SX(1.0), sols, valid)
     if len(sols) != prog.branches:
         raise DeriveError(f"{robot.name}: IK program gave {len(sols)} branches, expected {prog.branches}")
     cols = [ca.vertcat(*[wrap_angle_sx(a) for a in s]) for s in sols]
+    if free is not None:
+        return ca.Function("ik", [pose, free], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose", "free"],
+                           ["Q", "valid"])
     return ca.Function("ik", [pose], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose"], ["Q", "valid"])
 
 
