@@ -3,6 +3,7 @@ formulas 4.9-4.44."""
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 from pathlib import Path
@@ -17,11 +18,15 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
+from derive.errors import InputError
 from derive.ik.closed_form import spherical_class
 from derive.ik.extract import R_SYMS, check_numerically, extract
+from derive.ik import panda as panda_ik
+from derive.ik import srs as srs_ik
 from derive.ik.program import spherical_forms
+from derive.ik.redundant import LABELS, free_parameter, redundant_kind, solve
 from derive.ik.spherical import canonical_robot
-from derive.ik.tolerances import WRIST_SINGULAR
+from derive.ik.tolerances import ACCEPT_TOL, REACH_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import fk
 from derive.model.robot import load_robot
 from derive.reports.appendix import class_context
@@ -128,17 +133,23 @@ def build_ik_context(robot, command: str) -> dict:
 def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
              force: bool = False) -> list:
     """Extract and typeset the closed-form IK into out_dir/<robot name>/ik.{md,tex}, recorded in
-    its manifest (a folder of another robot is refused unless ``force``)."""
+    its manifest (a folder of another robot is refused unless ``force``). A 7R arm of the Franka
+    Panda or SRS class (:func:`derive.ik.redundant.redundant_kind`) gets the closed form with its
+    free parameter (:func:`build_redundant_ik_context`); a 6R arm the extracted one."""
     t0 = time.perf_counter()
     robot = load_robot(robot)
     robot_name = robot.name
     claim_folder(Path(out_dir) / robot_name, robot.id, robot_name, force)
     command = command or f"dq-derive ik {robot_name}"
-    geo = spherical_class(robot)
-    if geo is None:
-        ctx, stem = build_ik_context(robot, command), "ik"
+    kind = redundant_kind(robot)
+    if kind is not None:
+        ctx, stem = build_redundant_ik_context(robot, command), "ik_redundant"
     else:
-        ctx, stem = build_sw_ik_context(robot, geo, command), "ik_spherical"
+        geo = spherical_class(robot)
+        if geo is None:
+            ctx, stem = build_ik_context(robot, command), "ik"
+        else:
+            ctx, stem = build_sw_ik_context(robot, geo, command), "ik_spherical"
     env = template_environment()
     out = Path(out_dir) / robot_name
     out.mkdir(parents=True, exist_ok=True)
@@ -268,3 +279,414 @@ def build_sw_ik_context(robot, geo, command: str) -> dict:
         "spans": [f"{latex(t4)} = {latex(sig1 + sig2)}", f"{latex(t6)} = {latex(sig1 - sig2)}"],
         "wrist_singular": WRIST_SINGULAR,
     }
+
+
+# --------------------------------------------------------------------------- #
+# Seven-joint classes with a free parameter (Franka Panda class, SRS class)
+# --------------------------------------------------------------------------- #
+#: The numerical check of the 7R report: configurations, seed of numpy's default_rng, and the
+#: distance (rad, every joint, after wrapping) within which a solution is the generating
+#: configuration.
+CHECK7_SAMPLES = 200
+CHECK7_SEED = 7
+CHECK7_FOUND = 1e-9
+#: The largest FK residual is reported as below the first of these levels it is below (a level,
+#: not the value, so that rounding differences between machines do not change the text).
+RESIDUAL_LEVELS = (1e-12, 1e-10, 1e-8)
+
+#: The sources of each class: (authors, title, where and what is taken from it).
+SOURCES = {
+    "srs": [("M. Shimizu, H. Kakuya, W.-K. Yoon, K. Kitagaki, K. Kosuge",
+             "Analytical inverse kinematic computation for 7-DOF redundant manipulators with joint "
+             "limits and its application to redundancy resolution",
+             "IEEE Transactions on Robotics 24(5), 2008, sec. III (the arm angle, the joints as "
+             "functions of it, the feasible arm angles)"),
+            ("C. Faria, F. Ferreira, W. Erlhagen, S. Monteiro, E. Bicho",
+             "Position-based kinematics for 7-DoF serial manipulators with global configuration "
+             "control, joint limit and singularity avoidance",
+             "Mechanism and Machine Theory 121, 2018 (the same construction for the iiwa, the "
+             "configuration flags GC2, GC4, GC6)")],
+    "panda": [("Y. He, S. Liu",
+               "Analytical inverse kinematics for Franka Emika Panda - a geometric solver for 7-DOF "
+               "manipulators with unconventional design",
+               "ICCCR 2021 (q7 fixed, the point O6, the elbow from the shoulder-O6 distance, then q6, "
+               "q5 and the shoulder; the steps here are dq-derive's own form of that geometry, "
+               "derive.ik.panda)")],
+}
+
+
+def _num(x) -> str:
+    """A number for the report: at most 12 significant digits (no float noise such as
+    0.30000000000000004), 0 below 1e-12 in magnitude (never -0)."""
+    x = float(x)
+    if abs(x) < 1e-12:
+        return "0"
+    return f"{x:.12g}"
+
+
+def _lin(terms) -> str:
+    """LaTeX of the sum of (coefficient, factor) terms with the numbers formatted by
+    :func:`_num`; zero terms left out, a unit coefficient not printed before a factor."""
+    out = ""
+    for c, f in terms:
+        c = float(c)
+        if abs(c) < 1e-12:
+            continue
+        mag = _num(abs(c))
+        body = f if (mag == "1" and f) else (rf"{mag}\,{f}" if f else mag)
+        if not out:
+            out = ("-" if c < 0 else "") + body
+        else:
+            out += (" - " if c < 0 else " + ") + body
+    return out or "0"
+
+
+def _vector(v) -> str:
+    return r"\left(" + ",\\ ".join(_num(x) for x in v) + r"\right)"
+
+
+def _matrix(m) -> str:
+    rows = [" & ".join(_num(x) for x in row) for row in np.asarray(m, dtype=float)]
+    return r"\begin{pmatrix} " + r" \\ ".join(rows) + r" \end{pmatrix}"
+
+
+def _sci(x: float) -> str:
+    """A tolerance such as 1e-10 (not 1e-010 or 1e-08)."""
+    return f"{x:.0e}".replace("e-0", "e-").replace("e+0", "e+")
+
+
+def _residual_text(largest: float) -> str:
+    for level in RESIDUAL_LEVELS:
+        if largest < level:
+            return f"below {_sci(level)}"
+    return f"at least {_sci(RESIDUAL_LEVELS[-1])}"
+
+
+def _redundant_check(robot, kind: str, samples: int = CHECK7_SAMPLES, seed: int = CHECK7_SEED) -> dict:
+    """The report's numerical check of :func:`derive.ik.redundant.solve`: ``samples``
+    configurations uniform inside the joint limits (numpy ``default_rng(seed)``; +-pi for a joint
+    without limits), their poses by the reference FK (:func:`derive.kinematics.fk.fk`, the
+    function that :mod:`derive.reference` exports as ``fk``), each solved at its own value of the
+    free parameter (q7 = q[:, 6], or the arm angle :func:`derive.ik.srs.arm_angle`). Returns how
+    many generating configurations are among the solutions (every joint within CHECK7_FOUND rad
+    after :func:`derive.algebra.angles.wrap_angle`), the largest FK residual of any returned
+    solution (unit dual quaternions compared up to sign, min(|a - b|, |a + b|) of the largest
+    component) as a RESIDUAL_LEVELS level, and the histogram of solution counts."""
+    lim = np.asarray(robot.limits, dtype=float)
+    lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -np.pi)
+    hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], np.pi)
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(lo, hi, size=(samples, 7))
+    poses = fk(robot, q)
+    free = q[:, 6] if kind == "panda" else srs_ik.arm_angle(robot, q)
+    sol = solve(robot, poses, free)
+    with np.errstate(invalid="ignore"):
+        dist = np.abs(wrap_angle(sol.q - q[:, None, :])).max(-1)
+    dist = np.where(np.isfinite(dist), dist, np.inf).min(-1)
+    found = int(np.sum(dist < CHECK7_FOUND))
+    valid = np.isfinite(sol.q).all(-1)
+    rows, _ = np.nonzero(valid)
+    got, want = fk(robot, sol.q[valid]), poses[rows]
+    res = np.minimum(np.abs(got - want).max(-1), np.abs(got + want).max(-1))
+    largest = float(res.max()) if len(res) else 0.0
+    hist = np.bincount(sol.counts, minlength=9)
+    return {
+        "samples": samples, "seed": seed, "found": found,
+        "found_percent": f"{100 * found // samples} %", "found_tol": f"{_sci(CHECK7_FOUND)}",
+        "solutions": int(valid.sum()), "residual": _residual_text(largest),
+        "unsolved": int(sum(1 for r in sol.reason if r)),
+        "histogram": [{"count": k, "poses": int(n)} for k, n in enumerate(hist) if n],
+    }
+
+
+def _srs_context(robot) -> dict:
+    """Class paragraph, numbers, steps and singular sets of an SRS arm, after
+    :mod:`derive.ik.srs` (Shimizu sec. III; Faria) and :func:`derive.ik.program7.srs_program`."""
+    geo = srs_ik.srs_geometry(robot)
+    _, (lo, hi) = free_parameter(robot)
+    dse, dew = geo.d_se, geo.d_ew
+    signs = [int(s) for s in geo.signs]
+    s4 = signs[3]
+    intro = [
+        "The SRS class (spherical shoulder, revolute elbow, spherical wrist): axes 1, 2, 3 meet at "
+        "the shoulder $S$, axes 5, 6, 7 at the wrist centre $W$, and at the zero pose the arm is "
+        "stretched along one line through both, axes 1, 3, 5, 7 on it and axes 2, 4, 6 "
+        "perpendicular to it, axis 4 crossing it at the elbow $E$. A pose fixes $S$ and $W$, and "
+        "so the triangle $S, E, W$ up to a rotation about the shoulder-wrist line: one free "
+        "parameter remains.",
+        r"The free parameter is the arm angle $\psi$ (rad), after Shimizu et al. (2008, sec. III): "
+        "the rotation of the arm plane $(S, E, W)$ about the shoulder-wrist line, right-handed "
+        r"about $x = W / \lVert W \rVert$, measured from the reference plane (the plane of axis 1 "
+        r"and $W$, in which the arm lies with $\theta_3 = 0$; $\psi = 0$ has the elbow on the side "
+        r"that the sign of $\theta_4$ gives). It is periodic, its range "
+        rf"$[-\pi, \pi)$ = [{_num(lo)}, {_num(hi)}) rad; the values a pose can take under the "
+        "joint limits are a union of intervals (derive.ik.srs.psi\\_intervals, from the closed "
+        r"form's breakpoints). With $\psi$ given, a pose has up to 8 solutions.",
+    ]
+    numbers = [
+        {"name": "d_{bs}", "value": _num(geo.d_bs), "text": "base origin to shoulder (m)"},
+        {"name": "d_{se}", "value": _num(dse), "text": "shoulder to elbow (m)"},
+        {"name": "d_{ew}", "value": _num(dew), "text": "elbow to wrist centre (m)"},
+        {"name": "d_{wf}", "value": _num(geo.d_wf), "text": "wrist centre to the end frame along the arm line at zero (m)"},
+    ]
+    relation = [
+        r"\theta_i = s_i\, q_i,\quad s = " + _vector(signs),
+        r"F = " + _matrix(geo.frame) + r",\quad S = " + _vector(geo.shoulder),
+        r"T_R = " + _matrix(geo.tool_rotation) + r",\quad t_T = " + _vector(geo.tool_translation),
+        r"R(\theta) = R_z(\theta_1) R_y(\theta_2) R_z(\theta_3) R_y(\theta_4) R_z(\theta_5) "
+        r"R_y(\theta_6) R_z(\theta_7),\quad W(\theta) = R_z(\theta_1) R_y(\theta_2) R_z(\theta_3)\, "
+        r"v(\theta_4),\quad v(\theta_4) = \left(d_{ew} \sin\theta_4,\ 0,\ d_{se} + d_{ew} \cos\theta_4\right)",
+    ]
+    relation_text = (
+        r"In the canonical frame (origin $S$, $z$ along the arm line, $y$ along axis 2; its axes "
+        r"are the columns of $F$ in base coordinates) every axis is $\pm z$ or $\pm y$, so with "
+        r"$\theta_i = s_i q_i$ the rotation and wrist centre are the products below; the robot's "
+        r"end frame is $(F R, S + F W)$ followed by the constant $(T_R, t_T)$ (the end frame in the "
+        r"wrist frame at zero; the flange offset $d_{wf}$ and any tool are in it). The relation "
+        f"reproduces the robot's FK on random configurations with errors {_residual_text(geo.error)} "
+        "(m, rad; below 1e-10 is required).")
+    cos_c, cos_d = dse ** 2 + dew ** 2, 2 * dse * dew
+    steps = [
+        {"title": "The pose in the canonical frame, the wrist centre",
+         "text": "From the pose's rotation $R$ and translation $t$:",
+         "formulas": [r"R_c = F^\top R\, T_R^\top,\qquad W = F^\top (t - S) - R_c\, t_T"]},
+        {"title": r"The elbow $\theta_4$ (branch GC4)",
+         "text": r"The triangle $S, E, W$ gives the elbow by the cosine law, independent of $\psi$; "
+                 r"its two roots are the elbow branches.",
+         "formulas": [r"\cos\theta_4 = \frac{\lVert W \rVert^2 - d_{se}^2 - d_{ew}^2}{2\, d_{se}\, d_{ew}}"
+                      r" = \frac{\lVert W \rVert^2 - " + _num(cos_c) + "}{" + _num(cos_d) + "}",
+                      r"\theta_4 = \pm \arccos(\cos\theta_4)"]},
+        {"title": r"The reference configuration $R_0$",
+         "text": r"The shoulder rotation with $\theta_3 = 0$ that carries $v(\theta_4)$ onto $W$ "
+                 r"(with $W$ on axis 1, $W_x = W_y = 0$, $a = 0$ is taken):",
+         "formulas": [r"R_0 = R_z(a)\, R_y(b - \varphi),\quad a = \operatorname{atan2}(W_y, W_x),\quad "
+                      r"b = \operatorname{atan2}\left(\sqrt{W_x^2 + W_y^2},\ W_z\right),\quad "
+                      r"\varphi = \operatorname{atan2}(v_x, v_z)",
+                      r"v = \left(" + _num(dew) + r"\sin\theta_4,\ 0,\ " + _num(dse) + " + "
+                      + _num(dew) + r"\cos\theta_4\right)"]},
+        {"title": r"The shoulder rotation at the arm angle $\psi$",
+         "text": r"Every shoulder rotation that carries $v(\theta_4)$ onto $W$ is $R_0$ followed by a "
+                 r"rotation about $x = W / \lVert W \rVert$ (Rodrigues); it is affine in "
+                 r"$\sin\psi$ and $\cos\psi$:",
+         "formulas": [r"R_\psi = I + \sin\psi\, [x]_\times + (1 - \cos\psi)\, [x]_\times^2,\qquad R_s = R_\psi R_0",
+                      r"R_s = A_s \sin\psi + B_s \cos\psi + C_s,\quad A_s = [x]_\times R_0,\quad "
+                      r"B_s = -[x]_\times^2 R_0,\quad C_s = x x^\top R_0"]},
+        {"title": r"The shoulder joints $\theta_1, \theta_2, \theta_3$ (branch GC2)",
+         "text": r"A ZYZ Euler decomposition $R_s = R_z(\theta_1) R_y(\theta_2) R_z(\theta_3) = (m_{ij})$, "
+                 r"the sign (GC2) that of $\sin\theta_2$; the kernels compute $\theta_3$ from the "
+                 r"rounded $\theta_1, \theta_2$ (column 1 of $R_y(\theta_2)^\top R_z(\theta_1)^\top R_s$), "
+                 "which equals the formula below and keeps the product exact near the singular set:",
+         "formulas": [r"\theta_2 = \operatorname{atan2}\left(\pm\sqrt{m_{13}^2 + m_{23}^2},\ m_{33}\right),\quad "
+                      r"\theta_1 = \operatorname{atan2}(\pm m_{23},\ \pm m_{13}),\quad "
+                      r"\theta_3 = \operatorname{atan2}(\pm m_{32},\ \mp m_{31})"]},
+        {"title": r"The wrist joints $\theta_5, \theta_6, \theta_7$ (branch GC6)",
+         "text": r"The wrist rotation from the rounded shoulder angles (so that the wrist absorbs "
+                 r"their rounding), then the same ZYZ decomposition $R_w = R_z(\theta_5) R_y(\theta_6) "
+                 r"R_z(\theta_7) = (n_{ij})$, the sign (GC6) that of $\sin\theta_6$:",
+         "formulas": [r"R_w = \left(R_z(\theta_1) R_y(\theta_2) R_z(\theta_3) R_y(\theta_4)\right)^\top R_c",
+                      r"\theta_6 = \operatorname{atan2}\left(\pm\sqrt{n_{13}^2 + n_{23}^2},\ n_{33}\right),\quad "
+                      r"\theta_5 = \operatorname{atan2}(\pm n_{23},\ \pm n_{13}),\quad "
+                      r"\theta_7 = \operatorname{atan2}(\pm n_{32},\ \mp n_{31})"]},
+        {"title": "The joint values",
+         "text": r"Each candidate is wrapped to $(-\pi, \pi]$ and checked by the FK (dropped beyond "
+                 f"{_sci(ACCEPT_TOL)} in position or rotation); branches that coincide on a singular "
+                 "set are returned once.",
+         "formulas": [r"q_i = s_i\, \theta_i"]},
+    ]
+    branch = {
+        "formula": r"k = 4\, i_2 + 2\, i_4 + i_6",
+        "text": r"with $i = 0$ for the + sign and 1 for the - sign of GC2 ($\sin\theta_2$), GC4 "
+                r"($\theta_4$) and GC6 ($\sin\theta_6$). The signs are those of the canonical angles "
+                rf"$\theta_i = s_i q_i$; here $s_4 = {s4}$" + (", so GC4 + is $q_4 < 0$." if s4 < 0 else "."),
+    }
+    singular = [
+        {"name": r"Elbow stretched or folded ($\theta_4 = 0$ or $\pi$)",
+         "text": rf"$\cos\theta_4$ within {_sci(srs_ik.STRETCH_TOL)} of $\pm 1$ is taken as $\pm 1$: "
+                 "the two elbow branches coincide and are returned once (the kernels flag the "
+                 "solution singular, "
+                 rf"$\lvert\sin\theta_4\rvert$ below {_sci(WRIST_SINGULAR)}). No joint is left free."},
+        {"name": r"Shoulder aligned ($\sin\theta_2 = 0$)",
+         "text": r"axes 1 and 3 are one line: only $\theta_1 + \theta_3$ ($\theta_2 = 0$) or "
+                 r"$\theta_1 - \theta_3$ ($\theta_2 = \pi$) is fixed "
+                 rf"($\sqrt{{m_{{13}}^2 + m_{{23}}^2}}$ below {_sci(WRIST_SINGULAR)}). The kernels set "
+                 r"$q_1 = 0$, give $\theta_3$ the rest and flag the solution singular; the reference "
+                 "solver (derive.reference.ik) takes $q_1$ from q\\_ref when one is given (else 0)."},
+        {"name": r"Wrist aligned ($\sin\theta_6 = 0$)",
+         "text": r"axes 5 and 7 are one line: only $\theta_5 \pm \theta_7$ is fixed. The kernels set "
+                 r"$q_5 = 0$, give $\theta_7$ the rest and flag the solution singular; the reference "
+                 "solver takes $q_5$ from q\\_ref (else 0)."},
+        {"name": "Wrist centre on axis 1",
+         "text": r"the reference plane is undefined ($W_x = W_y = 0$); $a = 0$ is taken (the plane of "
+                 r"axis 1 and the canonical $x$ axis), in the solver and in the arm angle alike, so "
+                 r"$\psi$ keeps a meaning (there $\psi$ and $q_1$ move the arm the same way)."},
+        {"name": "Wrist centre at the shoulder",
+         "text": r"$W = 0$, possible only with $d_{se} = d_{ew}$ and the elbow folded: the shoulder "
+                 r"rotation is free in three dimensions and there is no arm angle; no solution, with "
+                 "its reason."},
+    ]
+    reach = {
+        "text": r"The elbow's $\cos\theta_4$ beyond $\pm 1$ by more than "
+                f"{_sci(REACH_TOL)} (the cosine is a ratio, so the tolerance is relative): the wrist "
+                r"centre is out of reach for every $\psi$; no solution, with the reason",
+        "reasons": [srs_ik.REASON_REACH, srs_ik.REASON_FOLDED],
+    }
+    return {"kind_name": "SRS class",
+            "free": "psi", "free_tex": r"\psi", "intro": intro, "numbers": numbers,
+            "relation_text": relation_text, "relation": relation, "table": None,
+            "steps": steps, "branch": branch, "singular": singular, "reach": reach}
+
+
+def _panda_context(robot) -> dict:
+    """Class paragraph, numbers, steps and singular sets of a Franka Panda-class arm, after
+    :mod:`derive.ik.panda` (He & Liu 2021) and :func:`derive.ik.program7.panda_program`."""
+    geo = panda_ik.panda_geometry(robot)
+    _, (lo, hi) = free_parameter(robot)
+    v = geo.values
+    d1, d3, a3, a4, d5, a6, d7 = (v[k] for k in panda_ik.PARAMETERS)
+    a_e, b_e = a3 * a4 + d3 * d5, a4 * d3 - a3 * d5
+    k_c = a3 ** 2 + d3 ** 2 + a4 ** 2 + d5 ** 2
+    r_e = math.hypot(a_e, b_e)
+    intro = [
+        "The Franka Panda class (Panda, FR3): Franka's modified-DH chain with seven lengths (table "
+        "below). Axes 1, 2, 3 meet at the shoulder $S = (0, 0, d_1)$; the elbow offsets $a_3$, "
+        "$a_4$ and the wrist offset $a_6$ leave the arm without a spherical wrist, so a pose has a "
+        "one-parameter self-motion.",
+        "The free parameter is $q_7$, the value of joint 7 (rad), after He and Liu (2021): with "
+        "$q_7$ fixed the other six joints are in closed form, with up to 8 solutions. Its range "
+        f"is joint 7's limits, [{_num(lo)}, {_num(hi)}] rad; the solutions return $q_7$ as given.",
+    ]
+    names = {"d1": "d_1", "d3": "d_3", "a3": "a_3", "a4": "a_4", "d5": "d_5", "a6": "a_6", "d7": "d_7"}
+    texts = {"d1": "base to shoulder (m)", "d3": "shoulder to elbow along axis 3 (m)",
+             "a3": "elbow offset (m)", "a4": "elbow offset (m)", "d5": "elbow to wrist along axis 5 (m)",
+             "a6": "wrist offset (m)", "d7": "flange along axis 7 (m)"}
+    numbers = [{"name": names[k], "value": _num(v[k]), "text": texts[k]} for k in panda_ik.PARAMETERS]
+    table = [("1", "0", "0", _num(d1)), ("2", r"-\pi/2", "0", "0"), ("3", r"\pi/2", "0", _num(d3)),
+             ("4", r"\pi/2", _num(a3), "0"), ("5", r"-\pi/2", _num(a4), _num(d5)),
+             ("6", r"\pi/2", "0", "0"), ("7", r"\pi/2", _num(a6), "0"), ("flange", "0", "0", _num(d7))]
+
+    def dq_text(d):
+        d = np.asarray(d, dtype=float)
+        return "I" if np.array_equal(d, np.array([1.0, 0, 0, 0, 0, 0, 0, 0])) else _vector(d)
+
+    relation_text = (
+        "The canonical chain is Franka's modified-DH table (Craig: $T_i = R_x(\\alpha_{i-1}) "
+        "T_x(a_{i-1}) R_z(q_i) T_z(d_i)$) with the robot's lengths; the robot is related to it by "
+        "constant transforms $B$ (base) and $T$ (end frame), unit dual quaternions, $I$ the "
+        "identity. The relation reproduces the robot's FK on random configurations with errors "
+        f"{_residual_text(geo.error)} (m, rad; below 1e-10 is required).")
+    relation = [r"FK_{\mathrm{robot}}(q) = B\, FK_{\mathrm{canonical}}(q)\, T,\quad B = "
+                + dq_text(geo.base) + r",\quad T = " + dq_text(geo.tool)]
+    steps = [
+        {"title": "The pose in the canonical chain's frames",
+         "text": "The canonical flange pose, its rotation $R_7$ (columns $x_7, y_7, z_7$) and "
+                 "position $p$:",
+         "formulas": [r"(R_7, p) = B^{-1} P\, T^{-1}"]},
+        {"title": "Frame 6 (eq. F7)",
+         "text": r"From $T_7 = T_6 R_x(\pi/2) T_x(a_6) R_z(q_7)$: the origin $O_6$ (also that of "
+                 r"frame 5, $a_5 = d_6 = 0$) and the rotation of frame 6, $x_6$ its first column:",
+         "formulas": [r"R_6 = R_7\, R_z(-q_7)\, R_x(-\pi/2),\qquad O_6 = p - d_7\, z_7 - a_6\, x_6 = "
+                      + _lin([(1, "p"), (-d7, "z_7"), (-a6, "x_6")])]},
+        {"title": "The shoulder in frame 6",
+         "text": "",
+         "formulas": [r"v = R_6^\top (S - O_6),\quad S = " + _vector([0.0, 0.0, d1])]},
+        {"title": r"The elbow $q_4$ (eqs. E1, E2; first branch)",
+         "text": r"The shoulder in frame 5 seen from the arm side is $(X c_5, -X s_5, Z)$ (E1); "
+                 r"$\lVert v \rVert^2 = X^2 + Z^2$ is linear in $c_4 = \cos q_4$, $s_4 = \sin q_4$ (E2), "
+                 "with the robot's numbers:",
+         "formulas": [r"X = -(a_3 c_4 + d_3 s_4 + a_4) = " + _lin([(-a3, "c_4"), (-d3, "s_4"), (-a4, "")])
+                      + r",\quad Z = a_3 s_4 - d_3 c_4 - d_5 = " + _lin([(a3, "s_4"), (-d3, "c_4"), (-d5, "")]),
+                      r"A c_4 + B s_4 = K,\quad A = a_3 a_4 + d_3 d_5 = " + _num(a_e)
+                      + r",\quad B = a_4 d_3 - a_3 d_5 = " + _num(b_e),
+                      r"K = \tfrac{1}{2}\left(\lVert v \rVert^2 - a_3^2 - d_3^2 - a_4^2 - d_5^2\right) = "
+                      r"\tfrac{1}{2}\left(\lVert v \rVert^2 - " + _num(k_c) + r"\right)",
+                      r"q_4 = \operatorname{atan2}(B, A) \pm \arccos\frac{K}{\sqrt{A^2 + B^2}} = "
+                      + _num(math.atan2(b_e, a_e)) + r" \pm \arccos\frac{K}{" + _num(r_e) + "}"]},
+        {"title": r"The wrist $q_6$ (eqs. W1, W2; second branch)",
+         "text": r"The same point seen from the wrist side is $R_x(\pi/2) R_z(q_6)\, v = "
+                 r"(v_x c_6 - v_y s_6,\ -v_z,\ v_x s_6 + v_y c_6)$ (W1); its third row equals $Z(q_4)$ (W2):",
+         "formulas": [r"v_x s_6 + v_y c_6 = Z,\qquad q_6 = \operatorname{atan2}(v_x, v_y) \pm "
+                      r"\arccos\frac{Z}{\sqrt{v_x^2 + v_y^2}}"]},
+        {"title": r"The wrist $q_5$ (eq. W3)",
+         "text": r"Rows 1 and 2 of E1 = W1: $X c_5 = v_x c_6 - v_y s_6$, $X s_5 = v_z$:",
+         "formulas": [r"q_5 = \operatorname{atan2}\left(\operatorname{sgn}(X)\, v_z,\ "
+                      r"\operatorname{sgn}(X)\,(v_x c_6 - v_y s_6)\right)"]},
+        {"title": r"The shoulder $q_1, q_2, q_3$ (eqs. S1, S2; third branch)",
+         "text": r"The rotation of frame 3, then a ZYZ Euler decomposition $R_3 = (m_{ij})$, the "
+                 r"sign that of $\sin q_2$ (the kernels compute $q_3$ from the rounded $q_1, q_2$, "
+                 "which equals the formula below):",
+         "formulas": [r"R_3 = R_6\, R_z(-q_6)\, R_y(-q_5)\, R_z(-q_4)\, R_x(-\pi/2) = R_z(q_1)\, R_y(q_2)\, R_z(q_3)",
+                      r"q_2 = \operatorname{atan2}\left(\pm\sqrt{m_{13}^2 + m_{23}^2},\ m_{33}\right),\quad "
+                      r"q_1 = \operatorname{atan2}(\pm m_{23},\ \pm m_{13}),\quad "
+                      r"q_3 = \operatorname{atan2}(\pm m_{32},\ \mp m_{31})"]},
+        {"title": "The joint values",
+         "text": r"$q_1$ to $q_6$ are wrapped to $(-\pi, \pi]$, $q_7$ is the given value; each "
+                 f"candidate is checked by the FK (dropped beyond {_sci(ACCEPT_TOL)} in position or "
+                 "rotation) and near-duplicates are merged.",
+         "formulas": []},
+    ]
+    branch = {
+        "formula": r"b = 4\, i_4 + 2\, i_6 + i_2",
+        "text": r"with $i = 0$ for the + root and 1 for the - root of the elbow ($q_4$, E2), the "
+                r"wrist ($q_6$, W2) and the shoulder (the sign of $\sin q_2$).",
+    }
+    x0 = " or ".join(_num(x) for x in ((0.0, 2 * math.atan2(d3, a3)) if abs(a4 + a3) < 1e-12 else ()))
+    axis6 = d5 > math.hypot(a3, d3)
+    singular = [
+        {"name": "Elbow stretched or folded",
+         "text": r"$\lvert K \rvert = \sqrt{A^2 + B^2}$: the two $q_4$ roots coincide (an argument within "
+                 f"{_sci(panda_ik.DOUBLE_ROOT)} of $\\pm 1$ is taken as $\\pm 1$) and the pairs merge: "
+                 "4 solutions."},
+        {"name": r"Shoulder on axis 5 ($X = 0$)",
+         "text": r"$a_3 c_4 + d_3 s_4 = -a_4$" + (f" ($q_4$ = {x0} rad)" if x0 else "")
+                 + r": axes 3 and 5 are one line through $S$, $q_5$ is free and $q_3$ absorbs it. "
+                 r"The kernels set $q_5 = 0$ and flag the solution singular; the reference solver "
+                 "(derive.reference.ik) takes $q_5$ from q\\_ref when one is given (else 0)."},
+        {"name": r"Shoulder on axis 6 ($v_x = v_y = 0$)",
+         "text": r"needs $Z(q_4) = 0$; $q_6$ is free: set to 0 by the kernels, from q\_ref in the "
+                 "reference solver, flagged singular."
+                 + (r" Impossible for this robot: $\lvert Z \rvert \ge d_5 - \sqrt{a_3^2 + d_3^2} = "
+                    + _num(d5 - math.hypot(a3, d3)) + " > 0$." if axis6 else "")},
+        {"name": r"Double root of $q_6$ ($c_5 = 0$)",
+         "text": r"$\lvert Z \rvert = \sqrt{v_x^2 + v_y^2}$ ($q_5 = \pm\pi/2$): the two $q_6$ roots merge."},
+        {"name": r"Axes 1 and 3 aligned ($\sin q_2 = 0$)",
+         "text": r"only $q_1 + q_3$ ($q_2 = 0$) or $q_1 - q_3$ ($q_2 = \pi$) is fixed "
+                 rf"($\sqrt{{m_{{13}}^2 + m_{{23}}^2}}$ below {_sci(WRIST_SINGULAR)}). The kernels set "
+                 r"$q_1 = 0$, give $q_3$ the rest and flag the solution singular; the reference solver "
+                 "takes $q_1$ from q\\_ref (else 0)."},
+        {"name": "Wrist centre on axis 1",
+         "text": r"not singular here: $q_1$ comes from the orientation of frame 3, not from the "
+                 r"position of $O_6$."},
+    ]
+    reach = {
+        "text": r"An arccos argument ($K / \sqrt{A^2 + B^2}$ of the elbow, $Z / \sqrt{v_x^2 + v_y^2}$ "
+                rf"of $q_6$) beyond $\pm 1$ by more than {_sci(REACH_TOL)} (the arguments are normalised, "
+                r"so the tolerance is relative): that branch has no solution for this value of $q_7$; "
+                "where none remains, the pose has no solution at this $q_7$, with the reason",
+        "reasons": [panda_ik.REASON_ELBOW, panda_ik.REASON_WRIST],
+    }
+    return {"kind_name": "Franka Panda class", "free": "q7", "free_tex": "q_7", "intro": intro,
+            "numbers": numbers, "relation_text": relation_text, "relation": relation,
+            "table": table, "steps": steps, "branch": branch, "singular": singular, "reach": reach}
+
+
+def build_redundant_ik_context(robot, command: str) -> dict:
+    """The closed form of a 7R arm with its free parameter (:func:`derive.ik.redundant.redundant_kind`:
+    the SRS class after Shimizu et al. 2008 and Faria et al. 2018, :mod:`derive.ik.srs`; the
+    Franka Panda class after He & Liu 2021, :mod:`derive.ik.panda`), as the IK programs of
+    :mod:`derive.ik.program7` run it, with the class's numbers, the branch numbering
+    (:data:`derive.ik.redundant.LABELS`), the singular sets, reachability and a numerical check
+    (:func:`_redundant_check`)."""
+    robot = load_robot(robot)
+    kind = redundant_kind(robot)
+    if kind is None:
+        raise InputError(f"{robot.name}: not a 7R arm of the Franka Panda or SRS class")
+    ctx = _srs_context(robot) if kind == "srs" else _panda_context(robot)
+    for k, st in enumerate(ctx["steps"]):
+        st["k"] = k + 1
+    ctx.update({
+        "version": __version__, "command": command, "robot": robot.name, "title": robot.title,
+        "kind": kind,
+        "labels": [{"weight": 4 >> i, "text": t} for i, t in enumerate(LABELS[kind])],
+        "sources": SOURCES[kind], "check": _redundant_check(robot, kind),
+    })
+    return ctx
