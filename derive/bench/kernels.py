@@ -35,10 +35,12 @@ from derive import reference
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.bench.machine import machine
+from derive.bench.redundant import bench_redundant, redundant_report
 from derive.codegen.emit import identifier
 from derive.codegen.loader import c_flags, kernel_folder, kernels
 from derive.errors import DeriveError
 from derive.ik.closed_form import spherical_class
+from derive.ik.redundant import redundant_kind
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 from derive.symbolic.chain import chain_from_robot
@@ -254,6 +256,8 @@ def _ikgeo(robot, mats):
 
 def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: int = 0,
                   singular: int = 2000) -> dict:
+    if redundant_kind(robot) is not None:
+        return bench_redundant(robot, repeats)
     rng = np.random.default_rng(seed)
     geo = spherical_class(robot)
     q = rng.uniform(-np.pi, np.pi, size=(n, 6))
@@ -335,6 +339,8 @@ def _spherical_peers(out, robot, geo, poses, mats, spose, smats, m_peer) -> dict
 
 
 def report(r: dict) -> str:
+    if r.get("kind") == "redundant":
+        return redundant_report(r)
     h = r["harness"]
     lines = [f"generated kernels of {r['robot']}, {r['n']} poses, {r['machine']}, {r['date']}",
              f"C flags: {h.get('flags', '?')}",
