@@ -67,6 +67,10 @@ UR_ROBOTS = ("ur3", "ur3e", "ur5", "ur5e", "ur10", "ur10e", "ur16e")
 #: report, kernels and CasADi functions of the first, kernels and CasADi functions of the rest.
 #: Every other robot of the class gets them on request (``dq-derive kernels ROBOT`` ...).
 SW_ROBOTS = ("irb120", "kr6-r900")
+#: Seven-joint robots whose outputs ``dq-derive generate`` writes by default: appendix, IK report,
+#: kernels and CasADi functions of the first of each class (Panda: q7 given, SRS: the arm angle
+#: given), kernels and CasADi functions of the others.
+SEVEN_ROBOTS = ("panda", "iiwa14", "fr3", "iiwa7")
 
 #: A --quat typed with a few decimals is normalised when its norm is this close to 1.
 QUAT_TOL = 1e-4
@@ -605,6 +609,17 @@ def cmd_generate(args) -> int:
             written += write_casadi(name, args.out, force=True)
         print(f"FK/IK kernels and CasADi functions (fk, fk_matrix, pose_error, pose_error_jacobian, "
               f"residual, ik) of {', '.join(UR_ROBOTS + tuple(sw))} written in {time.perf_counter() - t:.2f} s")
+        for name in SEVEN_ROBOTS:
+            t = time.perf_counter()
+            if name in SEVEN_ROBOTS[:2]:
+                written += write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}",
+                                          force=True)
+                written += write_ik(name, args.out, progress=True, command=f"dq-derive ik {name}", force=True)
+            written += write_kernels(name, args.out, command=f"dq-derive kernels {name}", force=True)
+            written += write_casadi(name, args.out, force=True)
+            what = "appendix, IK report, " if name in SEVEN_ROBOTS[:2] else ""
+            print(f"{name}: seven joints, {what}kernels and CasADi functions with the free parameter "
+                  f"written in {time.perf_counter() - t:.2f} s")
     for line in _robots_table([_robot_row(name) for name in list_robots()]):
         print(line)
     print()

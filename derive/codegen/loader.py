@@ -333,6 +333,8 @@ class Kernels:
         call."""
         if self.free and free is None:
             raise InputError(missing_free_message(self.robot))
+        if free is not None and not self.free:
+            raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
         if self._ext is not None and not (details or within_limits) and self.has_ik:
             out = self._ext.ik(P, self._tool, False, *self._ext_args(free))   # one C call, checks in C
             if out is not NotImplemented:
@@ -435,8 +437,14 @@ class Kernels:
         if not self.free:
             raise InputError(f"ik_sweep: {self.robot.name} has {self.dof} joints and no free parameter; use ik")
         poses, single = self._tool_free(P)
+        limiter = None
+        if self._ext is not None:           # the windings in C, with the kernel's limits
+            def limiter(q, counts, branch, singular):
+                return self._ext.within_limits(np.ascontiguousarray(q), np.asarray(counts, dtype=np.int64),
+                                               np.asarray(branch, dtype=np.int64),
+                                               np.asarray(singular, dtype=np.int64))
         return redundant.ik_sweep(self.robot, poses[0] if single else poses, n,
-                                  within_limits=within_limits, solver=self._solver(False))
+                                  within_limits=within_limits, solver=self._solver(False), limiter=limiter)
 
     def nearest(self, P, q_seed, tol=None) -> select.Nearest:
         """Per pose the solution nearest to the seed configuration(s) ``q_seed`` ((dof,) or (n,

@@ -199,7 +199,7 @@ def srs_program(robot) -> IKProgram:
     cb0, sb0 = bld.let("cb0", w[2] / nw), bld.let("sb0", rho / nw)
     # 3. shoulder sign, elbow root
     g2 = bld.branch("sg1", "shoulder GC2 = sign of sin q2 (+ / -)")
-    g4 = bld.branch("sg2", "elbow GC4 = sign of q4 (+ / -)")
+    g4 = bld.branch("sg2", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
     s4 = bld.let("st4", g4 * s4a)
     t4 = bld.let("t4", sp.atan2(s4, c4))
     vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)

@@ -86,7 +86,7 @@ REFINE = 31
 LABELS = {
     "panda": ["elbow q4 root (eq. E2, + / -)", "wrist q6 root (eq. W2, + / -)",
               "shoulder sign of sin q2 (+ / -)"],
-    "srs": ["shoulder GC2 = sign of sin q2 (+ / -)", "elbow GC4 = sign of q4 (+ / -)",
+    "srs": ["shoulder GC2 = sign of sin q2 (+ / -)", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)",
             "wrist GC6 = sign of sin q6 (+ / -)"],
 }
 NAMES = {"panda": "q7", "srs": "psi"}
@@ -295,13 +295,16 @@ def sweep_values(robot, poses, n: int) -> np.ndarray:
     return np.broadcast_to(lo + (hi - lo) * (np.arange(n) + 0.5) / n, (len(P), n)).copy()
 
 
-def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solver=None) -> Sweep:
+def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solver=None,
+             limiter=None) -> Sweep:
     """The solutions of P poses at n values of the free parameter over its feasible range
     (:func:`sweep_values`). ``within_limits`` (default): only the solutions inside the joint
     limits, each at its in-limit winding (:func:`derive.ik.select.within_limits`); else every
     solution (:func:`solve`). One pose (8,) / (4, 4) gives the arrays without the leading axis.
     ``solver(poses (m, 8), free (m,))`` -> (q, counts, branch, singular) replaces :func:`solve`
-    (the generated kernels' batch IK: ``derive.kernels(robot, "c").ik_sweep``)."""
+    (the generated kernels' batch IK: ``derive.kernels(robot, "c").ik_sweep``), and
+    ``limiter(q, counts, branch, singular)`` -> the same four, every in-limit winding, replaces
+    :func:`derive.ik.select.within_limits` (the kernels' extension does it in C)."""
     robot = load_robot(robot)
     values = sweep_values(robot, poses, n)
     P, single = as_pose_batch(poses)
@@ -320,7 +323,11 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solve
         else:
             sq, sc, sb, sg = solver(P[rows], values[have])
         if within_limits:
-            sq, sc, sb, sg = select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
+            if limiter is None:
+                sq, sc, sb, sg = select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
+            else:
+                sq, sc, sb, sg = limiter(sq, sc, sb, sg)
+                sg = np.asarray(sg, dtype=bool)
             width = max(BRANCHES, sq.shape[1])
             if width > BRANCHES:
                 q = np.full((m, n, width, 7), np.nan)
