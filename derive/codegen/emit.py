@@ -22,6 +22,7 @@ from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
 from derive.ik.select import LIMIT_SLACK
+from derive.ik.ir import leaf_of, leaf_weights
 from derive.ik.program import ik_program
 from derive.model.robot import load_robot
 
@@ -206,7 +207,7 @@ def _ik_context(robot) -> dict:
             branch_index.append(d["index"])
         ops.append(d)
     k = len(branch_index)
-    leaf = " + ".join(f"{2 ** (k - 1 - i)}*{b}" if k - 1 - i else b for i, b in enumerate(branch_index))
+    leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
     flat_full = _flat_ops(prog, printers["cc"], numeric)
     flat = _live(flat_full)
     # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
@@ -289,7 +290,7 @@ def _flat_ops(prog, printer, numeric) -> list:
         elif op.kind == "require":
             d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
         elif op.kind == "solution":
-            leaf = int("".join(map(str, path)) or "0", 2)
+            leaf = leaf_of(prog, path)
             d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
                  "sing": name("singular", path) if "singular" in depth_of else "0"}
         return [d]

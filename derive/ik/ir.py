@@ -51,7 +51,22 @@ class IKProgram:
     parameters: dict = field(default_factory=dict)
     branch_labels: list = field(default_factory=list)   # the unknown each branch bit chooses the root of
     free: str | None = None                 # 7R: the free parameter (input ``fv``), "psi" or "q7"
+    # the weight of each nesting level's bit in the branch (leaf) index, outermost first; None:
+    # 2^(levels - 1) ... 1 (the nesting order); branch_labels are in the order of the weights
+    bit_weights: tuple | None = None
     free_doc: str = ""                      # what it is, for the generated files' headers
+
+
+def leaf_weights(prog: IKProgram) -> tuple:
+    """The weight of each nesting level's branch bit in the leaf (branch) index, outermost first."""
+    levels = sorted({op.depth for op in prog.ops if op.kind == "branch"})
+    return tuple(prog.bit_weights) if prog.bit_weights else tuple(2 ** (len(levels) - 1 - i)
+                                                                   for i in range(len(levels)))
+
+
+def leaf_of(prog: IKProgram, bits) -> int:
+    """The leaf (branch) index of a path of branch bits (0 for the first root), outermost first."""
+    return sum(w * int(b) for w, b in zip(leaf_weights(prog), bits))
 
 
 class Builder:
@@ -90,6 +105,13 @@ class Builder:
 
     def require(self, cond):
         self.ops.append(Op("require", expr=self._trig(self._num(cond)), depth=self.depth))
+
+    def known_symbol(self, name: str) -> sp.Symbol:
+        """The symbol of a flag (or value) defined earlier, by name."""
+        sym = next((s for s in self.known if s.name == name), None)
+        if sym is None:
+            raise DeriveError(f"IK program: {name} is used before it is defined")
+        return sym
 
     def flag(self, name, cond) -> sp.Symbol:
         sym = sp.Symbol(name)

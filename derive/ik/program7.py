@@ -75,36 +75,43 @@ def _snap_select(bld: Builder, name: str, c, tol: float):
     return bld.select(name, c >= 1 - tol, 1, inner)
 
 
-def _zyz_magnitude(bld: Builder, m, stem: str, flag: str):
-    """Before the sign branch: |sin b| = hypot(m02, m12) of m = Rz(a) Ry(b) Rz(c), its flag
-    ``flag`` (below WRIST_SINGULAR: a is free) and a divisor that is 1 on the singular set."""
+def _zyz_plus(bld: Builder, m, stem: str, flag: str, trig: bool):
+    """Before the sign branch: the decomposition m = Rz(a) Ry(b) Rz(c) with sin b >= 0
+    (:func:`derive.ik.srs._zyz` with sign +1): |sin b| = hypot(m02, m12), the flag ``flag``
+    (below WRIST_SINGULAR: a is free and set to 0), a = atan2(m12, m02), b = atan2(|sin b|, m22),
+    c from Ry(b)^T Rz(a)^T m; with ``trig`` also the cosines and sines (ca, sa, cb, sb, cc, sc)
+    for a later product. Returns (a, b, c, the offset of a and c on the - branch (pi, or 0 on the
+    singular set), trig)."""
     hs = bld.let(f"{stem}_hs", sp.sqrt(m[0][2] ** 2 + m[1][2] ** 2))
     sing = bld.flag(flag, hs < WRIST_SINGULAR)
     safe = bld.select(f"{stem}_hd", sing, 1, hs)
-    return hs, safe, sing
-
-
-def _zyz_angles(bld: Builder, m, sign, mag, stem: str, names: tuple, trig: bool):
-    """After the sign branch (sign = +-1, the sign of sin b): the angles a, b, c (let names
-    ``names``) of m = Rz(a) Ry(b) Rz(c) (module docstring), a = 0 on the singular set; with
-    ``trig`` also their cosines and sines (ca, sa, cb, sb, cc, sc) for a later product."""
-    hs, safe, sing = mag
-    na, nb, nc = names
-    a = bld.select(na, sing, 0, sp.atan2(sign * m[1][2], sign * m[0][2]))
-    ca = bld.select(f"{stem}_ca", sing, 1, sign * m[0][2] / safe)
-    sa = bld.select(f"{stem}_sa", sing, 0, sign * m[1][2] / safe)
+    a = bld.select(f"{stem}_a", sing, 0, sp.atan2(m[1][2], m[0][2]))
+    ca = bld.select(f"{stem}_ca", sing, 1, m[0][2] / safe)
+    sa = bld.select(f"{stem}_sa", sing, 0, m[1][2] / safe)
     b_sing = bld.select(f"{stem}_bs", m[2][2] >= 0, 0, sp.pi)
-    b = bld.select(nb, sing, b_sing, sp.atan2(sign * hs, m[2][2]))
+    b = bld.select(f"{stem}_b", sing, b_sing, sp.atan2(hs, m[2][2]))
     cb = bld.select(f"{stem}_cb", sing, sgn(m[2][2]), m[2][2])
-    sb = bld.select(f"{stem}_sb", sing, 0, sign * hs)
+    sb = bld.select(f"{stem}_sb", sing, 0, hs)
     # Rz(c) = Ry(b)^T Rz(a)^T m, column 0: (cos c, sin c, 0)
     ny = bld.let(f"{stem}_ny", -sa * m[0][0] + ca * m[1][0])
     nx = bld.let(f"{stem}_nx", cb * (ca * m[0][0] + sa * m[1][0]) - sb * m[2][0])
-    c = bld.let(nc, sp.atan2(ny, nx))
+    c = bld.let(f"{stem}_c", sp.atan2(ny, nx))
+    off = bld.select(f"{stem}_off", sing, 0, sp.pi)
     if not trig:
-        return a, b, c, None
+        return a, b, c, off, None
     nn = bld.let(f"{stem}_nn", sp.sqrt(nx * nx + ny * ny))
-    return a, b, c, (ca, sa, cb, sb, bld.let(f"{stem}_cc", nx / nn), bld.let(f"{stem}_sc", ny / nn))
+    return a, b, c, off, (ca, sa, cb, sb, bld.let(f"{stem}_cc", nx / nn), bld.let(f"{stem}_sc", ny / nn))
+
+
+def _zyz_signed(bld: Builder, plus, sign, names: tuple):
+    """After the sign branch (sign = +-1, the sign of sin b): the decomposition of that sign,
+    (a + pi, -b, c + pi) for - (the same rotation: Rz(a + pi) Ry(-b) Rz(c + pi) = Rz(a) Ry(b)
+    Rz(c), with cosines and sines negated exactly), so the atan2 are taken once; on the singular
+    set a stays 0 and both signs give the same solution (merged)."""
+    a, b, c, off, _ = plus
+    na, nb, nc = names
+    half = (1 - sign) / 2                       # 0 on the + branch, 1 on the -
+    return bld.let(na, a + half * off), bld.let(nb, sign * b), bld.let(nc, c + half * off)
 
 
 def _rz_rows(m, c, s):
@@ -184,6 +191,7 @@ def srs_program(robot) -> IKProgram:
     bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
     c4 = _snap_select(bld, "ct4", ce, srs.STRETCH_TOL)
     s4a = bld.let("st4a", sp.sqrt(pos(1 - c4 * c4)))
+    t4a = bld.let("t4a", sp.atan2(s4a, c4))
     # 2. R_psi = cos psi I + sin psi [x]x + (1 - cos psi) x x^T, x = W/|W|
     nw = bld.let("nw", sp.sqrt(ww))
     x = [bld.let(f"x{i}", w[i] / nw) for i in range(3)]
@@ -197,11 +205,11 @@ def srs_program(robot) -> IKProgram:
     ca0 = bld.select("ca0", axis, w[0] / rho_d, 1)
     sa0 = bld.select("sa0", axis, w[1] / rho_d, 0)
     cb0, sb0 = bld.let("cb0", w[2] / nw), bld.let("sb0", rho / nw)
-    # 3. shoulder sign, elbow root
-    g2 = bld.branch("sg1", "shoulder GC2 = sign of sin q2 (+ / -)")
-    g4 = bld.branch("sg2", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
+    # 3. the elbow root, then everything that does not depend on the shoulder's and the wrist's
+    # sign (the rotations R_s and R_w are the same for both signs of each)
+    g4 = bld.branch("sg1", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
     s4 = bld.let("st4", g4 * s4a)
-    t4 = bld.let("t4", sp.atan2(s4, c4))
+    t4 = bld.let("t4", g4 * t4a)
     vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)
     nv = bld.let("nv", sp.sqrt(vx * vx + vz * vz))
     cphi, sphi = bld.let("cphi", vz / nv), bld.let("sphi", vx / nv)
@@ -210,17 +218,21 @@ def srs_program(robot) -> IKProgram:
     r0 = [[ca0 * cbe, -sa0, ca0 * sbe], [sa0 * cbe, ca0, sa0 * sbe], [-sbe, 0, cbe]]
     rs = _let_matrix(bld, "rs", [[sum(rpsi[i][k] * r0[k][j] for k in range(3)) for j in range(3)]
                                  for i in range(3)])
-    mag = _zyz_magnitude(bld, rs, "sh", "singular_sh")
-    t1, t2, t3, (c1, s1, c2, s2, c3, s3) = _zyz_angles(bld, rs, g2, mag, "sh", ("t1", "t2", "t3"), True)
-    # 4. R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c
+    sh = _zyz_plus(bld, rs, "sh", "singular_sh", True)
+    c1, s1, c2, s2, c3, s3 = sh[4]
+    # 4. R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c, from the rounded shoulder angles
     m = _let_matrix(bld, "ma", _rz_rows(rc, c1, s1))
     m = _let_matrix(bld, "mb", _ry_rows(m, c2, s2))
     m = _let_matrix(bld, "mc", _rz_rows(m, c3, s3))
     rw = _let_matrix(bld, "rw", _ry_rows(m, c4, s4))
-    magw = _zyz_magnitude(bld, rw, "wr", "singular_wr")
+    wr = _zyz_plus(bld, rw, "wr", "singular_wr", False)
+    bld.flag("singular", sp.Or(bld.known_symbol("singular_sh"), bld.known_symbol("singular_wr"),
+                               s4a < WRIST_SINGULAR))
+    # 5. the shoulder's and the wrist's signs
+    g2 = bld.branch("sg2", "shoulder GC2 = sign of sin q2 (+ / -)")
+    t1, t2, t3 = _zyz_signed(bld, sh, g2, ("t1", "t2", "t3"))
     g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
-    t5, t6, t7, _ = _zyz_angles(bld, rw, g6, magw, "wr", ("t5", "t6", "t7"), False)
-    bld.flag("singular", sp.Or(mag[2], magw[2], s4a < WRIST_SINGULAR))
+    t5, t6, t7 = _zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
     thetas = (t1, t2, t3, t4, t5, t6, t7)
     bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
     steps = [
@@ -235,7 +247,8 @@ def srs_program(robot) -> IKProgram:
                      free_rule=("set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the "
                                 "wrist's, sin q6 = 0), the next joint taking the rest"),
                      steps=steps, parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
-                     branch_labels=list(bld.labels), free="psi",
+                     branch_labels=[bld.labels[1], bld.labels[0], bld.labels[2]], bit_weights=(2, 4, 1),
+                     free="psi",
                      free_doc="psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, "
                               "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
 
@@ -325,10 +338,10 @@ def panda_program(robot) -> IKProgram:
     m = _let_matrix(bld, "rb", _ry_cols(m, c5, s5))
     m = _rx_minus_half_pi(_rz_cols(m, c4, s4))
     r3 = _let_matrix(bld, "r3", m)
-    mag = _zyz_magnitude(bld, r3, "sh", "singular_q1")
+    sh = _zyz_plus(bld, r3, "sh", "singular_q1", False)
+    bld.flag("singular", sp.Or(bld.known_symbol("singular_q1"), free5, free6))
     g2 = bld.branch("sg3", "shoulder sign of sin q2 (+ / -)")
-    q1, q2, q3, _ = _zyz_angles(bld, r3, g2, mag, "sh", ("q1", "q2", "q3"), False)
-    bld.flag("singular", sp.Or(mag[2], free5, free6))
+    q1, q2, q3 = _zyz_signed(bld, sh, g2, ("q1", "q2", "q3"))
     bld.ops.append(Op("solution", args=(q1, q2, q3, q4, q5, q6, FV), depth=bld.depth))
     steps = [
         ("pose in the canonical chain's frames", "B^-1 P T^-1", [f"Panda class, relation mismatch {geo.error:.1g}"]),

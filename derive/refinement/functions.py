@@ -53,6 +53,7 @@ from derive.codegen.fk import fk_kernel
 from derive.errors import DeriveError
 from derive.ik.closed_form import has_closed_form
 from derive.ik.redundant import redundant_kind
+from derive.ik.ir import leaf_of, leaf_weights
 from derive.ik.program import ik_program
 from derive.model.robot import LIBRARY_DIR, load_robot
 
@@ -356,6 +357,10 @@ def _ik_function(robot):
     _run(prog.ops, 0, dict(env), ca.SX(1.0), sols, valid)
     if len(sols) != prog.branches:
         raise DeriveError(f"{robot.name}: IK program gave {len(sols)} branches, expected {prog.branches}")
+    # _run visits the leaves in nesting order; the columns are in leaf (branch id) order
+    depth = len(leaf_weights(prog))
+    order = [leaf_of(prog, [(i >> (depth - 1 - d)) & 1 for d in range(depth)]) for i in range(len(sols))]
+    sols, valid = ([x for _, x in sorted(zip(order, xs), key=lambda t: t[0])] for xs in (sols, valid))
     cols = [ca.vertcat(*[wrap_angle_sx(a) for a in s]) for s in sols]
     if free is not None:
         return ca.Function("ik", [pose, free], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose", "free"],
