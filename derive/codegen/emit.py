@@ -216,10 +216,11 @@ def _ik_context(robot) -> dict:
     same_as = [[0] * robot.dof for _ in range(prog.branches)]
     for d in flat:
         if d["kind"] == "solution":
-            for k, e in enumerate(d["q"]):
-                same_as[d["leaf"]][k] = first.setdefault((k, e), d["leaf"])
+            for j, e in enumerate(d["q"]):
+                same_as[d["leaf"]][j] = first.setdefault((j, e), d["leaf"])
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
     labels = list(prog.branch_labels) or [f"step {i + 1}" for i in range(k)]
+    # labels are in the order of significance: weights 2^(k-1) ... 1
     bits = [f"{2 ** (k - 1 - i)} x ({lab}: 1 for the second root)" for i, lab in enumerate(labels)]
     branch_doc = "index = " + " + ".join(bits) if bits else "always 0"
     return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
