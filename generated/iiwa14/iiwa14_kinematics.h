@@ -39,7 +39,7 @@ int iiwa14_ik(const double *restrict pose, double fv, double *restrict sols);
 void iiwa14_ik_batch(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts);
 
 /* As iiwa14_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
- * index of the closed form's branch it comes from, index = 32 x (shoulder GC2 = sign of sin q2 (+ / -): 1 for the second root) + 16 x (elbow GC4 = sign of theta4 = s4 q4 (+ / -): 1 for the second root) + 8 x (wrist GC6 = sign of sin q6 (+ / -): 1 for the second root), the same for the same
+ * index of the closed form's branch it comes from, index = 4 x (shoulder GC2 = sign of sin q2 (+ / -): 1 for the second root) + 2 x (elbow GC4 = sign of theta4 = s4 q4 (+ / -): 1 for the second root) + 1 x (wrist GC6 = sign of sin q6 (+ / -): 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
  * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
 void iiwa14_ik_batch_ex(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts,

@@ -36,7 +36,7 @@ int irb120_ik(const double *restrict pose, double *restrict sols);
 void irb120_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
 
 /* As irb120_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
- * index of the closed form's branch it comes from, index = 16 x (theta1, shoulder: 1 for the second root) + 8 x (theta3, elbow: 1 for the second root) + 4 x (theta5, wrist: 1 for the second root), the same for the same
+ * index of the closed form's branch it comes from, index = 4 x (theta1, shoulder: 1 for the second root) + 2 x (theta3, elbow: 1 for the second root) + 1 x (theta5, wrist: 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
  * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
 void irb120_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,

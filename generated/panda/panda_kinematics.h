@@ -39,7 +39,7 @@ int panda_ik(const double *restrict pose, double fv, double *restrict sols);
 void panda_ik_batch(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts);
 
 /* As panda_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
- * index of the closed form's branch it comes from, index = 32 x (elbow q4 root (eq. E2, + / -): 1 for the second root) + 16 x (wrist q6 root (eq. W2, + / -): 1 for the second root) + 8 x (shoulder sign of sin q2 (+ / -): 1 for the second root), the same for the same
+ * index of the closed form's branch it comes from, index = 4 x (elbow q4 root (eq. E2, + / -): 1 for the second root) + 2 x (wrist q6 root (eq. W2, + / -): 1 for the second root) + 1 x (shoulder sign of sin q2 (+ / -): 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
  * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
 void panda_ik_batch_ex(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts,

@@ -37,7 +37,7 @@ int ur3_ik(const double *restrict pose, double *restrict sols);
 void ur3_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
 
 /* As ur3_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
- * index of the closed form's branch it comes from, index = 16 x (theta1: 1 for the second root) + 8 x (theta5 sign: 1 for the second root) + 4 x (theta3: 1 for the second root), the same for the same
+ * index of the closed form's branch it comes from, index = 4 x (theta1: 1 for the second root) + 2 x (theta5 sign: 1 for the second root) + 1 x (theta3: 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
  * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
 void ur3_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
