@@ -245,7 +245,7 @@ def bench_redundant(robot: str, repeats: int = 5, n: int = 100_000, n_slow: int 
                  "date": time.strftime("%Y-%m-%d %H:%M"), "repeats": repeats}
     k.ik(poses[:10], free=fv[:10])
     sols, counts = k.ik(poses, free=fv)
-    ours = {"found": _found(sols, q), "solutions": float(counts.mean()), "exact": _exact(robot, sols[:n_slow], mats),
+    ours = {"found": _found(sols, q), "solutions": float(counts[:n_slow].mean()), "exact": _exact(robot, sols[:n_slow], mats),
             "batch_s": _time(lambda: k.ik(poses, free=fv), repeats) / n}
     ps, pv = poses[:n_slow], fv[:n_slow]
     ours["single_s"] = _time(lambda: [k.ik(ps[i], free=pv[i]) for i in range(n_slow)], repeats) / n_slow
