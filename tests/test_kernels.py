@@ -490,7 +490,7 @@ def test_dq_atan2_at_extreme_magnitudes(c_helpers):
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
-@pytest.mark.parametrize("robot", ["ur5", "irb120"])
+@pytest.mark.parametrize("robot", ["ur5", "irb120", "iiwa14", "panda"])
 def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
     """The batch FK loop, the main batch IK loop, the duplicate marking after it and the
     nearest-solution pass of the shipped sources are branch-free (selects through dq_sel, the
