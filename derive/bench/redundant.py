@@ -16,7 +16,8 @@ angle :func:`derive.ik.srs.arm_angle` for the SRS class). Measured, best of ``re
 * peers when importable: frankik's ``ik_full`` (Panda, FR3; the flange pose and q7, one call per
   pose), EAIK's ``HPRobot`` with one joint locked (Panda class: joint 7 locked at 0 and the pose
   turned back by q7, so one robot serves all poses; SRS: joint 3 locked at the generating value,
-  one robot built per pose, the build timed apart), ssik.
+  one robot built per pose, the build timed apart), ssik's prebuilt arm (its default
+  ``solve(T)``, and ``self_motion(T)`` evaluated at the free value; see :func:`_ssik`).
 
 For every tool: on how many poses its solutions include the generating configuration (every
 joint within GEN_TOL rad, angles compared modulo 2 pi).
@@ -221,12 +222,103 @@ def _eaik(robot, kind, q, mats, n: int, repeats: int):
             "family": bots[0].getKinematicFamily(), "exact": _exact(robot, sols, mats[:n]), "solutions": float((~np.isnan(sols[..., 0])).sum(axis=1).mean())}
 
 
-def _ssik():
+#: ssik's prebuilt arm of each of our robots (the flange frame, no hand, as ours: checked at run time).
+SSIK_ARMS = {"panda": "franka_panda_ik", "fr3": "fr3_ik", "iiwa14": "iiwa14_ik", "iiwa7": "iiwa7_ik"}
+
+
+def _pad(rows: list, width: int = 0) -> np.ndarray:
+    """(n, k, 7) NaN-padded from a list of (k_i, 7) arrays."""
+    k = max([width] + [len(x) for x in rows]) or 1
+    out = np.full((len(rows), k, 7), np.nan)
+    for i, x in enumerate(rows):
+        if len(x):
+            out[i, :len(x)] = x
+    return out
+
+
+def _ssik(robot, kind, q, mats, n: int, repeats: int, ours_counts=None):
+    """ssik's prebuilt arm (``Manipulator.from_prebuilt``), one pose per call: (a) its default
+    ``solve(T)`` (every in-limits solution it enumerates: for the spherical-shoulder class one
+    per in-limits arc of q7 per branch, at the arc centre; for SRS a grid of 16 swivel values);
+    (b) the given-free-value route: ``self_motion(T)`` (the closed-form charts) and every chart
+    evaluated at the value, ``chart.q(t)`` (NaN where the branch does not exist; limits not
+    applied, as ours). The value is q7 itself for the Panda class (ssik's coordinate is the last
+    joint); for SRS our arm angle, mapped onto ssik's swivel per chart (below; the values are
+    computed before the timing). Poses: ssik's frames are ours (base and flange, no hand)."""
     try:
         import ssik
     except ImportError:
         return {"missing": "ssik not installed (import ssik fails)"}
-    return {"missing": f"ssik {getattr(ssik, '__version__', '?')} importable but not wired into this bench"}
+    name = SSIK_ARMS.get(robot)
+    if name is None:
+        return {"missing": f"ssik {ssik.__version__}: no prebuilt arm for {robot}"}
+    man = ssik.Manipulator.from_prebuilt(name)
+    m, qn = mats[:n], q[:n]
+    reps = min(repeats, 3)
+    fk_err = float(max(np.abs(man.fk(qn[i]) - m[i]).max() for i in range(min(n, 200))))
+    lims = np.array([(-np.inf, np.inf) if x is None else x for x in man.joint_limits], dtype=float)
+    inside = ((qn >= lims[:, 0]) & (qn <= lims[:, 1])).all(axis=1)
+
+    solve = lambda: [man.solve(m[i]) for i in range(n)]  # noqa: E731
+    t0 = time.perf_counter()
+    first = solve()
+    t_first = time.perf_counter() - t0
+    # keep ssik's part bounded: more repeats only when one pass is short
+    t_solve = min(t_first, _time(solve, reps - 1) if t_first < 5.0 and reps > 1 else t_first) / n
+    sols = _pad([np.array([s.q for s in ss]).reshape(-1, 7) for ss in first])
+    ok = ~np.isnan(sols[..., 0])
+    d = np.abs(np.angle(np.exp(1j * (sols - qn[:, None, :])))).max(axis=2)
+    nearest = np.where(np.isnan(d), np.inf, d).min(axis=1)
+    out = {"version": ssik.__version__, "arm": name, "n": n, "repeats": reps,
+           "solve_repeats": reps if t_first < 5.0 else 1, "max_fk_frame_error": fk_err,
+           "inside_own_limits": int(inside.sum()), "solve_s": t_solve, "solutions": float(ok.sum(axis=1).mean()),
+           "max_solutions": int(ok.sum(axis=1).max()), "exact": _exact(robot, sols, m), "found": _found(sols, qn),
+           "found_inside": _found(sols[inside], qn[inside]), "no_solution": int((~ok.any(axis=1)).sum()),
+           "nearest_median": float(np.median(nearest[np.isfinite(nearest)])) if np.isfinite(nearest).any() else float("nan")}
+
+    sms = [man.self_motion(m[i]) for i in range(n)]
+    if kind == "panda":
+        tv = np.repeat(qn[:, 6:7], 2, axis=1)
+        out["given"] = "q7 (ssik's coordinate is the last joint, q6 in its 0-based names)"
+    else:
+        # ssik's swivel: the elbow on the shoulder-wrist circle from the base z axis projected onto
+        # the circle's plane (base x when the axis is within 8.1 deg of z, |u_z| >= 0.99): it equals
+        # our arm angle psi on the charts with elbow label 1 and psi + pi on label 0 (checked here);
+        # on the near-vertical poses t is ssik's param_of of the generating configuration
+        psi = srs.arm_angle(robot, qn)
+        geo = srs.srs_geometry(robot)
+        _, w = srs._into_canonical(geo, reference.fk(robot, qn))
+        u = (geo.frame @ w[..., None])[..., 0]
+        vertical = np.abs(u[:, 2]) >= 0.99 * np.linalg.norm(u, axis=1)
+        own = np.array([sms[i].param_of(qn[i]) for i in range(n)])
+        tv = np.stack([psi + np.pi, psi], axis=1)
+        tv[vertical] = own[vertical, None]
+        dd = np.abs(np.angle(np.exp(1j * (own - psi))))
+        out["given"] = "our arm angle psi (psi + pi on ssik's elbow-0 charts)"
+        out["vertical"] = int(vertical.sum())
+        out["mapping_holds"] = int((~vertical & ((dd < 1e-9) | (np.abs(dd - np.pi) < 1e-9))).sum())
+    lab = 0 if kind == "panda" else 1  # SRS: the chart's elbow label picks the column of tv
+
+    def given():
+        res = []
+        for i in range(n):
+            sm = man.self_motion(m[i])
+            res.append([c.q(tv[i, min(c.label[0], lab)]) for c in sm])
+        return res
+
+    out["given_s"] = _time(given, reps) / n
+    out["self_motion_s"] = _time(lambda: [man.self_motion(m[i]) for i in range(n)], reps) / n
+    rows = []
+    for i in range(n):
+        x = np.array([c.q(tv[i, min(c.label[0], lab)]) for c in sms[i]]).reshape(-1, 7)
+        rows.append(x[~np.isnan(x).any(axis=1)])
+    gs = _pad(rows)
+    gok = ~np.isnan(gs[..., 0])
+    out.update(given_solutions=float(gok.sum(axis=1).mean()), given_exact=_exact(robot, gs, m),
+               given_found=_found(gs, qn), charts=float(np.mean([len(sm) for sm in sms])))
+    if ours_counts is not None:
+        out["given_same_count"] = int((gok.sum(axis=1) == np.asarray(ours_counts)[:n]).sum())
+    return out
 
 
 def bench_redundant(robot: str, repeats: int = 5, n: int = 100_000, n_slow: int = 2000,
@@ -267,7 +359,7 @@ def bench_redundant(robot: str, repeats: int = 5, n: int = 100_000, n_slow: int 
                                           == out["harness"]["count_single"])
     out["frankik"] = _frankik(robot, q, mats, n_slow, repeats)
     out["eaik"] = _eaik(robot, kind, q, mats, n_slow, repeats)
-    out["ssik"] = _ssik()
+    out["ssik"] = _ssik(robot, kind, q, mats, min(n_slow, 1000), repeats, counts)
     return out
 
 
@@ -308,10 +400,19 @@ def redundant_report(r: dict) -> str:
         else:
             lines += [f"  EAIK HPRobot IK, Python loop                     {_us(ea['single_s'])}   {ea['found']}/{ea['n']}",
                       f"  EAIK HPRobot build (per pose: locked value)      {_us(ea['build_s'])}"]
+    ss = r.get("ssik")
+    ss_ok = bool(ss) and "missing" not in ss
+    if ss_ok:
+        lines += [f"  {'ssik ' + ss['version'] + ' solve(T) (all it returns), loop':<49}{_us(ss['solve_s'])}   "
+                  f"{ss['found']}/{ss['n']}",
+                  f"  {'ssik self_motion(T), charts at the value, loop':<49}{_us(ss['given_s'])}   {ss['given_found']}/{ss['n']}",
+                  f"  {'ssik self_motion(T) alone, loop':<49}{_us(ss['self_motion_s'])}"]
     lines.append(f"solutions per pose (exact: FK within {EXACT:.0e}, on the first {m} poses): ours {o['solutions']:.2f} "
                  f"({o['exact']:.2f}; sweep: {o['sweep_solutions']:.2f} per value)"
                  + (f", frankik {fk['solutions']:.2f} ({fk['exact']:.2f})" if fk and "missing" not in fk else "")
-                 + (f", EAIK {ea['solutions']:.2f} ({ea['exact']:.2f})" if ea and "missing" not in ea else ""))
+                 + (f", EAIK {ea['solutions']:.2f} ({ea['exact']:.2f})" if ea and "missing" not in ea else "")
+                 + (f", ssik solve {ss['solutions']:.2f} ({ss['exact']:.2f}), at the value {ss['given_solutions']:.2f} "
+                    f"({ss['given_exact']:.2f}) (first {ss['n']})" if ss_ok else ""))
     if "error" not in h:
         lines.append(f"C harness solution counts equal kernels()'s: {h['counts_match']}")
     if fk and "missing" not in fk:
@@ -321,6 +422,19 @@ def redundant_report(r: dict) -> str:
                      f"of the poses it misses, {fk['missed_other_q4']} get solutions with only another q4 (elbow) root")
     if ea and "missing" not in ea:
         lines.append(f"EAIK: {ea['lock']}, {ea['family']}, {ea['flagged_ls']} least-squares solutions flagged")
+    if ss_ok:
+        sampled = ("one solution per branch and in-limits q7 arc, at the arc centre" if r["class"] == "panda"
+                   else "a grid of 16 swivel values, limit-filtered")
+        lines.append(f"ssik: prebuilt {ss['arm']}, same flange frame as ours (FK max difference {ss['max_fk_frame_error']:.1e}); "
+                     f"solve(T) samples the self-motion ({sampled}; up to {ss['max_solutions']} per pose, none for "
+                     f"{ss['no_solution']} poses), generating config inside ssik's limits for {ss['inside_own_limits']} poses, "
+                     f"found for {ss['found_inside']}, nearest returned solution median {ss['nearest_median']:.3f} rad; "
+                     f"best of {ss['solve_repeats']} (solve), {ss['repeats']} (charts)")
+        lines.append(f"ssik at a given value: {ss['charts']:.2f} charts per pose evaluated at {ss['given']}, "
+                     f"as many solutions as ours on {ss.get('given_same_count', '?')}/{ss['n']} poses"
+                     + (f"; ssik's swivel = psi or psi + pi checked on {ss['mapping_holds']} poses, its own coordinate "
+                        f"of the generating config (param_of) used on {ss['vertical']} poses with the shoulder-wrist axis "
+                        f"within 8.1 deg of z (its reference switches to x)" if "vertical" in ss else ""))
     if fk is None:
         lines.append("frankik: not applicable (Franka Panda and FR3 only)")
     for name in ("frankik", "eaik", "ssik"):
