@@ -52,10 +52,12 @@ DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
     const double m2 = k - 2.0 * ((k * 0.5 + round_magic) - round_magic);
     const double m4 = k - 4.0 * ((k * 0.25 + round_magic) - round_magic);
     const int odd = (m2 > 0.5) | (m2 < -0.5);
-    const double a = odd ? pc : ps;
-    const double b = odd ? ps : pc;
-    *s = ((m4 > 1.5) | (m4 < -0.5)) ? -a : a;          /* k mod 4 in {2, 3} */
-    *c = ((m4 > 0.5) | (m4 < -1.5)) ? -b : b;          /* k mod 4 in {1, 2} */
+    /* blends, not ?: (the FK of a 7-joint arm has 27 of these in one loop body, and gcc then
+       leaves the ?: as control flow and does not vectorise the loop) */
+    const double a = dq_sel(odd, pc, ps);
+    const double b = dq_sel(odd, ps, pc);
+    *s = dq_sel((m4 > 1.5) | (m4 < -0.5), -a, a);          /* k mod 4 in {2, 3} */
+    *c = dq_sel((m4 > 0.5) | (m4 < -1.5), -b, b);          /* k mod 4 in {1, 2} */
 }
 
 DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
