@@ -14,6 +14,7 @@ from derive import reference
 from derive.errors import InputError
 from derive.ik import redundant, srs
 from derive.refinement.functions import functions
+from paths7 import trajectory
 
 ROBOTS = ["panda", "fr3", "iiwa7", "iiwa14"]
 N = 10_000
@@ -169,27 +170,6 @@ def test_ik_sweep_on_the_kernels_equals_the_reference_sweep(robot):
     assert np.all((got.q[ok] >= lim[:, 0] - 1e-12) & (got.q[ok] <= lim[:, 1] + 1e-12))
 
 
-def _trajectory(name, n, rng):
-    """A smooth random joint trajectory inside the limits, away from the sets where branch labels
-    swap (as tests/test_redundant.py: iiwa |q2|, |q4|, |q6| >= 0.35 with fixed signs; Panda q2 of
-    fixed sign away from 0, q4 on one side of the elbow's stretch, q5 away from +-pi/2)."""
-    if name.startswith("iiwa"):
-        box = np.array([[-2.5, 2.5], [0.35, 1.8], [-2.5, 2.5], [0.35, 1.8], [-2.5, 2.5], [0.35, 1.8],
-                        [-2.5, 2.5]])
-        box[[1, 3, 5]] *= rng.choice([-1, 1], 3)[:, None]
-    else:
-        box = np.array([[-2.5, 2.5], [0.25, 1.6], [-2.5, 2.5], [-2.6, -1.0], [-1.2, 1.2], [0.3, 3.4],
-                        [-2.5, 2.5]])
-        box[1] *= rng.choice([-1, 1])
-    box = np.sort(box, axis=1)
-    t = np.arange(n)[:, None] / n
-    mid, half = box.mean(1), 0.5 * (box[:, 1] - box[:, 0])
-    c = mid + rng.uniform(-0.3, 0.3, 7) * half
-    amp = rng.uniform(0.15, 0.35, (3, 7)) * half
-    ph = rng.uniform(0, 2 * np.pi, (3, 7))
-    return c + sum(amp[k] * np.sin(2 * np.pi * (k + 1) * t + ph[k]) / (k + 1) for k in range(3))
-
-
 @pytest.mark.parametrize("robot, seed", [
     ("panda", 0), ("panda", 3), ("iiwa14", 0), ("iiwa14", 2),
     pytest.param("panda", 2, marks=pytest.mark.xfail(strict=True, reason=(
@@ -206,7 +186,7 @@ def test_kernel_nearest_along_a_trajectory_is_continuous_and_on_the_generating_b
     exact, inside the limits, no step above 3 x the trajectory's own step, on the generating
     configuration's branch throughout; the same answers as the numpy search to 1e-9."""
     rng = np.random.default_rng(seed)
-    q = _trajectory(robot, 1000, rng)
+    q = trajectory(robot, 1000, rng)
     poses = reference.fk(robot, q)
     gen = redundant.solve(robot, poses, _own_free(robot, q))
     d = _wrapped(gen.q - q[:, None]).max(axis=-1)

@@ -14,6 +14,7 @@ from derive import reference
 from derive.cli import main
 from derive.errors import InputError
 from derive.ik import redundant, srs
+from paths7 import trajectory
 
 SEED = 17
 ROBOTS = ["panda", "fr3", "iiwa7", "iiwa14"]
@@ -171,30 +172,6 @@ def test_sweep_covers_the_feasible_range_with_solutions_inside_the_limits(name):
 # --------------------------------------------------------------------------- #
 # Nearest along a path
 # --------------------------------------------------------------------------- #
-def _trajectory(name, n, rng):
-    """A smooth random joint trajectory (three harmonics per joint) inside the limits and away
-    from the sets where the branch labels swap (there two branches meet and "the generating
-    branch" is not defined): iiwa |q2|, |q4|, |q6| >= 0.35 with fixed signs; Panda q2 of fixed
-    sign away from 0, q4 on one side of the elbow's stretch, q5 away from +-pi/2."""
-    if name.startswith("iiwa"):
-        box = np.array([[-2.5, 2.5], [0.35, 1.8], [-2.5, 2.5], [0.35, 1.8], [-2.5, 2.5], [0.35, 1.8],
-                        [-2.5, 2.5]])
-        box[[1, 3, 5]] *= rng.choice([-1, 1], 3)[:, None]
-    else:
-        box = np.array([[-2.5, 2.5], [0.25, 1.6], [-2.5, 2.5], [-2.6, -1.0], [-1.2, 1.2], [0.3, 3.4],
-                        [-2.5, 2.5]])
-        box[1] *= rng.choice([-1, 1])
-    box = np.sort(box, axis=1)
-    t = np.arange(n)[:, None] / n
-    mid, half = box.mean(1), 0.5 * (box[:, 1] - box[:, 0])
-    c = mid + rng.uniform(-0.3, 0.3, 7) * half
-    amp = rng.uniform(0.15, 0.35, (3, 7)) * half
-    ph = rng.uniform(0, 2 * np.pi, (3, 7))
-    q = c + sum(amp[k] * np.sin(2 * np.pi * (k + 1) * t + ph[k]) / (k + 1) for k in range(3))
-    assert np.all((q > box[:, 0]) & (q < box[:, 1]))
-    return q
-
-
 @pytest.mark.parametrize("name", ["panda", "iiwa14"])
 def test_nearest_along_a_trajectory_stays_continuous_and_on_the_generating_branch(name):
     """1000 poses of a smooth trajectory, each step seeded with the previous answer (the first
@@ -202,7 +179,7 @@ def test_nearest_along_a_trajectory_stays_continuous_and_on_the_generating_branc
     the limits, no step is larger than 3 x the trajectory's own step, and the branch is the
     generating configuration's at every step."""
     rng = np.random.default_rng(0)
-    q = _trajectory(name, 1000, rng)
+    q = trajectory(name, 1000, rng)
     poses = reference.fk(name, q)
     gen = redundant.solve(name, poses, _own_free(name, q))
     d = _wrapped(gen.q - q[:, None]).max(axis=-1)

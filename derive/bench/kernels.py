@@ -34,6 +34,7 @@ import sympy as sp
 from derive import reference
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
+from derive.bench.machine import best_time as _time
 from derive.bench.machine import machine
 from derive.bench.redundant import bench_redundant, redundant_report
 from derive.codegen.emit import identifier
@@ -54,15 +55,6 @@ def dh_table(robot) -> np.ndarray:
     if r.convention != "standard_dh":
         raise DeriveError(f"{r.name}: the matrix baseline needs a standard-DH description")
     return np.array([[j.post[0].vector[2], j.post[1].vector[0], j.post[2].angle] for j in r.joints])
-
-
-def _time(fn, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict:

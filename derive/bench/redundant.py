@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from derive import reference
+from derive.bench.machine import best_time as _time
 from derive.bench.machine import machine
 from derive.codegen.loader import c_flags, kernel_folder, kernels
 from derive.ik import srs
@@ -51,15 +52,6 @@ GEN_TOL = 1e-6
 EXACT = 1e-10
 #: Values of the free parameter per pose in the sweep.
 SWEEP = 16
-
-
-def _time(fn, repeats: int) -> float:
-    best = float("inf")
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def _found(sols: np.ndarray, q: np.ndarray) -> int:
