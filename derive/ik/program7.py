@@ -84,21 +84,26 @@ def _zyz_plus(bld: Builder, m, stem: str, flag: str, trig: bool):
     singular set), trig)."""
     hs = bld.let(f"{stem}_hs", sp.sqrt(m[0][2] ** 2 + m[1][2] ** 2))
     sing = bld.flag(flag, hs < WRIST_SINGULAR)
-    safe = bld.select(f"{stem}_hd", sing, 1, hs)
     a = bld.select(f"{stem}_a", sing, 0, sp.atan2(m[1][2], m[0][2]))
-    ca = bld.select(f"{stem}_ca", sing, 1, m[0][2] / safe)
-    sa = bld.select(f"{stem}_sa", sing, 0, m[1][2] / safe)
     b_sing = bld.select(f"{stem}_bs", m[2][2] >= 0, 0, sp.pi)
     b = bld.select(f"{stem}_b", sing, b_sing, sp.atan2(hs, m[2][2]))
     cb = bld.select(f"{stem}_cb", sing, sgn(m[2][2]), m[2][2])
+    off = bld.select(f"{stem}_off", sing, 0, sp.pi)
+    if not trig:
+        # Rz(c) = Ry(b)^T Rz(a)^T m, column 0 (cos c, sin c, 0), with cos a = m02 / hs, sin a =
+        # m12 / hs, sin b = hs, all times hs > 0 (atan2 does not see the scale): no division
+        ny = bld.select(f"{stem}_ny", sing, m[1][0], m[0][2] * m[1][0] - m[1][2] * m[0][0])
+        nx = bld.select(f"{stem}_nx", sing, cb * m[0][0],
+                        m[2][2] * (m[0][2] * m[0][0] + m[1][2] * m[1][0]) - hs * hs * m[2][0])
+        return a, b, bld.let(f"{stem}_c", sp.atan2(ny, nx)), off, None
+    safe = bld.select(f"{stem}_hd", sing, 1, hs)
+    ca = bld.select(f"{stem}_ca", sing, 1, m[0][2] / safe)
+    sa = bld.select(f"{stem}_sa", sing, 0, m[1][2] / safe)
     sb = bld.select(f"{stem}_sb", sing, 0, hs)
     # Rz(c) = Ry(b)^T Rz(a)^T m, column 0: (cos c, sin c, 0)
     ny = bld.let(f"{stem}_ny", -sa * m[0][0] + ca * m[1][0])
     nx = bld.let(f"{stem}_nx", cb * (ca * m[0][0] + sa * m[1][0]) - sb * m[2][0])
     c = bld.let(f"{stem}_c", sp.atan2(ny, nx))
-    off = bld.select(f"{stem}_off", sing, 0, sp.pi)
-    if not trig:
-        return a, b, c, off, None
     nn = bld.let(f"{stem}_nn", sp.sqrt(nx * nx + ny * ny))
     return a, b, c, off, (ca, sa, cb, sb, bld.let(f"{stem}_cc", nx / nn), bld.let(f"{stem}_sc", ny / nn))
 

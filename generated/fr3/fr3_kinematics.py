@@ -310,18 +310,14 @@ def ik(pose, fv):
             r322 = cq4*rb21 + rb20*sq4
             sh_hs = sqrt(r302*r302 + r312*r312)
             singular_q1 = (sh_hs < 1e-11)
-            sh_hd = 1.0 if singular_q1 else sh_hs
             sh_a = 0 if singular_q1 else atan2(r312, r302)
-            sh_ca = 1.0 if singular_q1 else r302/sh_hd
-            sh_sa = 0 if singular_q1 else r312/sh_hd
             sh_bs = 0 if (r322 >= 0) else 3.141592653589793
             sh_b = sh_bs if singular_q1 else atan2(sh_hs, r322)
             sh_cb = copysign(1.0, r322) if singular_q1 else r322
-            sh_sb = 0 if singular_q1 else sh_hs
-            sh_ny = -r300*sh_sa + r310*sh_ca
-            sh_nx = -r320*sh_sb + sh_cb*(r300*sh_ca + r310*sh_sa)
-            sh_c = atan2(sh_ny, sh_nx)
             sh_off = 0 if singular_q1 else 3.141592653589793
+            sh_ny = r310 if singular_q1 else -r300*r312 + r302*r310
+            sh_nx = r300*sh_cb if singular_q1 else -r320*sh_hs*sh_hs + r322*(r300*r302 + r310*r312)
+            sh_c = atan2(sh_ny, sh_nx)
             singular = singular_q1 or singular_q5 or singular_q6
             for b3, sg3 in ((0, 1.0), (1, -1.0)):
                 q1 = sh_a + sh_off*(0.5 - 0.5*sg3)

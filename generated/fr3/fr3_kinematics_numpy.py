@@ -339,18 +339,14 @@ def ik(P, fv):
             r322 = cq4*rb21 + rb20*sq4
             sh_hs = np.sqrt(r302*r302 + r312*r312)
             singular_q1 = np.less(sh_hs, 1e-11)
-            sh_hd = np.where(singular_q1, 1.0, sh_hs)
             sh_a = np.where(singular_q1, 0, np.arctan2(r312, r302))
-            sh_ca = np.where(singular_q1, 1.0, r302/sh_hd)
-            sh_sa = np.where(singular_q1, 0, r312/sh_hd)
             sh_bs = np.where(np.greater_equal(r322, 0), 0, 3.141592653589793)
             sh_b = np.where(singular_q1, sh_bs, np.arctan2(sh_hs, r322))
             sh_cb = np.where(singular_q1, np.copysign(1.0, r322), r322)
-            sh_sb = np.where(singular_q1, 0, sh_hs)
-            sh_ny = -r300*sh_sa + r310*sh_ca
-            sh_nx = -r320*sh_sb + sh_cb*(r300*sh_ca + r310*sh_sa)
-            sh_c = np.arctan2(sh_ny, sh_nx)
             sh_off = np.where(singular_q1, 0, 3.141592653589793)
+            sh_ny = np.where(singular_q1, r310, -r300*r312 + r302*r310)
+            sh_nx = np.where(singular_q1, r300*sh_cb, -r320*sh_hs*sh_hs + r322*(r300*r302 + r310*r312))
+            sh_c = np.arctan2(sh_ny, sh_nx)
             singular = np.logical_or.reduce((singular_q1,singular_q5,singular_q6))
             for b3, sg3 in ((0, 1.0), (1, -1.0)):
                 ok3 = ok2

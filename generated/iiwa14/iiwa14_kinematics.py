@@ -274,18 +274,18 @@ def ik(pose, fv):
         rs22 = ca0*rq20*sbe + cbe*rq22 + rq21*sa0*sbe
         sh_hs = sqrt(rs02*rs02 + rs12*rs12)
         singular_sh = (sh_hs < 1e-11)
-        sh_hd = 1.0 if singular_sh else sh_hs
         sh_a = 0 if singular_sh else atan2(rs12, rs02)
-        sh_ca = 1.0 if singular_sh else rs02/sh_hd
-        sh_sa = 0 if singular_sh else rs12/sh_hd
         sh_bs = 0 if (rs22 >= 0) else 3.141592653589793
         sh_b = sh_bs if singular_sh else atan2(sh_hs, rs22)
         sh_cb = copysign(1.0, rs22) if singular_sh else rs22
+        sh_off = 0 if singular_sh else 3.141592653589793
+        sh_hd = 1.0 if singular_sh else sh_hs
+        sh_ca = 1.0 if singular_sh else rs02/sh_hd
+        sh_sa = 0 if singular_sh else rs12/sh_hd
         sh_sb = 0 if singular_sh else sh_hs
         sh_ny = -rs00*sh_sa + rs10*sh_ca
         sh_nx = -rs20*sh_sb + sh_cb*(rs00*sh_ca + rs10*sh_sa)
         sh_c = atan2(sh_ny, sh_nx)
-        sh_off = 0 if singular_sh else 3.141592653589793
         sh_nn = sqrt(sh_nx*sh_nx + sh_ny*sh_ny)
         sh_cc = sh_nx/sh_nn
         sh_sc = sh_ny/sh_nn
@@ -327,18 +327,14 @@ def ik(pose, fv):
         rw22 = ct4*mc22 + mc02*st4
         wr_hs = sqrt(rw02*rw02 + rw12*rw12)
         singular_wr = (wr_hs < 1e-11)
-        wr_hd = 1.0 if singular_wr else wr_hs
         wr_a = 0 if singular_wr else atan2(rw12, rw02)
-        wr_ca = 1.0 if singular_wr else rw02/wr_hd
-        wr_sa = 0 if singular_wr else rw12/wr_hd
         wr_bs = 0 if (rw22 >= 0) else 3.141592653589793
         wr_b = wr_bs if singular_wr else atan2(wr_hs, rw22)
         wr_cb = copysign(1.0, rw22) if singular_wr else rw22
-        wr_sb = 0 if singular_wr else wr_hs
-        wr_ny = -rw00*wr_sa + rw10*wr_ca
-        wr_nx = -rw20*wr_sb + wr_cb*(rw00*wr_ca + rw10*wr_sa)
-        wr_c = atan2(wr_ny, wr_nx)
         wr_off = 0 if singular_wr else 3.141592653589793
+        wr_ny = rw10 if singular_wr else -rw00*rw12 + rw02*rw10
+        wr_nx = rw00*wr_cb if singular_wr else -rw20*wr_hs*wr_hs + rw22*(rw00*rw02 + rw10*rw12)
+        wr_c = atan2(wr_ny, wr_nx)
         singular = singular_sh or singular_wr or (st4a < 1e-11)
         for b2, sg2 in ((0, 1.0), (1, -1.0)):
             t1 = sh_a + sh_off*(0.5 - 0.5*sg2)
