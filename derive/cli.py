@@ -123,8 +123,7 @@ def _joints_in(robot, values, name: str, deg: bool) -> np.ndarray:
         raise InputError(f"{name}: robot {robot.name!r} has {robot.dof} joint variables "
                          f"({', '.join(robot.variable_names)}), got {q.size} value(s)")
     if deg:
-        revolute = np.array([j.type == "revolute" for j in _variables(robot)])
-        q = np.where(revolute, np.radians(q), q)
+        q = np.where(robot.revolute, np.radians(q), q)
     return q
 
 
@@ -133,8 +132,7 @@ def _joints_out(robot, q, deg: bool) -> np.ndarray:
     q = np.asarray(q, dtype=float)
     if not deg:
         return q
-    revolute = np.array([j.type == "revolute" for j in _variables(robot)])
-    return np.where(revolute, np.degrees(q), q)
+    return np.where(robot.revolute, np.degrees(q), q)
 
 
 def _joint_meta(robot, deg: bool) -> list[dict]:

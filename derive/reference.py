@@ -117,8 +117,7 @@ def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
     seeds = _seeds(robot, q_seed, len(P))
     single = single and seeds[1]
     sols, counts = closed_form.ik_batch(robot, P, q_ref=seeds[0])
-    revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
-    res = select.nearest(sols, counts, seeds[0], robot.limits, revolute, tol=tol)
+    res = select.nearest(sols, counts, seeds[0], robot.limits, robot.revolute, tol=tol)
     if single:
         return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
                                                            "branch", "singular")))

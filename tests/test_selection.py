@@ -101,7 +101,7 @@ def test_nearest_in_c_equals_the_numpy_rule(robot):
     poses = reference.fk(r, q)
     gq, gmx, gtt, gbr, gsg = k._ext.nearest(poses, seeds)     # the C pass itself (k.nearest then
     sols, counts, branch, sing = k.ik(poses, details=True)    # re-solves singular choices)
-    want = select.nearest(sols, counts, seeds, r.limits, k._revolute, branch, sing)
+    want = select.nearest(sols, counts, seeds, r.limits, r.revolute, branch, sing)
     f = gbr >= 0
     assert np.array_equal(f, want.found) and f.sum() > 1500
     assert np.allclose(gmx[f], want.max_move[f], atol=1e-12)

@@ -165,10 +165,9 @@ def _limit_context(robot) -> list:
     def lit(x):
         return repr(float(x)) if math.isfinite(x) else ("INFINITY" if x > 0 else "-INFINITY")
 
-    revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
     return [{"lo": lit(lo - LIMIT_SLACK), "hi": lit(hi + LIMIT_SLACK), "lo_text": f"{lo:.6g}",
              "hi_text": f"{hi:.6g}", "revolute": rev}
-            for (lo, hi), rev in zip(robot.limits.tolist(), revolute)]
+            for (lo, hi), rev in zip(robot.limits.tolist(), robot.revolute.tolist())]
 
 
 def _ik_context(robot) -> dict:

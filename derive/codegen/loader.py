@@ -144,7 +144,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     text = template_environment().get_template("pyext.c.j2").render(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
         prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
-        revolute=[j.type == "revolute" for j in robot.joints if not j.is_mimic],
+        revolute=robot.revolute.tolist(),
         unit_tol=repr(UNIT_TOL), module="MODULE")
     digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
@@ -295,21 +295,21 @@ class Kernels:
             raise DeriveError(f"{self.robot.name}: no closed-form IK kernel ({why}); "
                               "use derive.refine")
 
-    def _free_values(self, free, n: int):
-        """The free parameter per pose as a float64 array (n,) (7-joint arms; InputError without
-        it), or None for a 6-joint arm (InputError if one is given)."""
-        if not self.free:
-            if free is not None:
-                raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
-            return None
-        if free is None:
+    def _check_free(self, free):
+        """InputError unless ``free`` is given exactly when the arm has a free parameter."""
+        if self.free and free is None:
             raise InputError(missing_free_message(self.robot))
-        arr = as_finite_array(free, "free", ndim_min=0)
-        if arr.ndim == 0 or arr.shape == (1,):
-            return np.full(n, float(arr.reshape(-1)[0]))
-        if arr.shape != (n,):
-            raise InputError(f"free: expected a number or shape ({n},) (one per pose), got {arr.shape}")
-        return np.ascontiguousarray(arr, dtype=np.float64)
+        if free is not None and not self.free:
+            raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
+
+    def _windings(self, q, counts, branch, singular):
+        """Every in-limit 2 pi winding of each solution, by the extension (in C, with the limits
+        compiled into the kernel) or by :func:`derive.ik.select.within_limits`."""
+        if self._ext is not None:
+            return self._ext.within_limits(np.ascontiguousarray(q), np.asarray(counts, dtype=np.int64),
+                                           np.asarray(branch, dtype=np.int64),
+                                           np.asarray(singular, dtype=np.int64))
+        return select.within_limits(q, counts, self.robot.limits, self.robot.revolute, branch, singular)
 
     def _ext_args(self, free) -> tuple:
         """The trailing arguments of the extension's ik / nearest: the free parameter, if any."""
@@ -331,10 +331,7 @@ class Kernels:
         (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
         call."""
-        if self.free and free is None:
-            raise InputError(missing_free_message(self.robot))
-        if free is not None and not self.free:
-            raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
+        self._check_free(free)
         if self._ext is not None and not (details or within_limits) and self.has_ik:
             out = self._ext.ik(P, self._tool, False, *self._ext_args(free))   # one C call, checks in C
             if out is not NotImplemented:
@@ -346,24 +343,16 @@ class Kernels:
             if within_limits:
                 s3, c1 = (sols[None], np.atleast_1d(counts)) if single else (sols, counts)
                 b3, g3 = (branch[None], sing[None]) if single else (branch, sing)
-                if self._ext is not None:       # the enumeration in C, with the kernel's limits
-                    sols3, cnt, b3, g3 = self._ext.within_limits(s3, np.asarray(c1, dtype=np.int64),
-                                                                 np.asarray(b3, dtype=np.int64),
-                                                                 np.asarray(g3, dtype=np.int64))
-                else:
-                    sols3, cnt, b3, g3 = select.within_limits(s3, c1, self.robot.limits, self._revolute, b3, g3)
+                sols3, cnt, b3, g3 = self._windings(s3, c1, b3, g3)
                 sols, counts, branch, sing = ((sols3[0], int(cnt[0]), b3[0], g3[0]) if single
                                               else (sols3, cnt, b3, g3))
             return (sols, counts, branch, sing) if details else (sols, counts)
         if self._ext is not None:
             poses, single = as_pose_batch(P)
             return self._ext.ik(poses[0] if single else poses, self._tool, False, *self._ext_args(free))
-        poses, single = as_pose_batch(P)
-        if self._tool is not None:
-            poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
-        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        poses, single = self._tool_free(P)
         n = poses.shape[0]
-        fv = self._free_values(free, n)
+        fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
         if self.backend == "python":
             sols = np.full((n, 8, self.dof), np.nan)
             counts = np.zeros(n, dtype=np.int64)
@@ -383,10 +372,6 @@ class Kernels:
                 self._ik_batch(n, poses.ctypes.data, fv.ctypes.data, sols.ctypes.data, c.ctypes.data)
             counts = c.astype(np.int64)
         return (sols[0], int(counts[0])) if single else (sols, counts)
-
-    @property
-    def _revolute(self) -> np.ndarray:
-        return np.array([j.type == "revolute" for j in self.robot.joints if not j.is_mimic])
 
     def _ik_details(self, P, need: bool, free=None):
         if self._ext is None:
@@ -437,14 +422,8 @@ class Kernels:
         if not self.free:
             raise InputError(f"ik_sweep: {self.robot.name} has {self.dof} joints and no free parameter; use ik")
         poses, single = self._tool_free(P)
-        limiter = None
-        if self._ext is not None:           # the windings in C, with the kernel's limits
-            def limiter(q, counts, branch, singular):
-                return self._ext.within_limits(np.ascontiguousarray(q), np.asarray(counts, dtype=np.int64),
-                                               np.asarray(branch, dtype=np.int64),
-                                               np.asarray(singular, dtype=np.int64))
         return redundant.ik_sweep(self.robot, poses[0] if single else poses, n,
-                                  within_limits=within_limits, solver=self._solver(False), limiter=limiter)
+                                  within_limits=within_limits, solver=self._solver(False), limiter=self._windings)
 
     def nearest(self, P, q_seed, tol=None) -> select.Nearest:
         """Per pose the solution nearest to the seed configuration(s) ``q_seed`` ((dof,) or (n,
@@ -486,16 +465,13 @@ class Kernels:
                 sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
             seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
             seeds = np.broadcast_to(seeds, (len(sols), self.dof))
-            res = select.nearest(sols, counts, seeds, self.robot.limits, self._revolute, branch, sing, tol)
+            res = select.nearest(sols, counts, seeds, self.robot.limits, self.robot.revolute, branch, sing, tol)
         if np.any(res.singular):
             seeds = np.broadcast_to(np.asarray(q_seed, dtype=float), res.q.shape)   # checked above
             at = np.nonzero(res.singular)[0]
-            poses, _ = as_pose_batch(P)
-            poses = np.broadcast_to(poses, (len(res.q), 8))[at]
-            if self._tool is not None:
-                poses = dq._mul(poses, dq.conj_quaternion(self._tool)[None])
+            poses = np.broadcast_to(self._tool_free(P)[0], (len(res.q), 8))[at]
             qs, cs = reference_ik_batch(self.robot, poses, q_ref=seeds[at])
-            again = select.nearest(qs, cs, seeds[at], self.robot.limits, self._revolute, tol=tol)
+            again = select.nearest(qs, cs, seeds[at], self.robot.limits, self.robot.revolute, tol=tol)
             q = res.q.copy()
             ok = again.found & (again.max_move <= res.max_move[at] + 1e-12)
             q[at[ok]] = again.q[ok]

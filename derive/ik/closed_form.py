@@ -467,8 +467,7 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     sols, sing = q[0, :k], singular[0, :k]
     reason = reasons[0]
     if within_limits:
-        revolute = [j.type == "revolute" for j in robot.joints if not j.is_mimic]
-        q, cnt, _, sg = select.within_limits(sols[None], np.array([len(sols)]), robot.limits, revolute,
+        q, cnt, _, sg = select.within_limits(sols[None], np.array([len(sols)]), robot.limits, robot.revolute,
                                       singular=sing[None])
         sols, sing = q[0, :cnt[0]], sg[0, :cnt[0]]
         if len(sols) == 0 and not reason:

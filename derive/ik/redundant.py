@@ -201,7 +201,9 @@ def missing_free_message(robot) -> str:
 # --------------------------------------------------------------------------- #
 # Solutions at given values
 # --------------------------------------------------------------------------- #
-def _free_values(free, n: int) -> np.ndarray:
+def free_values(free, n: int) -> np.ndarray:
+    """The free parameter for n poses as a float64 array (n,): a number for every pose or one
+    per pose; InputError for other shapes, NaN or inf."""
     arr = as_finite_array(free, "free", ndim_min=0)
     if arr.ndim == 0 or arr.shape == (1,):
         return np.full(n, float(arr.reshape(-1)[0]))
@@ -232,7 +234,7 @@ def solve(robot, poses, free, q_ref=None) -> Solutions:
     kind = _kind(robot)
     P, _ = as_pose_batch(poses)
     n = len(P)
-    f = _free_values(free, n)
+    f = free_values(free, n)
     qr = _q_ref(q_ref, n)
     if kind == "panda":
         r = panda.ik_q7(robot, P, f, q_ref=qr)
@@ -258,7 +260,7 @@ def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None)
     P, single = as_pose_batch(pose)
     if not single:
         raise InputError("pose: ik() takes one pose; use ik_batch() for several")
-    f = _free_values(free, 1)
+    f = free_values(free, 1)
     r = solve(robot, P, f, q_ref)
     k = int(r.counts[0])
     sols, sing, br, reason = r.q[0, :k], r.singular[0, :k], r.branch[0, :k], r.reason[0]

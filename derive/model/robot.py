@@ -198,6 +198,11 @@ class Robot:
                 out.append(j.limits if j.limits is not None else (-math.inf, math.inf))
         return np.array(out, dtype=float).reshape(-1, 2)
 
+    @property
+    def revolute(self) -> np.ndarray:
+        """(dof,) bool: which joint variables are revolute (their values wind by 2 pi)."""
+        return np.array([j.type == "revolute" for j in self.joints if not j.is_mimic], dtype=bool)
+
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, {self.convention}, dof={self.dof}, ends={list(self.ends)})"
 
