@@ -280,17 +280,19 @@ def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None)
 # --------------------------------------------------------------------------- #
 # Sweep
 # --------------------------------------------------------------------------- #
-def sweep_values(robot, poses, n: int) -> np.ndarray:
+def sweep_values(robot, poses, n: int, feasible=None) -> np.ndarray:
     """(P, n) values of the free parameter: the midpoints of n equal parts of the feasible range
     (q7: joint 7's limits, the same for every pose; psi: the union of the pose's feasible
-    intervals, :func:`derive.ik.srs.sweep_psi`; NaN for a pose without one)."""
+    intervals, :func:`derive.ik.srs.sweep_psi`; NaN for a pose without one). ``feasible(poses
+    (r, 8), psi (r,))`` -> bool (r,) decides the SRS arcs between the closed-form breakpoints
+    (default: the numpy closed form and the limits)."""
     robot = load_robot(robot)
     kind = _kind(robot)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n: the number of values of the free parameter, a positive integer; got {n!r}")
     P, _ = as_pose_batch(poses)
     if kind == "srs":
-        return srs.sweep_psi(robot, P, int(n))
+        return srs.sweep_psi(robot, P, int(n), feasible)
     lo, hi = panda.q7_interval(robot)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         lo, hi = -math.pi, math.pi
@@ -308,7 +310,14 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solve
     ``limiter(q, counts, branch, singular)`` -> the same four, every in-limit winding, replaces
     :func:`derive.ik.select.within_limits` (the kernels' extension does it in C)."""
     robot = load_robot(robot)
-    values = sweep_values(robot, poses, n)
+    if limiter is None:
+        def limiter(sq, sc, sb, sg):
+            return select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
+    feasible = None
+    if solver is not None:
+        def feasible(p, f):
+            return srs.within_limits(robot, solver(p, f)[0]).any(-1)
+    values = sweep_values(robot, poses, n, feasible)
     P, single = as_pose_batch(poses)
     m = len(P)
     qr = _q_ref(q_ref, m)
@@ -325,11 +334,8 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solve
         else:
             sq, sc, sb, sg = solver(P[rows], values[have])
         if within_limits:
-            if limiter is None:
-                sq, sc, sb, sg = select.within_limits(sq, sc, robot.limits, [True] * 7, branch=sb, singular=sg)
-            else:
-                sq, sc, sb, sg = limiter(sq, sc, sb, sg)
-                sg = np.asarray(sg, dtype=bool)
+            sq, sc, sb, sg = limiter(sq, sc, sb, sg)
+            sg = np.asarray(sg, dtype=bool)
             width = max(BRANCHES, sq.shape[1])
             if width > BRANCHES:
                 q = np.full((m, n, width, 7), np.nan)

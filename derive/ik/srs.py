@@ -670,40 +670,86 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
 # --------------------------------------------------------------------------- #
 # Feasible arm angles under the joint limits (Shimizu sec. III)
 # --------------------------------------------------------------------------- #
-def _trig_roots(a, b, c) -> list[float]:
-    """Roots psi in [-pi, pi] of a sin psi + b cos psi + c = 0: with r = hypot(a, b),
-    r cos(psi - atan2(a, b)) = -c."""
-    r = math.hypot(a, b)
-    if r < 1e-14 or abs(c) > r:
-        return []
-    base = math.atan2(a, b)
-    d = math.acos(max(-1.0, min(1.0, -c / r)))
-    return [math.remainder(base + d, 2 * math.pi), math.remainder(base - d, 2 * math.pi)]
+def _trig_roots(a, b, c):
+    """(..., 2) roots psi in [-pi, pi] of a sin psi + b cos psi + c = 0 (arrays of one shape):
+    with r = hypot(a, b), r cos(psi - atan2(a, b)) = -c; NaN where there is none."""
+    r = np.hypot(a, b)
+    ok = (r >= 1e-14) & (np.abs(c) <= r)
+    base = np.arctan2(a, b)
+    d = np.arccos(np.clip(-c / np.where(ok, r, 1.0), -1.0, 1.0))
+    roots = np.stack([base + d, base - d], -1)
+    # x - 2 pi rint(x / 2 pi) is exact here (|x| <= 2 pi, Sterbenz), as math.remainder
+    roots = roots - 2.0 * math.pi * np.rint(roots / (2.0 * math.pi))
+    return np.where(ok[..., None], roots, np.nan)
 
 
-def _breakpoints(geo: SRSGeometry, coeffs, limits) -> list[float]:
-    """Arm angles where a joint of one elbow branch can meet a limit or jump.
+def _breakpoints(geo: SRSGeometry, rc, w) -> np.ndarray:
+    """(m, 82) arm angles per pose where a joint of a branch can meet a limit or jump, with -pi
+    and pi; NaN where a root does not exist (and for a whole pose without arm angles).
 
-    ``coeffs`` maps (matrix index, row, col) to (a, b, c) of that entry as a sin + b cos + c.
-    Tangent-type joints (numerator, denominator entries): roots of n cos L - d sin L and of n
-    and d; cosine-type: roots of m - cos L."""
-    out = []
-    tangent = {0: ((0, 1, 2), (0, 0, 2)), 2: ((0, 2, 1), (0, 2, 0)),
-               4: ((1, 1, 2), (1, 0, 2)), 6: ((1, 2, 1), (1, 2, 0))}
-    cosine = {1: (0, 2, 2), 5: (1, 2, 2)}
-    for j, (num, den) in tangent.items():
-        an, ad = np.array(coeffs[num]), np.array(coeffs[den])
-        out += _trig_roots(*an) + _trig_roots(*ad)
-        for lim in limits[j]:
-            if np.isfinite(lim):
-                L = geo.signs[j] * lim
-                out += _trig_roots(*(an * math.cos(L) - ad * math.sin(L)))
-    for j, ent in cosine.items():
-        a = np.array(coeffs[ent])
-        for lim in limits[j]:
-            if np.isfinite(lim):
-                out += _trig_roots(a[0], a[1], a[2] - math.cos(lim))
-    return out
+    For each elbow sign, R_s and R_w are A sin psi + B cos psi + C (:func:`arm_angle_matrices`);
+    tangent-type joints (numerator, denominator entries) give the roots of n cos L - d sin L and
+    of n and d; cosine-type joints the roots of m - cos L (module docstring, "Feasible
+    intervals")."""
+    m = len(w)
+    c4 = elbow_cosine(geo, w)
+    ok = (np.abs(c4) <= 1.0 + REACH_TOL) & (np.linalg.norm(w, axis=-1) >= CLASS_TOL)
+    t4abs = elbow_angle(np.where(ok, c4, 1.0))
+    wk = np.where(ok[:, None], w, 1.0)
+    tangent = (((0, 1, 2), (0, 0, 2), 0), ((0, 2, 1), (0, 2, 0), 2),
+               ((1, 1, 2), (1, 0, 2), 4), ((1, 2, 1), (1, 2, 0), 6))
+    cosine = (((0, 2, 2), 1), ((1, 2, 2), 5))
+    parts = [np.full((m, 1), -math.pi), np.full((m, 1), math.pi)]
+    for g4 in (1.0, -1.0):
+        t4 = g4 * t4abs
+        r0 = reference_shoulder(geo, wk, t4)
+        shoulder = arm_angle_matrices(wk, r0)                       # A_s, B_s, C_s: (m, 3, 3)
+        r4 = rot_y(t4)
+        wrist = [_t(x @ r4) @ rc for x in shoulder]                 # A_w, B_w, C_w
+        abc = np.stack([np.stack(shoulder, -1), np.stack(wrist, -1)], 1)   # (m, 2, 3, 3, 3)
+        for num, den, j in tangent:
+            an, ad = abc[:, num[0], num[1], num[2]], abc[:, den[0], den[1], den[2]]   # (m, 3)
+            parts += [_trig_roots(*an.T), _trig_roots(*ad.T)]
+            for lim in geo.limits[j]:
+                if np.isfinite(lim):
+                    L = geo.signs[j] * lim
+                    parts.append(_trig_roots(*(an * math.cos(L) - ad * math.sin(L)).T))
+        for ent, j in cosine:
+            a = abc[:, ent[0], ent[1], ent[2]]
+            for lim in geo.limits[j]:
+                if np.isfinite(lim):
+                    parts.append(_trig_roots(a[:, 0], a[:, 1], a[:, 2] - math.cos(lim)))
+    pts = np.concatenate(parts, 1)
+    pts[~ok] = np.nan
+    return pts
+
+
+def _arcs(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The arcs between consecutive distinct breakpoints (closer than 1e-13 count as one):
+    lower and upper ends (m, K - 1) in [-pi, pi], NaN past a pose's last arc."""
+    s = np.sort(np.clip(pts, -math.pi, math.pi), 1)             # NaN sort last
+    keep = np.concatenate([np.isfinite(s[:, :1]), np.diff(s, axis=1) > 1e-13], 1)
+    s = np.sort(np.where(keep, s, np.nan), 1)
+    return s[:, :-1], s[:, 1:]
+
+
+def _feasible_arcs(geo: SRSGeometry, rc, w, feasible=None):
+    """Arcs (lo, hi (m, K)) of each pose and which of them are feasible: (m, K, 8) per branch
+    by :func:`_solve_psi` and the limits, or (m, K) for any branch by ``feasible(rows, psi)``
+    (the rows (r,) of the poses and the arm angles (r,) -> bool (r,)), decided at each arc's
+    midpoint (the breakpoints are the only places where feasibility can change)."""
+    lo, hi = _arcs(_breakpoints(geo, rc, w))
+    have = np.isfinite(hi)
+    rows = np.nonzero(have)[0]
+    mids = 0.5 * (lo[have] + hi[have])
+    if feasible is None:
+        out = np.zeros(lo.shape + (8,), dtype=bool)
+        cand, _, _ = _solve_psi(geo, rc[rows], w[rows], mids, None)
+        out[have] = _within(geo.limits, cand)                     # NaN rows are False
+    else:
+        out = np.zeros(lo.shape, dtype=bool)
+        out[have] = feasible(rows, mids)
+    return lo, hi, out
 
 
 def psi_intervals(robot, pose) -> list[np.ndarray]:
@@ -720,70 +766,46 @@ def psi_intervals(robot, pose) -> list[np.ndarray]:
     if not single:
         raise InputError(f"pose: psi_intervals takes one pose (8,), got shape {P.shape}")
     rc, w = _into_canonical(geo, P)
-    c4 = elbow_cosine(geo, w)[0]
-    empty = [np.zeros((0, 2)) for _ in range(8)]
-    if abs(c4) > 1.0 + REACH_TOL or np.linalg.norm(w) < CLASS_TOL:
-        return empty
-    t4abs = elbow_angle(np.array([c4]))
-    points = [-math.pi, math.pi]
-    for g4 in (1.0, -1.0):
-        t4 = g4 * t4abs
-        r0 = reference_shoulder(geo, w, t4)
-        a_s, b_s, c_s = (m[0] for m in arm_angle_matrices(w, r0))
-        r4 = rot_y(t4)[0]
-        a_w, b_w, c_w = (_t(m @ r4) @ rc[0] for m in (a_s, b_s, c_s))
-        coeffs = {}
-        for mi, (a, b, c) in enumerate(((a_s, b_s, c_s), (a_w, b_w, c_w))):
-            for r in range(3):
-                for cc in range(3):
-                    coeffs[(mi, r, cc)] = (a[r, cc], b[r, cc], c[r, cc])
-        points += _breakpoints(geo, coeffs, geo.limits)
-    pts = np.unique(np.clip(points, -math.pi, math.pi))
-    pts = pts[np.concatenate([[True], np.diff(pts) > 1e-13])]
-    mids = 0.5 * (pts[:-1] + pts[1:])
-    m = len(mids)
-    cand, _, _ = _solve_psi(geo, np.repeat(rc, m, 0), np.repeat(w, m, 0), mids, None)
-    feasible = _within(geo.limits, cand)            # (m, 8); NaN rows are False
+    lo, hi, feasible = _feasible_arcs(geo, rc, w)
     out = []
     for k in range(8):
         iv = []
-        for i in np.flatnonzero(feasible[:, k]):
-            lo, hi = float(pts[i]), float(pts[i + 1])
-            if iv and abs(iv[-1][1] - lo) <= 1e-13:
-                iv[-1][1] = hi
+        for i in np.flatnonzero(feasible[0, :, k]):
+            a, b = float(lo[0, i]), float(hi[0, i])
+            if iv and abs(iv[-1][1] - a) <= 1e-13:
+                iv[-1][1] = b
             else:
-                iv.append([lo, hi])
+                iv.append([a, b])
         out.append(np.array(iv, dtype=float).reshape(-1, 2))
     return out
 
 
-def sweep_psi(robot, poses, n: int) -> np.ndarray:
+def sweep_psi(robot, poses, n: int, feasible=None) -> np.ndarray:
     """(m, n) arm angles for poses (8,) or (m, 8): per pose ``n`` values spread evenly over the
     union of the branches' feasible intervals (:func:`psi_intervals`), the midpoints of n equal
-    parts of its total length; a NaN row for a pose without a feasible arm angle."""
+    parts of its total length; a NaN row for a pose without a feasible arm angle. All poses at
+    once: ``feasible(poses (r, 8), psi (r,))`` -> bool (r,), whether any solution at psi is
+    within the limits, replaces the numpy closed form's test at the arcs' midpoints (the
+    generated kernels' batch IK: ``derive.kernels(robot, "c").ik_sweep``)."""
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n: expected a positive integer, got {n!r}")
+    geo = srs_geometry(robot)
     P, _ = _poses(poses)
-    m = len(P)
-    psi = np.full((m, n), np.nan)
-    for i in range(m):
-        iv = np.concatenate(psi_intervals(robot, P[i]))
-        if len(iv) == 0:
-            continue
-        iv = iv[np.argsort(iv[:, 0])]
-        merged = [list(iv[0])]
-        for lo, hi in iv[1:]:
-            if lo <= merged[-1][1] + 1e-13:
-                merged[-1][1] = max(merged[-1][1], hi)
-            else:
-                merged.append([lo, hi])
-        merged = np.array(merged)
-        lengths = merged[:, 1] - merged[:, 0]
-        total = lengths.sum()
-        s = (np.arange(n) + 0.5) / n * total
-        edges = np.concatenate([[0.0], np.cumsum(lengths)])
-        j = np.clip(np.searchsorted(edges, s, side="right") - 1, 0, len(merged) - 1)
-        psi[i] = merged[j, 0] + (s - edges[j])
+    rc, w = _into_canonical(geo, P)
+    test = None if feasible is None else (lambda rows, psi: feasible(P[rows], psi))
+    lo, hi, ok = _feasible_arcs(geo, rc, w, test)
+    if ok.ndim == 3:
+        ok = ok.any(-1)
+    length = np.where(ok, hi - lo, 0.0)                          # NaN arcs are not ok
+    edges = np.concatenate([np.zeros((len(P), 1)), np.cumsum(length, 1)], 1)
+    total = edges[:, -1:]
+    s = (np.arange(n) + 0.5) / n * total                         # (m, n)
+    # the arc holding s: the last one starting at or below it (zero-length arcs are skipped:
+    # s < total, so that arc has positive length)
+    j = np.minimum((edges[:, None, :-1] <= s[:, :, None]).sum(-1) - 1, lo.shape[1] - 1)
+    rows = np.arange(len(P))[:, None]
+    psi = lo[rows, j] + (s - edges[rows, j])
+    psi[total[:, 0] <= 0.0] = np.nan
     return psi
 
 
