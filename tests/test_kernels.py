@@ -3,6 +3,7 @@
 import ctypes
 import math
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -364,18 +365,33 @@ int main(void)
 """
 
 
-@pytest.fixture(scope="module")
-def c_helpers(tmp_path_factory):
-    """run(kind, args) -> the helpers' results (floats, bit exact) for a list of arguments."""
+def _has_fma() -> bool:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            return platform.machine() in ("x86_64", "AMD64") and " fma " in f.read()
+    except OSError:
+        return False
+
+
+@pytest.fixture(scope="module", params=["portable", "fma"])
+def c_helpers(request, tmp_path_factory):
+    """run(kind, args) -> the helpers' results (floats, bit exact) for a list of arguments; once
+    as a portable build (two operations where the source says DQ_FMA) and once with x86 FMA
+    (-mfma: one fused instruction), the two polynomial paths of the helpers."""
     cc = shutil.which("gcc") or shutil.which("cc")
     if cc is None:
         pytest.skip("no C compiler (gcc or cc) on PATH")
+    extra = []
+    if request.param == "fma":
+        if not _has_fma():
+            pytest.skip("this CPU has no x86 FMA")
+        extra = ["-mfma", "-mavx2"]
     source, header, _ = _c_sources("ur5")
     d = tmp_path_factory.mktemp("c_helpers")
     shutil.copy(source, d / source.name)
     shutil.copy(header, d / header.name)
     (d / "driver.c").write_text(HELPERS_DRIVER % source.name)
-    res = subprocess.run([cc, "-std=c99", "-O2", "-Wall", "-o", str(d / "driver"), str(d / "driver.c"), "-lm"],
+    res = subprocess.run([cc, "-std=c99", "-O2", *extra, "-Wall", "-o", str(d / "driver"), str(d / "driver.c"), "-lm"],
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
 

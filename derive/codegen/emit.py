@@ -217,6 +217,7 @@ def _ik_context(robot) -> dict:
         if d["kind"] == "solution":
             for j, e in enumerate(d["q"]):
                 same_as[d["leaf"]][j] = first.setdefault((j, e), d["leaf"])
+    near, dups = _duplicate_tests(same_as, prog.branches, robot.dof)
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
     labels = list(prog.branch_labels) or [f"step {i + 1}" for i in range(k)]
     # labels are in the order of significance: weights 2^(k-1) ... 1
@@ -227,8 +228,35 @@ def _ik_context(robot) -> dict:
                    "free_joint": prog.free_joint, "free_rule": prog.free_rule,
                    "leaf": leaf or "0", "flat": flat, "flat_full": flat_full, "merge_tol": repr(MERGE_TOL), "steps": step_lines,
                    "singular_flag": any(op.kind == "flag" and op.name == "singular" for op in prog.ops),
-                   "same_as": same_as, "free": prog.free, "free_doc": prog.free_doc},
+                   "same_as": same_as, "near": near, "dups": dups,
+                   "free": prog.free, "free_doc": prog.free_doc},
             "ik_missing": ""}
+
+
+def _duplicate_tests(same_as, branches: int, dof: int):
+    """The batch loop's duplicate test (dq_merge's rule: candidate i is dropped when an earlier
+    valid candidate a is within the merge tolerance in every joint) with each distinct pair of
+    values compared once. Leaves whose value of joint k is the same expression (``same_as``) are
+    equal there and need no test; theta1 is one of two values for all 8 leaves of the UR, so its
+    28 leaf pairs need 1 comparison. Returns the comparisons [(flag name, joint, leaf x, leaf y)]
+    and per leaf i > 0 the list [(a, [flag names])] of its earlier leaves and the flags that must
+    all hold for a to be its duplicate."""
+    near, names, dups = [], {}, []
+    for i in range(1, branches):
+        row = []
+        for a in range(i):
+            flags = []
+            for k in range(dof):
+                x, y = sorted((same_as[i][k], same_as[a][k]), reverse=True)
+                if x == y:
+                    continue
+                if (k, x, y) not in names:
+                    names[(k, x, y)] = f"near{k}_{x}_{y}"
+                    near.append((names[(k, x, y)], k, x, y))
+                flags.append(names[(k, x, y)])
+            row.append((a, flags))
+        dups.append((i, row))
+    return near, dups
 
 
 def _singular_only(cond) -> bool:

@@ -15,6 +15,14 @@
 #define DQ_INLINE static inline
 #endif
 
+/* a * b + c: one fused instruction where the target has it (x86 FMA, ARMv8), else two
+   operations; the results of one build do not depend on the loop (single and batch agree) */
+#if defined(__FMA__) || defined(__ARM_FEATURE_FMA)
+#define DQ_FMA(a, b, c) fma((a), (b), (c))
+#else
+#define DQ_FMA(a, b, c) ((a) * (b) + (c))
+#endif
+
 /* c ? a : b as a bitwise blend of a and b (both evaluated), with no branch. A plain `c ? a : b`
  * is a branch in the compiler's intermediate code, and it moves a computation used only by one
  * arm into that arm; a floating-point operation there may trap, so the loop is not if-converted
@@ -33,21 +41,26 @@ DQ_INLINE double dq_sel(int c, double a, double b)
 
 /* sin and cos of x without a library call and without branches or integer conversions, so a
  * batch loop can be vectorised. x is reduced to r = x - k pi/2, |r| <= pi/4 (k rounded with the
- * 1.5 * 2^52 trick, pi/2 split in two parts as in fdlibm), then Taylor polynomials to degree 15
- * and 16 (truncation below 1e-16 on |r| <= pi/4); the quadrant k mod 4, found the same way,
- * picks signs and swaps. Accurate to a few ulp for |x| up to about 1e6. */
+ * 1.5 * 2^52 trick, pi/2 split in two parts as in fdlibm), then fdlibm's minimax polynomials
+ * on |r| <= pi/4 (k_sin.c, degree 13, and k_cos.c, degree 14; each within 2^-58 of the function
+ * there) in Horner form with fused multiply-adds where the target has them; the quadrant
+ * k mod 4, found the same way, picks signs and swaps. Accurate to a few ulp for |x| up to about
+ * 1e6. */
 DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
 {
     const double round_magic = 6755399441055744.0;
     const double k = (x * 0.63661977236758134308 + round_magic) - round_magic;
     const double r = (x - k * 1.57079632673412561417e+00) - k * 6.07710050650619224932e-11;
-    const double r2 = r * r;
-    const double ps = r * (1.0 + r2 * (-1.0 / 6.0 + r2 * (1.0 / 120.0 + r2 * (-1.0 / 5040.0
-                     + r2 * (1.0 / 362880.0 + r2 * (-1.0 / 39916800.0 + r2 * (1.0 / 6227020800.0
-                     + r2 * (-1.0 / 1307674368000.0))))))));
-    const double pc = 1.0 + r2 * (-0.5 + r2 * (1.0 / 24.0 + r2 * (-1.0 / 720.0
-                     + r2 * (1.0 / 40320.0 + r2 * (-1.0 / 3628800.0 + r2 * (1.0 / 479001600.0
-                     + r2 * (-1.0 / 87178291200.0 + r2 * (1.0 / 20922789888000.0))))))));
+    const double z = r * r;
+    /* r (1 + z p(z)), not r + r z p(z): keeps the sign of r = -0.0 */
+    const double ps = r * DQ_FMA(z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z,
+                      1.58969099521155010221e-10, -2.50507602534068634195e-08),
+                      2.75573137070700676789e-06), -1.98412698298579493134e-04),
+                      8.33333333332248946124e-03), -1.66666666666666324348e-01), 1.0);
+    const double pc = DQ_FMA(z * z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z, DQ_FMA(z,
+                      -1.13596475577881948265e-11, 2.08757232129817482790e-09),
+                      -2.75573143513906633035e-07), 2.48015872894767294178e-05),
+                      -1.38888888888741095749e-03), 4.16666666666666019037e-02), DQ_FMA(-0.5, z, 1.0));
     /* k mod 2 and k mod 4 as k - 2 round(k/2) in {-1, 0, 1} and k - 4 round(k/4) in {-2 .. 2} */
     const double m2 = k - 2.0 * ((k * 0.5 + round_magic) - round_magic);
     const double m4 = k - 4.0 * ((k * 0.25 + round_magic) - round_magic);
@@ -438,12 +451,12 @@ DQ_INLINE double dq_atan2(double y, double x)
     const double den = dq_sel(red, lo + hi * 1.7320508075688772, hi);
     const double u = num / dq_sel(den > 0.0, den, 1.0);   /* den = 0 only with num = 0 */
     const double z = u * u, z2 = z * z, z4 = z2 * z2, z8 = z4 * z4;
-    const double e0 = (1.0 / 3.0 - z * (1.0 / 5.0)) + z2 * (1.0 / 7.0 - z * (1.0 / 9.0));
-    const double e1 = (1.0 / 11.0 - z * (1.0 / 13.0)) + z2 * (1.0 / 15.0 - z * (1.0 / 17.0));
-    const double e2 = (1.0 / 19.0 - z * (1.0 / 21.0)) + z2 * (1.0 / 23.0 - z * (1.0 / 25.0));
-    const double e3 = 1.0 / 27.0 - z * (1.0 / 29.0);
-    const double p = (e0 + z4 * e1) + z8 * (e2 + z4 * e3);
-    double r = u - u * z * p;
+    const double e0 = DQ_FMA(z2, DQ_FMA(-z, 1.0 / 9.0, 1.0 / 7.0), DQ_FMA(-z, 1.0 / 5.0, 1.0 / 3.0));
+    const double e1 = DQ_FMA(z2, DQ_FMA(-z, 1.0 / 17.0, 1.0 / 15.0), DQ_FMA(-z, 1.0 / 13.0, 1.0 / 11.0));
+    const double e2 = DQ_FMA(z2, DQ_FMA(-z, 1.0 / 25.0, 1.0 / 23.0), DQ_FMA(-z, 1.0 / 21.0, 1.0 / 19.0));
+    const double e3 = DQ_FMA(-z, 1.0 / 29.0, 1.0 / 27.0);
+    const double p = DQ_FMA(z8, DQ_FMA(z4, e3, e2), DQ_FMA(z4, e1, e0));
+    double r = DQ_FMA(-(u * z), p, u);
     r = dq_sel(red, r + 0.52359877559829887308, r);
     r = dq_sel(swap, 1.57079632679489661923 - r, r);
     /* the sign bit of x (-0.0 too, as C99 atan2) read through copysign: signbit() does not vectorise */
@@ -1461,14 +1474,113 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[9][DQ_BLOCK], double cb[][7
     }
     dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
     for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicates */
+        /* each distinct pair of values of a joint compared once (leaves that share a value need
+           no test); candidate i is a duplicate of a when all of the pair's joints are near */
+        const int near0_1_0 = dq_adist(cb[1][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_1_0 = dq_adist(cb[1][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_1_0 = dq_adist(cb[1][2][j], cb[0][2][j]) < 1e-06;
+        const int near0_2_0 = dq_adist(cb[2][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_2_0 = dq_adist(cb[2][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_2_0 = dq_adist(cb[2][2][j], cb[0][2][j]) < 1e-06;
+        const int near4_2_0 = dq_adist(cb[2][4][j], cb[0][4][j]) < 1e-06;
+        const int near5_2_0 = dq_adist(cb[2][5][j], cb[0][5][j]) < 1e-06;
+        const int near0_2_1 = dq_adist(cb[2][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_2_1 = dq_adist(cb[2][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_2_1 = dq_adist(cb[2][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_3_0 = dq_adist(cb[3][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_3_0 = dq_adist(cb[3][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_3_0 = dq_adist(cb[3][2][j], cb[0][2][j]) < 1e-06;
+        const int near0_3_1 = dq_adist(cb[3][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_3_1 = dq_adist(cb[3][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_3_1 = dq_adist(cb[3][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_3_2 = dq_adist(cb[3][0][j], cb[2][0][j]) < 1e-06;
+        const int near1_3_2 = dq_adist(cb[3][1][j], cb[2][1][j]) < 1e-06;
+        const int near2_3_2 = dq_adist(cb[3][2][j], cb[2][2][j]) < 1e-06;
+        const int near0_4_0 = dq_adist(cb[4][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_4_0 = dq_adist(cb[4][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_4_0 = dq_adist(cb[4][2][j], cb[0][2][j]) < 1e-06;
+        const int near3_4_0 = dq_adist(cb[4][3][j], cb[0][3][j]) < 1e-06;
+        const int near4_4_0 = dq_adist(cb[4][4][j], cb[0][4][j]) < 1e-06;
+        const int near5_4_0 = dq_adist(cb[4][5][j], cb[0][5][j]) < 1e-06;
+        const int near0_4_1 = dq_adist(cb[4][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_4_1 = dq_adist(cb[4][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_4_1 = dq_adist(cb[4][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_4_2 = dq_adist(cb[4][0][j], cb[2][0][j]) < 1e-06;
+        const int near1_4_2 = dq_adist(cb[4][1][j], cb[2][1][j]) < 1e-06;
+        const int near2_4_2 = dq_adist(cb[4][2][j], cb[2][2][j]) < 1e-06;
+        const int near4_4_2 = dq_adist(cb[4][4][j], cb[2][4][j]) < 1e-06;
+        const int near5_4_2 = dq_adist(cb[4][5][j], cb[2][5][j]) < 1e-06;
+        const int near0_4_3 = dq_adist(cb[4][0][j], cb[3][0][j]) < 1e-06;
+        const int near1_4_3 = dq_adist(cb[4][1][j], cb[3][1][j]) < 1e-06;
+        const int near2_4_3 = dq_adist(cb[4][2][j], cb[3][2][j]) < 1e-06;
+        const int near0_5_0 = dq_adist(cb[5][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_5_0 = dq_adist(cb[5][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_5_0 = dq_adist(cb[5][2][j], cb[0][2][j]) < 1e-06;
+        const int near0_5_1 = dq_adist(cb[5][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_5_1 = dq_adist(cb[5][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_5_1 = dq_adist(cb[5][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_5_2 = dq_adist(cb[5][0][j], cb[2][0][j]) < 1e-06;
+        const int near1_5_2 = dq_adist(cb[5][1][j], cb[2][1][j]) < 1e-06;
+        const int near2_5_2 = dq_adist(cb[5][2][j], cb[2][2][j]) < 1e-06;
+        const int near0_5_3 = dq_adist(cb[5][0][j], cb[3][0][j]) < 1e-06;
+        const int near1_5_3 = dq_adist(cb[5][1][j], cb[3][1][j]) < 1e-06;
+        const int near2_5_3 = dq_adist(cb[5][2][j], cb[3][2][j]) < 1e-06;
+        const int near0_5_4 = dq_adist(cb[5][0][j], cb[4][0][j]) < 1e-06;
+        const int near1_5_4 = dq_adist(cb[5][1][j], cb[4][1][j]) < 1e-06;
+        const int near2_5_4 = dq_adist(cb[5][2][j], cb[4][2][j]) < 1e-06;
+        const int near0_6_0 = dq_adist(cb[6][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_6_0 = dq_adist(cb[6][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_6_0 = dq_adist(cb[6][2][j], cb[0][2][j]) < 1e-06;
+        const int near4_6_0 = dq_adist(cb[6][4][j], cb[0][4][j]) < 1e-06;
+        const int near5_6_0 = dq_adist(cb[6][5][j], cb[0][5][j]) < 1e-06;
+        const int near0_6_1 = dq_adist(cb[6][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_6_1 = dq_adist(cb[6][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_6_1 = dq_adist(cb[6][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_6_2 = dq_adist(cb[6][0][j], cb[2][0][j]) < 1e-06;
+        const int near1_6_2 = dq_adist(cb[6][1][j], cb[2][1][j]) < 1e-06;
+        const int near2_6_2 = dq_adist(cb[6][2][j], cb[2][2][j]) < 1e-06;
+        const int near4_6_2 = dq_adist(cb[6][4][j], cb[2][4][j]) < 1e-06;
+        const int near5_6_2 = dq_adist(cb[6][5][j], cb[2][5][j]) < 1e-06;
+        const int near0_6_3 = dq_adist(cb[6][0][j], cb[3][0][j]) < 1e-06;
+        const int near1_6_3 = dq_adist(cb[6][1][j], cb[3][1][j]) < 1e-06;
+        const int near2_6_3 = dq_adist(cb[6][2][j], cb[3][2][j]) < 1e-06;
+        const int near0_6_4 = dq_adist(cb[6][0][j], cb[4][0][j]) < 1e-06;
+        const int near1_6_4 = dq_adist(cb[6][1][j], cb[4][1][j]) < 1e-06;
+        const int near2_6_4 = dq_adist(cb[6][2][j], cb[4][2][j]) < 1e-06;
+        const int near4_6_4 = dq_adist(cb[6][4][j], cb[4][4][j]) < 1e-06;
+        const int near5_6_4 = dq_adist(cb[6][5][j], cb[4][5][j]) < 1e-06;
+        const int near0_6_5 = dq_adist(cb[6][0][j], cb[5][0][j]) < 1e-06;
+        const int near1_6_5 = dq_adist(cb[6][1][j], cb[5][1][j]) < 1e-06;
+        const int near2_6_5 = dq_adist(cb[6][2][j], cb[5][2][j]) < 1e-06;
+        const int near0_7_0 = dq_adist(cb[7][0][j], cb[0][0][j]) < 1e-06;
+        const int near1_7_0 = dq_adist(cb[7][1][j], cb[0][1][j]) < 1e-06;
+        const int near2_7_0 = dq_adist(cb[7][2][j], cb[0][2][j]) < 1e-06;
+        const int near0_7_1 = dq_adist(cb[7][0][j], cb[1][0][j]) < 1e-06;
+        const int near1_7_1 = dq_adist(cb[7][1][j], cb[1][1][j]) < 1e-06;
+        const int near2_7_1 = dq_adist(cb[7][2][j], cb[1][2][j]) < 1e-06;
+        const int near0_7_2 = dq_adist(cb[7][0][j], cb[2][0][j]) < 1e-06;
+        const int near1_7_2 = dq_adist(cb[7][1][j], cb[2][1][j]) < 1e-06;
+        const int near2_7_2 = dq_adist(cb[7][2][j], cb[2][2][j]) < 1e-06;
+        const int near0_7_3 = dq_adist(cb[7][0][j], cb[3][0][j]) < 1e-06;
+        const int near1_7_3 = dq_adist(cb[7][1][j], cb[3][1][j]) < 1e-06;
+        const int near2_7_3 = dq_adist(cb[7][2][j], cb[3][2][j]) < 1e-06;
+        const int near0_7_4 = dq_adist(cb[7][0][j], cb[4][0][j]) < 1e-06;
+        const int near1_7_4 = dq_adist(cb[7][1][j], cb[4][1][j]) < 1e-06;
+        const int near2_7_4 = dq_adist(cb[7][2][j], cb[4][2][j]) < 1e-06;
+        const int near0_7_5 = dq_adist(cb[7][0][j], cb[5][0][j]) < 1e-06;
+        const int near1_7_5 = dq_adist(cb[7][1][j], cb[5][1][j]) < 1e-06;
+        const int near2_7_5 = dq_adist(cb[7][2][j], cb[5][2][j]) < 1e-06;
+        const int near0_7_6 = dq_adist(cb[7][0][j], cb[6][0][j]) < 1e-06;
+        const int near1_7_6 = dq_adist(cb[7][1][j], cb[6][1][j]) < 1e-06;
+        const int near2_7_6 = dq_adist(cb[7][2][j], cb[6][2][j]) < 1e-06;
         kb[0][j] = vb[0][j];
-        kb[1][j] = vb[1][j] & !((vb[0][j] & (dq_max(dq_adist(cb[1][0][j], cb[0][0][j]), dq_max(dq_adist(cb[1][1][j], cb[0][1][j]), dq_max(dq_adist(cb[1][2][j], cb[0][2][j]), dq_max(dq_adist(cb[1][3][j], cb[0][3][j]), dq_max(dq_adist(cb[1][4][j], cb[0][4][j]), dq_max(dq_adist(cb[1][5][j], cb[0][5][j]), dq_adist(cb[1][6][j], cb[0][6][j]))))))) < 1e-06)));
-        kb[2][j] = vb[2][j] & !((vb[0][j] & (dq_max(dq_adist(cb[2][0][j], cb[0][0][j]), dq_max(dq_adist(cb[2][1][j], cb[0][1][j]), dq_max(dq_adist(cb[2][2][j], cb[0][2][j]), dq_max(dq_adist(cb[2][3][j], cb[0][3][j]), dq_max(dq_adist(cb[2][4][j], cb[0][4][j]), dq_max(dq_adist(cb[2][5][j], cb[0][5][j]), dq_adist(cb[2][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[2][0][j], cb[1][0][j]), dq_max(dq_adist(cb[2][1][j], cb[1][1][j]), dq_max(dq_adist(cb[2][2][j], cb[1][2][j]), dq_max(dq_adist(cb[2][3][j], cb[1][3][j]), dq_max(dq_adist(cb[2][4][j], cb[1][4][j]), dq_max(dq_adist(cb[2][5][j], cb[1][5][j]), dq_adist(cb[2][6][j], cb[1][6][j]))))))) < 1e-06)));
-        kb[3][j] = vb[3][j] & !((vb[0][j] & (dq_max(dq_adist(cb[3][0][j], cb[0][0][j]), dq_max(dq_adist(cb[3][1][j], cb[0][1][j]), dq_max(dq_adist(cb[3][2][j], cb[0][2][j]), dq_max(dq_adist(cb[3][3][j], cb[0][3][j]), dq_max(dq_adist(cb[3][4][j], cb[0][4][j]), dq_max(dq_adist(cb[3][5][j], cb[0][5][j]), dq_adist(cb[3][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[3][0][j], cb[1][0][j]), dq_max(dq_adist(cb[3][1][j], cb[1][1][j]), dq_max(dq_adist(cb[3][2][j], cb[1][2][j]), dq_max(dq_adist(cb[3][3][j], cb[1][3][j]), dq_max(dq_adist(cb[3][4][j], cb[1][4][j]), dq_max(dq_adist(cb[3][5][j], cb[1][5][j]), dq_adist(cb[3][6][j], cb[1][6][j]))))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[3][0][j], cb[2][0][j]), dq_max(dq_adist(cb[3][1][j], cb[2][1][j]), dq_max(dq_adist(cb[3][2][j], cb[2][2][j]), dq_max(dq_adist(cb[3][3][j], cb[2][3][j]), dq_max(dq_adist(cb[3][4][j], cb[2][4][j]), dq_max(dq_adist(cb[3][5][j], cb[2][5][j]), dq_adist(cb[3][6][j], cb[2][6][j]))))))) < 1e-06)));
-        kb[4][j] = vb[4][j] & !((vb[0][j] & (dq_max(dq_adist(cb[4][0][j], cb[0][0][j]), dq_max(dq_adist(cb[4][1][j], cb[0][1][j]), dq_max(dq_adist(cb[4][2][j], cb[0][2][j]), dq_max(dq_adist(cb[4][3][j], cb[0][3][j]), dq_max(dq_adist(cb[4][4][j], cb[0][4][j]), dq_max(dq_adist(cb[4][5][j], cb[0][5][j]), dq_adist(cb[4][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[4][0][j], cb[1][0][j]), dq_max(dq_adist(cb[4][1][j], cb[1][1][j]), dq_max(dq_adist(cb[4][2][j], cb[1][2][j]), dq_max(dq_adist(cb[4][3][j], cb[1][3][j]), dq_max(dq_adist(cb[4][4][j], cb[1][4][j]), dq_max(dq_adist(cb[4][5][j], cb[1][5][j]), dq_adist(cb[4][6][j], cb[1][6][j]))))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[4][0][j], cb[2][0][j]), dq_max(dq_adist(cb[4][1][j], cb[2][1][j]), dq_max(dq_adist(cb[4][2][j], cb[2][2][j]), dq_max(dq_adist(cb[4][3][j], cb[2][3][j]), dq_max(dq_adist(cb[4][4][j], cb[2][4][j]), dq_max(dq_adist(cb[4][5][j], cb[2][5][j]), dq_adist(cb[4][6][j], cb[2][6][j]))))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[4][0][j], cb[3][0][j]), dq_max(dq_adist(cb[4][1][j], cb[3][1][j]), dq_max(dq_adist(cb[4][2][j], cb[3][2][j]), dq_max(dq_adist(cb[4][3][j], cb[3][3][j]), dq_max(dq_adist(cb[4][4][j], cb[3][4][j]), dq_max(dq_adist(cb[4][5][j], cb[3][5][j]), dq_adist(cb[4][6][j], cb[3][6][j]))))))) < 1e-06)));
-        kb[5][j] = vb[5][j] & !((vb[0][j] & (dq_max(dq_adist(cb[5][0][j], cb[0][0][j]), dq_max(dq_adist(cb[5][1][j], cb[0][1][j]), dq_max(dq_adist(cb[5][2][j], cb[0][2][j]), dq_max(dq_adist(cb[5][3][j], cb[0][3][j]), dq_max(dq_adist(cb[5][4][j], cb[0][4][j]), dq_max(dq_adist(cb[5][5][j], cb[0][5][j]), dq_adist(cb[5][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[5][0][j], cb[1][0][j]), dq_max(dq_adist(cb[5][1][j], cb[1][1][j]), dq_max(dq_adist(cb[5][2][j], cb[1][2][j]), dq_max(dq_adist(cb[5][3][j], cb[1][3][j]), dq_max(dq_adist(cb[5][4][j], cb[1][4][j]), dq_max(dq_adist(cb[5][5][j], cb[1][5][j]), dq_adist(cb[5][6][j], cb[1][6][j]))))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[5][0][j], cb[2][0][j]), dq_max(dq_adist(cb[5][1][j], cb[2][1][j]), dq_max(dq_adist(cb[5][2][j], cb[2][2][j]), dq_max(dq_adist(cb[5][3][j], cb[2][3][j]), dq_max(dq_adist(cb[5][4][j], cb[2][4][j]), dq_max(dq_adist(cb[5][5][j], cb[2][5][j]), dq_adist(cb[5][6][j], cb[2][6][j]))))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[5][0][j], cb[3][0][j]), dq_max(dq_adist(cb[5][1][j], cb[3][1][j]), dq_max(dq_adist(cb[5][2][j], cb[3][2][j]), dq_max(dq_adist(cb[5][3][j], cb[3][3][j]), dq_max(dq_adist(cb[5][4][j], cb[3][4][j]), dq_max(dq_adist(cb[5][5][j], cb[3][5][j]), dq_adist(cb[5][6][j], cb[3][6][j]))))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[5][0][j], cb[4][0][j]), dq_max(dq_adist(cb[5][1][j], cb[4][1][j]), dq_max(dq_adist(cb[5][2][j], cb[4][2][j]), dq_max(dq_adist(cb[5][3][j], cb[4][3][j]), dq_max(dq_adist(cb[5][4][j], cb[4][4][j]), dq_max(dq_adist(cb[5][5][j], cb[4][5][j]), dq_adist(cb[5][6][j], cb[4][6][j]))))))) < 1e-06)));
-        kb[6][j] = vb[6][j] & !((vb[0][j] & (dq_max(dq_adist(cb[6][0][j], cb[0][0][j]), dq_max(dq_adist(cb[6][1][j], cb[0][1][j]), dq_max(dq_adist(cb[6][2][j], cb[0][2][j]), dq_max(dq_adist(cb[6][3][j], cb[0][3][j]), dq_max(dq_adist(cb[6][4][j], cb[0][4][j]), dq_max(dq_adist(cb[6][5][j], cb[0][5][j]), dq_adist(cb[6][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[6][0][j], cb[1][0][j]), dq_max(dq_adist(cb[6][1][j], cb[1][1][j]), dq_max(dq_adist(cb[6][2][j], cb[1][2][j]), dq_max(dq_adist(cb[6][3][j], cb[1][3][j]), dq_max(dq_adist(cb[6][4][j], cb[1][4][j]), dq_max(dq_adist(cb[6][5][j], cb[1][5][j]), dq_adist(cb[6][6][j], cb[1][6][j]))))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[6][0][j], cb[2][0][j]), dq_max(dq_adist(cb[6][1][j], cb[2][1][j]), dq_max(dq_adist(cb[6][2][j], cb[2][2][j]), dq_max(dq_adist(cb[6][3][j], cb[2][3][j]), dq_max(dq_adist(cb[6][4][j], cb[2][4][j]), dq_max(dq_adist(cb[6][5][j], cb[2][5][j]), dq_adist(cb[6][6][j], cb[2][6][j]))))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[6][0][j], cb[3][0][j]), dq_max(dq_adist(cb[6][1][j], cb[3][1][j]), dq_max(dq_adist(cb[6][2][j], cb[3][2][j]), dq_max(dq_adist(cb[6][3][j], cb[3][3][j]), dq_max(dq_adist(cb[6][4][j], cb[3][4][j]), dq_max(dq_adist(cb[6][5][j], cb[3][5][j]), dq_adist(cb[6][6][j], cb[3][6][j]))))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[6][0][j], cb[4][0][j]), dq_max(dq_adist(cb[6][1][j], cb[4][1][j]), dq_max(dq_adist(cb[6][2][j], cb[4][2][j]), dq_max(dq_adist(cb[6][3][j], cb[4][3][j]), dq_max(dq_adist(cb[6][4][j], cb[4][4][j]), dq_max(dq_adist(cb[6][5][j], cb[4][5][j]), dq_adist(cb[6][6][j], cb[4][6][j]))))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[6][0][j], cb[5][0][j]), dq_max(dq_adist(cb[6][1][j], cb[5][1][j]), dq_max(dq_adist(cb[6][2][j], cb[5][2][j]), dq_max(dq_adist(cb[6][3][j], cb[5][3][j]), dq_max(dq_adist(cb[6][4][j], cb[5][4][j]), dq_max(dq_adist(cb[6][5][j], cb[5][5][j]), dq_adist(cb[6][6][j], cb[5][6][j]))))))) < 1e-06)));
-        kb[7][j] = vb[7][j] & !((vb[0][j] & (dq_max(dq_adist(cb[7][0][j], cb[0][0][j]), dq_max(dq_adist(cb[7][1][j], cb[0][1][j]), dq_max(dq_adist(cb[7][2][j], cb[0][2][j]), dq_max(dq_adist(cb[7][3][j], cb[0][3][j]), dq_max(dq_adist(cb[7][4][j], cb[0][4][j]), dq_max(dq_adist(cb[7][5][j], cb[0][5][j]), dq_adist(cb[7][6][j], cb[0][6][j]))))))) < 1e-06)) | (vb[1][j] & (dq_max(dq_adist(cb[7][0][j], cb[1][0][j]), dq_max(dq_adist(cb[7][1][j], cb[1][1][j]), dq_max(dq_adist(cb[7][2][j], cb[1][2][j]), dq_max(dq_adist(cb[7][3][j], cb[1][3][j]), dq_max(dq_adist(cb[7][4][j], cb[1][4][j]), dq_max(dq_adist(cb[7][5][j], cb[1][5][j]), dq_adist(cb[7][6][j], cb[1][6][j]))))))) < 1e-06)) | (vb[2][j] & (dq_max(dq_adist(cb[7][0][j], cb[2][0][j]), dq_max(dq_adist(cb[7][1][j], cb[2][1][j]), dq_max(dq_adist(cb[7][2][j], cb[2][2][j]), dq_max(dq_adist(cb[7][3][j], cb[2][3][j]), dq_max(dq_adist(cb[7][4][j], cb[2][4][j]), dq_max(dq_adist(cb[7][5][j], cb[2][5][j]), dq_adist(cb[7][6][j], cb[2][6][j]))))))) < 1e-06)) | (vb[3][j] & (dq_max(dq_adist(cb[7][0][j], cb[3][0][j]), dq_max(dq_adist(cb[7][1][j], cb[3][1][j]), dq_max(dq_adist(cb[7][2][j], cb[3][2][j]), dq_max(dq_adist(cb[7][3][j], cb[3][3][j]), dq_max(dq_adist(cb[7][4][j], cb[3][4][j]), dq_max(dq_adist(cb[7][5][j], cb[3][5][j]), dq_adist(cb[7][6][j], cb[3][6][j]))))))) < 1e-06)) | (vb[4][j] & (dq_max(dq_adist(cb[7][0][j], cb[4][0][j]), dq_max(dq_adist(cb[7][1][j], cb[4][1][j]), dq_max(dq_adist(cb[7][2][j], cb[4][2][j]), dq_max(dq_adist(cb[7][3][j], cb[4][3][j]), dq_max(dq_adist(cb[7][4][j], cb[4][4][j]), dq_max(dq_adist(cb[7][5][j], cb[4][5][j]), dq_adist(cb[7][6][j], cb[4][6][j]))))))) < 1e-06)) | (vb[5][j] & (dq_max(dq_adist(cb[7][0][j], cb[5][0][j]), dq_max(dq_adist(cb[7][1][j], cb[5][1][j]), dq_max(dq_adist(cb[7][2][j], cb[5][2][j]), dq_max(dq_adist(cb[7][3][j], cb[5][3][j]), dq_max(dq_adist(cb[7][4][j], cb[5][4][j]), dq_max(dq_adist(cb[7][5][j], cb[5][5][j]), dq_adist(cb[7][6][j], cb[5][6][j]))))))) < 1e-06)) | (vb[6][j] & (dq_max(dq_adist(cb[7][0][j], cb[6][0][j]), dq_max(dq_adist(cb[7][1][j], cb[6][1][j]), dq_max(dq_adist(cb[7][2][j], cb[6][2][j]), dq_max(dq_adist(cb[7][3][j], cb[6][3][j]), dq_max(dq_adist(cb[7][4][j], cb[6][4][j]), dq_max(dq_adist(cb[7][5][j], cb[6][5][j]), dq_adist(cb[7][6][j], cb[6][6][j]))))))) < 1e-06)));
+        kb[1][j] = vb[1][j] & !((vb[0][j] & near0_1_0 & near1_1_0 & near2_1_0));
+        kb[2][j] = vb[2][j] & !((vb[0][j] & near0_2_0 & near1_2_0 & near2_2_0 & near4_2_0 & near5_2_0) | (vb[1][j] & near0_2_1 & near1_2_1 & near2_2_1 & near4_2_0 & near5_2_0));
+        kb[3][j] = vb[3][j] & !((vb[0][j] & near0_3_0 & near1_3_0 & near2_3_0 & near4_2_0 & near5_2_0) | (vb[1][j] & near0_3_1 & near1_3_1 & near2_3_1 & near4_2_0 & near5_2_0) | (vb[2][j] & near0_3_2 & near1_3_2 & near2_3_2));
+        kb[4][j] = vb[4][j] & !((vb[0][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_4_0 & near4_4_0 & near5_4_0) | (vb[1][j] & near0_4_1 & near1_4_1 & near2_4_1 & near3_4_0 & near4_4_0 & near5_4_0) | (vb[2][j] & near0_4_2 & near1_4_2 & near2_4_2 & near3_4_0 & near4_4_2 & near5_4_2) | (vb[3][j] & near0_4_3 & near1_4_3 & near2_4_3 & near3_4_0 & near4_4_2 & near5_4_2));
+        kb[5][j] = vb[5][j] & !((vb[0][j] & near0_5_0 & near1_5_0 & near2_5_0 & near3_4_0 & near4_4_0 & near5_4_0) | (vb[1][j] & near0_5_1 & near1_5_1 & near2_5_1 & near3_4_0 & near4_4_0 & near5_4_0) | (vb[2][j] & near0_5_2 & near1_5_2 & near2_5_2 & near3_4_0 & near4_4_2 & near5_4_2) | (vb[3][j] & near0_5_3 & near1_5_3 & near2_5_3 & near3_4_0 & near4_4_2 & near5_4_2) | (vb[4][j] & near0_5_4 & near1_5_4 & near2_5_4));
+        kb[6][j] = vb[6][j] & !((vb[0][j] & near0_6_0 & near1_6_0 & near2_6_0 & near3_4_0 & near4_6_0 & near5_6_0) | (vb[1][j] & near0_6_1 & near1_6_1 & near2_6_1 & near3_4_0 & near4_6_0 & near5_6_0) | (vb[2][j] & near0_6_2 & near1_6_2 & near2_6_2 & near3_4_0 & near4_6_2 & near5_6_2) | (vb[3][j] & near0_6_3 & near1_6_3 & near2_6_3 & near3_4_0 & near4_6_2 & near5_6_2) | (vb[4][j] & near0_6_4 & near1_6_4 & near2_6_4 & near4_6_4 & near5_6_4) | (vb[5][j] & near0_6_5 & near1_6_5 & near2_6_5 & near4_6_4 & near5_6_4));
+        kb[7][j] = vb[7][j] & !((vb[0][j] & near0_7_0 & near1_7_0 & near2_7_0 & near3_4_0 & near4_6_0 & near5_6_0) | (vb[1][j] & near0_7_1 & near1_7_1 & near2_7_1 & near3_4_0 & near4_6_0 & near5_6_0) | (vb[2][j] & near0_7_2 & near1_7_2 & near2_7_2 & near3_4_0 & near4_6_2 & near5_6_2) | (vb[3][j] & near0_7_3 & near1_7_3 & near2_7_3 & near3_4_0 & near4_6_2 & near5_6_2) | (vb[4][j] & near0_7_4 & near1_7_4 & near2_7_4 & near4_6_4 & near5_6_4) | (vb[5][j] & near0_7_5 & near1_7_5 & near2_7_5 & near4_6_4 & near5_6_4) | (vb[6][j] & near0_7_6 & near1_7_6 & near2_7_6));
     }
 }
 
