@@ -126,7 +126,7 @@ def _arg(printer, a, column):
     return printer.doprint(a.xreplace({s: sp.Symbol(column(int(s.name[1:]))) for s in qs}))
 
 
-def _context(robot, command: str) -> dict:
+def _context(robot, command: str, free: str | None = None) -> dict:
     k = fk_kernel(robot)
     py, c = _Py(), _C()
     trig = []
@@ -154,7 +154,7 @@ def _context(robot, command: str) -> dict:
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
         "limits": _limit_context(robot),
-        **_ik_context(robot),
+        **_ik_context(robot, free),
     }
 
 
@@ -170,11 +170,12 @@ def _limit_context(robot) -> list:
             for (lo, hi), rev in zip(robot.limits.tolist(), robot.revolute.tolist())]
 
 
-def _ik_context(robot) -> dict:
-    """The IK program's lines printed for each language ("ik" is None when the robot has none)."""
+def _ik_context(robot, free: str | None = None) -> dict:
+    """The IK program's lines printed for each language ("ik" is None when the robot has none);
+    ``free`` as :func:`derive.ik.program.ik_program`."""
 
     try:
-        prog = ik_program(robot)
+        prog = ik_program(robot, free)
     except DeriveError as exc:
         return {"ik": None, "ik_missing": str(exc)}
     printers = {"py": _Py(), "np": _Np(), "cc": _C()}
@@ -389,23 +390,25 @@ FILES = {
 }
 
 
-def render_kernels(robot, command: str | None = None) -> dict:
-    """{role: (file name, text)} of every kernel file of one robot (roles as in :data:`FILES`)."""
+def render_kernels(robot, command: str | None = None, free: str | None = None) -> dict:
+    """{role: (file name, text)} of every kernel file of one robot (roles as in :data:`FILES`);
+    ``free``: a 7-joint arm's free parameter where its class offers a choice (the IK functions
+    then take that one, :func:`derive.ik.program.ik_program`)."""
     robot = load_robot(robot)
     command = command or f"dq-derive kernels {robot.name}"
-    ctx = _context(robot, command)
+    ctx = _context(robot, command, free)
     env = template_environment()
     return {role: (name.format(id=ctx["id"]), env.get_template(tpl).render(ctx))
             for role, (tpl, name) in FILES.items()}
 
 
-def kernel_manifest(robot) -> dict:
+def kernel_manifest(robot, free: str | None = None) -> dict:
     """What a kernel folder's manifest records besides its files: the robot's identity and
     name, the identifier stem of its functions, the IK's branch labels and, for a 7-joint arm,
-    the name of the free parameter its IK functions take (``free``: "psi" or "q7")."""
+    the name of the free parameter its IK functions take (``free``: "psi", "q3" or "q7")."""
     robot = load_robot(robot)
     try:
-        prog = ik_program(robot)
+        prog = ik_program(robot, free)
     except DeriveError:
         prog = None
     out = {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),

@@ -51,7 +51,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
 from derive.ik.closed_form import ik_batch as reference_ik_batch
-from derive.ik.redundant import missing_free_message
+from derive.ik.program7 import FREE_CHOICES
+from derive.ik.redundant import missing_free_message, redundant_kind
 from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
@@ -82,25 +83,29 @@ def _machine_key() -> str:
 KERNEL_ROLES = tuple(FILES)
 
 
-def kernel_folder(robot) -> tuple[Path, dict]:
+def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
     """(folder, manifest) of the kernel sources of a robot: the shipped ``generated/<robot>/``
     folder of its identity, else the user cache's, else they are derived now (progress on
     stderr) and stored in the user cache. Never derives when an artifact of
-    the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists."""
+    the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
+    ``free``: the kernels of a 7-joint arm's alternative free parameter ("q3" for the SRS
+    class), kept in the user cache beside the default ones."""
     robot = load_robot(robot)
-    for folder in (shipped_index().get(robot.id), user_folder(robot.id)):
+    key = robot.id if free is None else f"{robot.id}-{free}"
+    places = (shipped_index().get(robot.id), user_folder(robot.id)) if free is None else (user_folder(key),)
+    for folder in places:
         if folder is None:
             continue
         manifest = read_manifest(folder)
         files = manifest.get("files", {})
-        if manifest.get("id") == robot.id and manifest.get("format") == KERNEL_FORMAT and all(r in files and (folder / files[r]).is_file()
-                                                 for r in KERNEL_ROLES):
+        if manifest.get("id") == key and manifest.get("format") == KERNEL_FORMAT and all(r in files and (folder / files[r]).is_file()
+                                                 for r in KERNEL_ROLES) and (free is None or manifest.get("free") == free):
             return folder, manifest
     with task(robot.name):
-        step(f"no kernels of identity {robot.id} in generated/ or the user cache: deriving them")
-        files = render_kernels(robot)
+        step(f"no kernels of identity {key} in generated/ or the user cache: deriving them")
+        files = render_kernels(robot, free=free)
         step("kernel sources rendered")
-    folder = store_artifacts(robot.id, files, kernel_manifest(robot))
+    folder = store_artifacts(key, files, kernel_manifest(robot, free))
     return folder, read_manifest(folder)
 
 
@@ -195,11 +200,11 @@ def _import(path: Path, name: str):
 class Kernels:
     """The kernels of one robot for one backend."""
 
-    def __init__(self, robot, backend: str):
+    def __init__(self, robot, backend: str, free: str | None = None):
         self.robot = load_robot(robot)
         self.backend = backend
         self.dof = self.robot.dof
-        folder, manifest = kernel_folder(self.robot)
+        folder, manifest = kernel_folder(self.robot, free)
         self._manifest = manifest
         files = manifest["files"]
         ident = manifest["prefix"]
@@ -298,7 +303,9 @@ class Kernels:
     def _check_free(self, free):
         """InputError unless ``free`` is given exactly when the arm has a free parameter."""
         if self.free and free is None:
-            raise InputError(missing_free_message(self.robot))
+            raise InputError(missing_free_message(self.robot) if self.free != "q3" else
+                             f"{self.robot.name}: these kernels solve with joint 3 given and need "
+                             "free= (q3, the value of joint 3, rad), a number or one per pose")
         if free is not None and not self.free:
             raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
 
@@ -310,6 +317,13 @@ class Kernels:
                                            np.asarray(branch, dtype=np.int64),
                                            np.asarray(singular, dtype=np.int64))
         return select.within_limits(q, counts, self.robot.limits, self.robot.revolute, branch, singular)
+
+    def _require_main_free(self, what: str):
+        """InputError for the searches over the free parameter on kernels that take joint 3."""
+        if self.free == "q3":
+            raise InputError(f"{what}: these kernels take q3; the search over the free parameter runs "
+                             f"on the arm-angle kernels: derive.kernels({self.robot.name!r}, "
+                             f"{self.backend!r}).{what}")
 
     def _ext_args(self, free) -> tuple:
         """The trailing arguments of the extension's ik / nearest: the free parameter, if any."""
@@ -421,6 +435,7 @@ class Kernels:
         ``branch``, ``singular``); ``within_limits`` (default) keeps the in-limit windings only."""
         if not self.free:
             raise InputError(f"ik_sweep: {self.robot.name} has {self.dof} joints and no free parameter; use ik")
+        self._require_main_free("ik_sweep")
         poses, single = self._tool_free(P)
         return redundant.ik_sweep(self.robot, poses[0] if single else poses, n,
                                   within_limits=within_limits, solver=self._solver(False), limiter=self._windings)
@@ -441,6 +456,7 @@ class Kernels:
                                     and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
             raise InputError(f"tol: expected a finite number >= 0 (rad or m), got {tol!r}")
         if self.free:       # 7 joints: the free parameter and the branch by derive.ik.redundant's search
+            self._require_main_free("nearest")
             poses, single = self._tool_free(P)
             return redundant.nearest(self.robot, poses[0] if single else poses, q_seed, tol,
                                      solver=self._solver(True))
@@ -489,12 +505,24 @@ class Kernels:
         return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
 
 
-def kernels(robot, backend: str = "numpy") -> Kernels:
+def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
     """The generated kernels of ``robot`` (a library name, a description file under any name,
     or a :class:`~derive.model.robot.Robot`) for ``backend`` ("python", "numpy", "c"), loaded
-    from the artifacts of its identity (see :func:`kernel_folder`); once per process."""
+    from the artifacts of its identity (see :func:`kernel_folder`); once per process.
+
+    ``free``: for a 7-joint arm, which free parameter the IK takes where the class offers a
+    choice (:data:`derive.ik.program7.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
+    psi by default and joint 3's value with ``free="q3"`` (derived into the user cache on first
+    use, about 15 s; ``ik_sweep``, ``nearest`` and the CasADi functions are the psi kernels')."""
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
-    key = (r.id, backend, tuple(c_flags()) if backend == "c" else ())
-    return memo("kernels", key, lambda: Kernels(r, backend))
+    if free is not None:
+        choices = FREE_CHOICES.get(redundant_kind(r), ())
+        if free not in choices:
+            raise InputError(f"free: {r.name} offers no kernels with {free!r} as the free parameter; "
+                             f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
+        if free == choices[0]:
+            free = None                 # the default kernels (shipped in generated/)
+    key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free)
+    return memo("kernels", key, lambda: Kernels(r, backend, free))

@@ -36,10 +36,10 @@ import sympy as sp
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
-from derive.errors import DeriveError
+from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import closed_form_relation, spherical_class, ur_geometry
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
-from derive.ik.program7 import seven_joint_program
+from derive.ik.program7 import FREE_CHOICES, seven_joint_program
 from derive.ik.redundant import redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.ik.spherical import SWGeometry, canonical_robot
@@ -95,17 +95,22 @@ def _half_factor(d, u):
     return None
 
 
-def ik_program(robot) -> IKProgram:
+def ik_program(robot, free: str | None = None) -> IKProgram:
     """The IK program of a robot (raises DeriveError for chains whose extraction it cannot use);
-    cached per robot identity."""
+    cached per robot identity. ``free``: a 7-joint arm's free parameter where its class offers a
+    choice (:data:`derive.ik.program7.FREE_CHOICES`: "q3" instead of psi for the SRS class)."""
     robot = load_robot(robot)
-    return memo("ik-program", robot.id, lambda: _ik_program(robot))
+    return memo("ik-program", (robot.id, free), lambda: _ik_program(robot, free))
 
 
-def _ik_program(robot) -> IKProgram:
+def _ik_program(robot, free) -> IKProgram:
     kind = redundant_kind(robot)
+    if free is not None and free not in FREE_CHOICES.get(kind, ()):
+        have = ", ".join(FREE_CHOICES.get(kind, ())) or "none (not a 7-joint arm of a known class)"
+        raise InputError(f"free: {robot.name} offers no IK with {free!r} as the free parameter; "
+                         f"its choices: {have}")
     if kind is not None:
-        return seven_joint_program(robot, kind)
+        return seven_joint_program(robot, kind, free)
     geo = spherical_class(robot)
     if geo is not None:
         return _spherical_program(robot, geo)

@@ -158,6 +158,45 @@ def _rx_minus_half_pi(m):
 # --------------------------------------------------------------------------- #
 # SRS (iiwa): arm angle psi
 # --------------------------------------------------------------------------- #
+def _srs_elbow(bld: Builder, geo) -> tuple:
+    """Steps 0 and 1 of the SRS programs: the pose's rotation R_c and wrist centre W in the
+    canonical frame (R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T), |W|^2, and the elbow: cos t4
+    (snapped at the stretch), |sin t4|, |t4|; unreachable beyond +-1 and where W is at the
+    shoulder. Returns (rc, w, ww, c4, s4a, t4a)."""
+    p = _inputs(bld)
+    rot, tr = _rotation_and_translation(bld, p, "p")
+    frame = [[_number(x) for x in row] for row in geo.frame.tolist()]
+    tool_r = [[_number(x) for x in row] for row in geo.tool_rotation.tolist()]
+    shoulder = [_number(x) for x in geo.shoulder]
+    tool_t = [_number(x) for x in geo.tool_translation]
+    fr = [[sum(frame[k][i] * rot[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
+    rc = _let_matrix(bld, "rc", [[sum(fr[i][k] * tool_r[j][k] for k in range(3)) for j in range(3)]
+                                 for i in range(3)])
+    w = [bld.let(f"w{i}", sum(frame[k][i] * (tr[k] - shoulder[k]) for k in range(3))
+                 - sum(rc[i][k] * tool_t[k] for k in range(3))) for i in range(3)]
+    dse, dew = _number(geo.d_se), _number(geo.d_ew)
+    ww = bld.let("ww", w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+    bld.require(ww > srs.CLASS_TOL ** 2)                      # wrist centre not at the shoulder
+    ce = bld.let("ce", (ww - dse ** 2 - dew ** 2) / (2 * dse * dew))
+    bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
+    c4 = _snap_select(bld, "ct4", ce, srs.STRETCH_TOL)
+    s4a = bld.let("st4a", sp.sqrt(pos(1 - c4 * c4)))
+    t4a = bld.let("t4a", sp.atan2(s4a, c4))
+    return rc, w, ww, c4, s4a, t4a
+
+
+def _srs_wrist(bld: Builder, rc, angles):
+    """The wrist rotation R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c from the cosines and sines
+    ((c1, s1), ..., (c4, s4)) of the rounded shoulder and elbow angles, and its ZYZ decomposition
+    before the sign branch (:func:`_zyz_plus`, flag ``singular_wr``)."""
+    (c1, s1), (c2, s2), (c3, s3), (c4, s4) = angles
+    m = _let_matrix(bld, "ma", _rz_rows(rc, c1, s1))
+    m = _let_matrix(bld, "mb", _ry_rows(m, c2, s2))
+    m = _let_matrix(bld, "mc", _rz_rows(m, c3, s3))
+    rw = _let_matrix(bld, "rw", _ry_rows(m, c4, s4))
+    return _zyz_plus(bld, rw, "wr", "singular_wr", False)
+
+
 def srs_program(robot) -> IKProgram:
     """The IK program of an SRS arm with the arm angle psi as input ``fv``
     (:mod:`derive.ik.srs`, Shimizu sec. III). Steps:
@@ -176,27 +215,8 @@ def srs_program(robot) -> IKProgram:
     """
     geo = srs.srs_geometry(robot)
     bld = Builder({})
-    p = _inputs(bld)
-    rot, tr = _rotation_and_translation(bld, p, "p")
-    frame = [[_number(x) for x in row] for row in geo.frame.tolist()]
-    tool_r = [[_number(x) for x in row] for row in geo.tool_rotation.tolist()]
-    shoulder = [_number(x) for x in geo.shoulder]
-    tool_t = [_number(x) for x in geo.tool_translation]
-    # 0. R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T
-    fr = [[sum(frame[k][i] * rot[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
-    rc = _let_matrix(bld, "rc", [[sum(fr[i][k] * tool_r[j][k] for k in range(3)) for j in range(3)]
-                                 for i in range(3)])
-    w = [bld.let(f"w{i}", sum(frame[k][i] * (tr[k] - shoulder[k]) for k in range(3))
-                 - sum(rc[i][k] * tool_t[k] for k in range(3))) for i in range(3)]
+    rc, w, ww, c4, s4a, t4a = _srs_elbow(bld, geo)
     dse, dew = _number(geo.d_se), _number(geo.d_ew)
-    # 1. the elbow
-    ww = bld.let("ww", w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-    bld.require(ww > srs.CLASS_TOL ** 2)                      # wrist centre not at the shoulder
-    ce = bld.let("ce", (ww - dse ** 2 - dew ** 2) / (2 * dse * dew))
-    bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
-    c4 = _snap_select(bld, "ct4", ce, srs.STRETCH_TOL)
-    s4a = bld.let("st4a", sp.sqrt(pos(1 - c4 * c4)))
-    t4a = bld.let("t4a", sp.atan2(s4a, c4))
     # 2. R_psi = cos psi I + sin psi [x]x + (1 - cos psi) x x^T, x = W/|W|
     nw = bld.let("nw", sp.sqrt(ww))
     x = [bld.let(f"x{i}", w[i] / nw) for i in range(3)]
@@ -226,11 +246,7 @@ def srs_program(robot) -> IKProgram:
     sh = _zyz_plus(bld, rs, "sh", "singular_sh", True)
     c1, s1, c2, s2, c3, s3 = sh[4]
     # 4. R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c, from the rounded shoulder angles
-    m = _let_matrix(bld, "ma", _rz_rows(rc, c1, s1))
-    m = _let_matrix(bld, "mb", _ry_rows(m, c2, s2))
-    m = _let_matrix(bld, "mc", _rz_rows(m, c3, s3))
-    rw = _let_matrix(bld, "rw", _ry_rows(m, c4, s4))
-    wr = _zyz_plus(bld, rw, "wr", "singular_wr", False)
+    wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4, s4)))
     bld.flag("singular", sp.Or(bld.known_symbol("singular_sh"), bld.known_symbol("singular_wr"),
                                s4a < WRIST_SINGULAR))
     # 5. the shoulder's and the wrist's signs
@@ -256,6 +272,72 @@ def srs_program(robot) -> IKProgram:
                      free="psi",
                      free_doc="psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, "
                               "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
+
+
+def srs_joint3_program(robot) -> IKProgram:
+    """The IK program of an SRS arm with joint 3 given as input ``fv`` instead of the arm angle
+    (:func:`derive.ik.srs.ik_joint` with joint 3, :func:`derive.ik.srs.joint_given_steps`; the
+    joint that EAIK and IK-Geo lock). Steps:
+
+    0, 1. as :func:`srs_program`: R_c, W, the elbow t4 = +-acos (branch GC4);
+    2. the shoulder carries the forearm u = Rz(t3) v(t4) onto W (Paden-Kahan subproblem 2 about
+       axes z and y): Rz(t1) Ry(t2) u = W gives cos(t2 + phi) = W_z / r with r = hypot(u_x, u_z),
+       phi = atan2(u_x, u_z): t2 = +-acos(W_z / r) - phi (branch: the root), unreachable with
+       this t3 beyond +-1; t1 = atan2(W_y, W_x) - atan2(u'_y, u'_x), u' = Ry(t2) u (t1 free, set
+       to 0, where W lies on axis 1: flag ``singular_sh``);
+    3. the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c; branch GC6: t5, t6, t7 (ZYZ);
+    4. q = s theta (s the axis signs; the given q3 is returned as given, wrapped).
+
+    Branch k = 4 i + 2 i4 + i6 as :func:`derive.ik.srs.ik_joint` (i the root of step 2)."""
+    geo = srs.srs_geometry(robot)
+    bld = Builder({})
+    rc, w, ww, c4, s4a, t4a = _srs_elbow(bld, geo)
+    dse, dew = _number(geo.d_se), _number(geo.d_ew)
+    t3 = bld.let("t3", int(geo.signs[2]) * FV)
+    c3, s3 = sp.cos(t3), sp.sin(t3)
+    rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
+    on_axis = bld.flag("singular_sh", rho < srs.AXIS_TOL)
+    aw = bld.select("aw", on_axis, 0, sp.atan2(w[1], w[0]))
+    # 1. the elbow root
+    g4 = bld.branch("sg1", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
+    s4 = bld.let("st4", g4 * s4a)
+    t4 = bld.let("t4", g4 * t4a)
+    vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)
+    ux, uy = bld.let("ux", c3 * vx), bld.let("uy", s3 * vx)
+    r = bld.let("ru", sp.sqrt(ux * ux + vz * vz))
+    bld.require(r > 0)
+    cz = bld.let("cz", w[2] / bld.select("ru_d", r > 0, r, 1))
+    bld.require(sp.Abs(cz) <= 1 + REACH_TOL)
+    czs = _snap_select(bld, "czs", cz, srs.STRETCH_TOL)
+    acz = bld.let("acz", sp.atan2(sp.sqrt(pos(1 - czs * czs)), czs))
+    phi = bld.let("phi", sp.atan2(ux, vz))
+    # 2. the root of the shoulder subproblem
+    g2 = bld.branch("sg2", "shoulder root = sign of t2 + phi (+ / -)")
+    t2 = bld.let("t2", g2 * acz - phi)
+    c2, s2 = sp.cos(t2), sp.sin(t2)
+    upx = bld.let("upx", c2 * ux + s2 * vz)
+    t1 = bld.select("t1", on_axis, 0, aw - sp.atan2(uy, upx))
+    c1, s1 = sp.cos(t1), sp.sin(t1)
+    # 3. the wrist
+    wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4, s4)))
+    bld.flag("singular", sp.Or(on_axis, bld.known_symbol("singular_wr")))
+    g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
+    t5, t6, t7 = _zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
+    thetas = (t1, t2, t3, t4, t5, t6, t7)
+    bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
+    steps = [
+        ("pose in the canonical frame, wrist centre W", "R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T",
+         [f"SRS class, relation mismatch {geo.error:.1g}"]),
+        ("theta4", "cosine law", ["|W|^2 = d_se^2 + d_ew^2 + 2 d_se d_ew cos t4"]),
+        ("theta1, theta2", "subproblem 2 (axes z, y)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W, t3 given"]),
+        ("theta5, theta6, theta7", "ZYZ of R_w", ["R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c"]),
+    ]
+    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0,
+                     free_rule=("set to 0 (q1 where the wrist centre is on axis 1; q5 at the "
+                                "wrist's alignment, sin q6 = 0), the next joint taking the rest"),
+                     steps=steps, parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
+                     branch_labels=[bld.labels[1], bld.labels[0], bld.labels[2]], bit_weights=(2, 4, 1),
+                     free="q3", free_doc="q3, the value of joint 3 (rad), returned as given in (-pi, pi]")
 
 
 # --------------------------------------------------------------------------- #
@@ -363,7 +445,15 @@ def panda_program(robot) -> IKProgram:
                      free="q7", free_doc="q7, the value of joint 7 (rad), returned as given in (-pi, pi]")
 
 
-def seven_joint_program(robot, kind: str) -> IKProgram:
-    """The program of a 7R arm of class ``kind`` ("srs" or "panda", :func:`derive.ik.redundant.redundant_kind`)."""
-    return srs_program(robot) if kind == "srs" else panda_program(robot)
+#: The free parameters each class's programs can take: the first is the default.
+FREE_CHOICES = {"srs": ("psi", "q3"), "panda": ("q7",)}
+
+
+def seven_joint_program(robot, kind: str, free: str | None = None) -> IKProgram:
+    """The program of a 7R arm of class ``kind`` ("srs" or "panda",
+    :func:`derive.ik.redundant.redundant_kind`) with the free parameter ``free`` (one of
+    :data:`FREE_CHOICES`; default the class's first: psi, q7)."""
+    if kind == "panda":
+        return panda_program(robot)
+    return srs_joint3_program(robot) if free == "q3" else srs_program(robot)
 
