@@ -47,7 +47,8 @@ from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import classify, spherical_class
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
-from derive.ik.srs import arm_angle
+from derive.ik.srs import arm_angle, ik_joint
+from derive.ik.srs import within_limits as srs_within_limits
 from derive.kinematics.pose import from_position_quaternion, from_position_rpy, to_position_rpy
 from derive.model import export
 from derive.model.classify import classify as geometric_classify
@@ -283,8 +284,8 @@ def cmd_robots(args) -> int:
         print(line)
     print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
-          "--seed Q; numpy reference, no kernels yet); kernels and CasADi functions: shipped in the "
-          "package, or derived on first use and cached")
+          "--seed Q; SRS also with joint 3 given: --free V --free-joint 3); kernels and CasADi "
+          "functions: shipped in the package, or derived on first use and cached")
     return EXIT_OK
 
 
@@ -354,8 +355,8 @@ def cmd_ik(args) -> int:
     _deprecated(args, "ik --pose", "--q", "pose_old", "q")
     if args.q is None and args.xyz is None and args.dq is None:
         if (args.seed is not None or args.within_limits or args.rpy is not None or args.quat is not None
-                or args.free is not None or args.sweep is not None):
-            raise InputError("ik: --seed, --within-limits, --free, --sweep, --rpy and --quat need a "
+                or args.free is not None or args.sweep is not None or args.free_joint is not None):
+            raise InputError("ik: --seed, --within-limits, --free, --free-joint, --sweep, --rpy and --quat need a "
                              "target (--q, --xyz or --dq)")
         t0 = time.perf_counter()
         return _report(write_ik(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
@@ -366,8 +367,8 @@ def cmd_ik(args) -> int:
             "joints": _joint_meta(robot, deg)}
     if redundant_kind(robot) is not None:
         return _ik_redundant(robot, args, pose, q, head)
-    if args.free is not None or args.sweep is not None:
-        raise InputError(f"ik: --free and --sweep are for the seven-joint arms with a free parameter "
+    if args.free is not None or args.sweep is not None or args.free_joint is not None:
+        raise InputError(f"ik: --free, --free-joint and --sweep are for the seven-joint arms with a free parameter "
                          f"(panda, fr3: q7; iiwa7, iiwa14: the arm angle psi); {robot.name} has none")
     if args.seed is not None:
         seed = _joints_in(robot, args.seed, "--seed", deg)
@@ -458,7 +459,25 @@ def _ik_redundant(robot, args, pose, q, head) -> int:
         for line in _table(robot, [(["1"], res.q, note)], deg, [("#", "", 3)]):
             print(line)
         return EXIT_OK
-    if args.sweep is not None:
+    if args.free_joint is not None:
+        if name != "psi" or args.free_joint != 3 or args.free is None:
+            raise InputError("ik: --free-joint 3 (with --free V, the value of joint 3) is for the SRS "
+                             f"arms (iiwa7, iiwa14); {robot.name}: "
+                             + ("its free parameter is q7" if name != "psi" else
+                                "only joint 3" if args.free_joint != 3 else "give --free V"))
+        value = math.radians(args.free) if deg else float(args.free)
+        res = ik_joint(robot, pose, 3, value, q_ref=q)
+        keep = np.arange(res.count)
+        if args.within_limits:
+            keep = keep[srs_within_limits(robot, res.q[:res.count])]
+        rows = [(value, res.q[i], res.branch[i], res.singular[i]) for i in keep]
+        name = "q3"
+        head = {**head, "free_parameter": {**free_meta, "name": "q3",
+                                           "range": [_jnum(conv(x)) for x in robot.limits[2]]}}
+        what = (f"closed form at q3 = {_clean(args.free, 6):g} {unit}"
+                + (", inside the joint limits" if args.within_limits else ""))
+        reason = res.reason or ("" if rows else "no solution inside the joint limits")
+    elif args.sweep is not None:
         if args.sweep < 1:
             raise InputError(f"--sweep: the number of values of {name}, an integer >= 1; got {args.sweep}")
         sw = reference.ik_sweep(robot, pose, args.sweep, q_ref=q)
@@ -755,6 +774,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--free", type=float, default=None, metavar="V",
                    help="seven-joint arms: the free parameter, q7 (panda, fr3) or the arm angle psi "
                         "(iiwa7, iiwa14), rad (--deg: degrees); every solution at that value")
+    s.add_argument("--free-joint", type=int, default=None, metavar="J", dest="free_joint",
+                   help="SRS arms (iiwa7, iiwa14): --free V gives joint J's value instead of the arm "
+                        "angle; J = 3 (the joint EAIK and IK-Geo lock)")
     s.add_argument("--sweep", type=int, default=None, metavar="N",
                    help="seven-joint arms: N values of the free parameter over its feasible range, the "
                         "solutions inside the joint limits at each")

@@ -124,3 +124,26 @@ def test_q3_kernels_input_contract():
             call()
     # the class's default parameter by name is the default kernels
     assert derive.kernels("iiwa14", "c", free="psi") is derive.kernels("iiwa14", "c")
+
+
+def test_cli_ik_with_joint_3_given(capsys):
+    """dq-derive ik iiwa14 --q Q --free V --free-joint 3: the closed form of srs.ik_joint, the
+    generating configuration among the solutions when V is its q3."""
+    import json
+
+    from derive.cli import main
+
+    q = [0.3, 0.5, -0.4, 1.1, 0.2, -0.7, 0.4]
+    assert main(["ik", "iiwa14", "--q", *map(str, q), "--free", "-0.4", "--free-joint", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["free_parameter"]["name"] == "q3" and out["count"] == 8
+    sols = np.array([s["q"] for s in out["solutions"]])
+    assert np.all(np.abs(sols[:, 2] + 0.4) < 1e-12)
+    assert _wrapped(sols - np.array(q)).max(-1).min() < 1e-9
+    pose = reference.fk("iiwa14", q)
+    dp, dr = reference.pose_error(reference.fk("iiwa14", sols), np.repeat(pose[None], 8, 0))
+    assert max(dp.max(), dr.max()) < 1e-10
+    assert main(["ik", "panda", "--q", *map(str, q), "--free", "0.4", "--free-joint", "3"]) == 2
+    assert "SRS arms" in capsys.readouterr().err
+    assert main(["ik", "iiwa14", "--q", *map(str, q), "--sweep", "3", "--free-joint", "3"]) == 2
+    assert "give --free V" in capsys.readouterr().err
