@@ -139,3 +139,19 @@ def test_no_float_noise_and_sources(reports, robot):
     src = "He, S. Liu" if robot == "panda" else "IEEE Transactions on Robotics 24(5), 2008"
     assert src in md and src in tex
     assert tex.count("\\[") == tex.count("\\]") and md.count("$$") % 2 == 0
+
+
+def test_srs_report_has_the_joint_3_alternative(reports):
+    """The SRS report's section on joint 3 given (derive.ik.srs.ik_joint): its steps, and a check
+    of its own on the same 200 configurations that finds every generating one; the Panda report
+    has no such section."""
+    md, tex = reports["iiwa14"]["md"], reports["iiwa14"]["tex"]
+    part = md.split("## Joint 3 given instead of $\\psi$")[1].split("## Sources")[0]
+    assert "Paden-Kahan subproblem 2" in part and 'free="q3"' in part and "--free-joint 3" in part
+    assert "for 200 of\n200 (100 %)" in part
+    rows = [tuple(int(x) for x in m) for m in re.findall(r"^\| (\d) \| (\d+) \|$", part, re.M)]
+    assert sum(n for _, n in rows) == 200
+    total = int(re.search(r"largest FK residual of the\n(\d+) returned solutions", part).group(1))
+    assert total == sum(k * n for k, n in rows)
+    assert r"\section*{Joint 3 given instead of $\psi$}" in tex and r"(100 \%)" in tex.split("Joint 3 given")[1]
+    assert "Joint 3 given" not in reports["panda"]["md"]

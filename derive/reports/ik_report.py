@@ -372,31 +372,69 @@ def _redundant_check(robot, kind: str, samples: int = CHECK7_SAMPLES, seed: int 
     after :func:`derive.algebra.angles.wrap_angle`), the largest FK residual of any returned
     solution (unit dual quaternions compared up to sign, min(|a - b|, |a + b|) of the largest
     component) as a RESIDUAL_LEVELS level, and the histogram of solution counts."""
+    q, poses = _check_configurations(robot, samples, seed)
+    free = q[:, 6] if kind == "panda" else srs_ik.arm_angle(robot, q)
+    sol = solve(robot, poses, free)
+    return _check_summary(robot, q, poses, sol.q, sol.counts, sol.reason, samples, seed)
+
+
+def _check_configurations(robot, samples: int, seed: int):
+    """``samples`` configurations uniform inside the joint limits (numpy ``default_rng(seed)``;
+    +-pi for a joint without limits) and their poses by the reference FK."""
     lim = np.asarray(robot.limits, dtype=float)
     lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -np.pi)
     hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], np.pi)
     rng = np.random.default_rng(seed)
     q = rng.uniform(lo, hi, size=(samples, 7))
-    poses = fk(robot, q)
-    free = q[:, 6] if kind == "panda" else srs_ik.arm_angle(robot, q)
-    sol = solve(robot, poses, free)
+    return q, fk(robot, q)
+
+
+def _check_summary(robot, q, poses, sols, counts, reasons, samples: int, seed: int) -> dict:
+    """The report's check numbers for solutions ``sols`` (n, 8, 7) of the poses of ``q``: the
+    generating configurations found, the largest FK residual, the histogram of counts."""
     with np.errstate(invalid="ignore"):
-        dist = np.abs(wrap_angle(sol.q - q[:, None, :])).max(-1)
+        dist = np.abs(wrap_angle(sols - q[:, None, :])).max(-1)
     dist = np.where(np.isfinite(dist), dist, np.inf).min(-1)
     found = int(np.sum(dist < CHECK7_FOUND))
-    valid = np.isfinite(sol.q).all(-1)
+    valid = np.isfinite(sols).all(-1)
     rows, _ = np.nonzero(valid)
-    got, want = fk(robot, sol.q[valid]), poses[rows]
+    got, want = fk(robot, sols[valid]), poses[rows]
     res = np.minimum(np.abs(got - want).max(-1), np.abs(got + want).max(-1))
     largest = float(res.max()) if len(res) else 0.0
-    hist = np.bincount(sol.counts, minlength=9)
+    hist = np.bincount(counts, minlength=9)
     return {
         "samples": samples, "seed": seed, "found": found,
         "found_percent": f"{100 * found // samples} %", "found_tol": f"{_sci(CHECK7_FOUND)}",
         "solutions": int(valid.sum()), "residual": _residual_text(largest),
-        "unsolved": int(sum(1 for r in sol.reason if r)),
+        "unsolved": int(sum(1 for r in reasons if r)),
         "histogram": [{"count": k, "poses": int(n)} for k, n in enumerate(hist) if n],
     }
+
+
+def _joint3_context(robot) -> dict:
+    """The SRS closed form with joint 3 given instead of psi (:func:`derive.ik.srs.ik_joint`,
+    :func:`derive.ik.program7.srs_joint3_program`): steps, branch numbering and its check."""
+    q, poses = _check_configurations(robot, CHECK7_SAMPLES, CHECK7_SEED)
+    sol = srs_ik.ik_joint(robot, poses, 3, q[:, 2])
+    check = _check_summary(robot, q, poses, sol.q, sol.count, sol.reason, CHECK7_SAMPLES, CHECK7_SEED)
+    steps = [
+        {"title": r"The pose, the wrist centre and the elbow $\theta_4$",
+         "text": r"As steps 1 and 2 above; $\theta_3 = s_3 q_3$ is given.", "formulas": []},
+        {"title": r"The shoulder $\theta_1, \theta_2$ (the root of subproblem 2)",
+         "text": r"The shoulder carries the forearm $u = R_z(\theta_3)\, v(\theta_4)$ onto $W$: "
+                 r"$R_z(\theta_1) R_y(\theta_2)\, u = W$ (Paden-Kahan subproblem 2 about $z$ and $y$). "
+                 r"Its $z$ row fixes $\theta_2$ (two roots, unreachable with this $\theta_3$ where the "
+                 r"cosine leaves $[-1, 1]$), then $\theta_1$ turns $u' = R_y(\theta_2)\, u$ onto $W$ "
+                 r"(free, set to 0, where $W$ lies on axis 1):",
+         "formulas": [r"\theta_2 = \pm\arccos\frac{W_z}{\sqrt{u_x^2 + u_z^2}} - \operatorname{atan2}(u_x, u_z),"
+                      r"\qquad \theta_1 = \operatorname{atan2}(W_y, W_x) - \operatorname{atan2}(u'_y, u'_x)"]},
+        {"title": r"The wrist $\theta_5, \theta_6, \theta_7$",
+         "text": r"As step 6 above, from the rounded $\theta_1, \theta_2, \theta_3, \theta_4$.",
+         "formulas": []},
+    ]
+    return {"steps": steps, "check": check,
+            "branch": r"k = 4\, i + 2\, i_4 + i_6",
+            "branch_text": r"$i = 0$ for the + root and 1 for the - root of $\theta_2$, the others as above."}
 
 
 def _srs_context(robot) -> dict:
@@ -683,6 +721,7 @@ def build_redundant_ik_context(robot, command: str) -> dict:
     ctx = _srs_context(robot) if kind == "srs" else _panda_context(robot)
     for k, st in enumerate(ctx["steps"]):
         st["k"] = k + 1
+    ctx["joint3"] = _joint3_context(robot) if kind == "srs" else None
     ctx.update({
         "version": __version__, "command": command, "robot": robot.name, "title": robot.title,
         "kind": kind,
