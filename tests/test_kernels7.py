@@ -171,15 +171,8 @@ def test_ik_sweep_on_the_kernels_equals_the_reference_sweep(robot):
 
 
 @pytest.mark.parametrize("robot, seed", [
-    ("panda", 0), ("panda", 3), ("iiwa14", 0), ("iiwa14", 2),
-    pytest.param("panda", 2, marks=pytest.mark.xfail(strict=True, reason=(
-        "known: continuous (every step within 3 x), but the answer, drifted along the self-motion, "
-        "passes the q6 double root (q5 = +-pi/2) at poses 629-633, where the two wrist roots meet "
-        "and their labels swap: branch 4 where the generating configuration has 6"))),
-    pytest.param("panda", 1, marks=pytest.mark.xfail(strict=True, reason=(
-        "known: the greedy search drifts along the self-motion towards sin q2 = 0 (q2 0.06 where "
-        "the trajectory has -1.15) and steps 11.6 x the trajectory's step near the end; the numpy "
-        "search does the same"))),
+    ("panda", 0), ("panda", 1), ("panda", 2), ("panda", 3), ("panda", 9),
+    ("iiwa14", 0), ("iiwa14", 2), ("iiwa14", 4), ("iiwa14", 6),
 ])
 def test_kernel_nearest_along_a_trajectory_is_continuous_and_on_the_generating_branch(robot, seed):
     """k.nearest (the 1-D search on the C batch IK), 1000 poses seeded with the previous answer:

@@ -19,26 +19,39 @@ limits; psi: the union of the branches' feasible intervals under the joint limit
 :func:`derive.ik.srs.psi_intervals`, computed from the closed form's breakpoints, not sampled).
 
 :func:`nearest` chooses the free parameter and the branch for a seed configuration by a 1D
-search that keeps a path continuous:
+search that keeps a path continuous. Every move below is that of a joint at its winding nearest
+to the seed inside the limits, as in :func:`derive.ik.select.nearest`; the largest move is the
+largest of the seven, the summed move their sum, the summed squared move the sum of their squares.
 
 1. start at the seed's own free value f0 (its q7, or its arm angle :func:`derive.ik.srs.arm_angle`):
    evaluate every branch at f0, at f0 +- 1e-4, 3e-4, ..., 0.1, 0.3 (near a singular set the
    solutions turn fast with the free parameter, so f0 alone can be far off) and at 32 values
    over the range, and take the (value, branch) whose solution moves least from the seed
-   (largest single-joint move, then the summed move, every joint at its winding nearest to the
-   seed inside the limits as in :func:`derive.ik.select.nearest`); along a path that is the
-   seed's branch near f0, within about one step;
-2. refine the value on that branch between the neighbours of the start in its set: successive
-   grid refinement, 31 values per step and the bracket narrowed to the neighbours of the best
-   value, down to FREE_TOL (a parallel form of golden-section search, J. Kiefer, "Sequential
-   minimax search for a maximum", Proc. AMS 4, 1953; each step is one batched evaluation of the
-   closed form, which costs about what one value costs);
-3. the chosen branch at the chosen value is checked by the class's FK (else the nearest of the
-   FK-checked solutions there is taken).
+   (largest move, then summed move); along a path that is the seed's branch near f0, within
+   about one step;
+2. refine the value on that branch between the neighbours of the start in its set to the least
+   largest move M (then the least summed move): successive grid refinement, 31 values per step
+   and the bracket narrowed to the neighbours of the best value, down to FREE_TOL (a parallel
+   form of golden-section search, J. Kiefer, "Sequential minimax search for a maximum",
+   Proc. AMS 4, 1953; each step is one batched evaluation of the closed form, which costs about
+   what one value costs);
+3. on the same branch, take the value with the least summed squared move among the values whose
+   largest move is at most (1 + SLACK) M, SLACK = 0.5 (the same refinement of the key (the
+   excess of the largest move over (1 + SLACK) M, clipped at 0; then the summed squared move)
+   on WIDE = 4 times (1 + SLACK) M either side of the value of step 2). The least largest move
+   alone is not enough on a path: it is reached where two joints' moves are equal, a kink that
+   takes the free value a little off the path's own at every step, and these errors add up to a
+   drift along the self-motion (on a test trajectory of the Panda 0.6 rad of q7, into sin q2 = 0
+   where two branches meet); the least summed squared move (the minimum-norm step) drifts less
+   (by about a third on the test trajectories) and, on them, stays on the generating branch;
+4. the chosen branch at the chosen value is checked by the class's FK (else the nearest of the
+   FK-checked solutions there, by largest move then summed move, is taken).
 
-The result is the same :class:`derive.ik.select.Nearest` record as the 6R path's. The answer is
-the nearest solution *along the path*: a local minimum of the move, not a global search over
-the whole self-motion.
+The result is the same :class:`derive.ik.select.Nearest` record as the 6R path's; its largest
+move is at most (1 + SLACK) times the least over the self-motion near the seed (so, for a seed
+near a solution q, at most 1.5 times q's). The answer is the nearest solution *along the path*:
+a local minimum of the move, not a global search over the whole self-motion; a path can still
+drift along the self-motion, less than with the largest move alone.
 """
 
 from __future__ import annotations
@@ -81,6 +94,15 @@ _UPPER = np.array([(_SORTED[min(np.searchsorted(_SORTED, x) + 1, len(_ALL) - 1)]
                    or 2 * _OFFSETS[-1] for x in _ALL])
 #: Values per step of the refinement (the bracket narrows by (REFINE + 1) / 2 per step).
 REFINE = 31
+#: nearest, step 3: the largest move may exceed the least by this fraction, so that the summed
+#: squared move decides (the least largest move alone drifts along the self-motion on a path).
+#: 0 gives the least largest move itself (then a seed q + c, the same c in every joint, returns
+#: q exactly where moving along the self-motion moves some joint more).
+SLACK = 0.5
+#: nearest, step 3: the bracket searched, WIDE x that bound either side of the value of the
+#: least largest move. For the Panda class every value within the bound is within 2 x the bound
+#: of it (q7 is a joint, so |q7 - the seed's q7| is at most the bound at both).
+WIDE = 4.0
 
 #: What the bits of a branch id choose, most significant first.
 LABELS = {
@@ -391,7 +413,8 @@ class _Problem:
 
     def moves(self, rows, cand):
         """Per candidate: the winding nearest to the seed inside the limits (NaN if none), and
-        the largest and summed joint moves (inf if none): the rule of select.nearest."""
+        the largest, summed and summed squared joint moves (inf if none); the first two are the
+        rule of select.nearest."""
         s = self.seeds[rows][:, None, :]
         w = s + wrap_angle(cand - s)
         opts = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
@@ -403,14 +426,14 @@ class _Problem:
         ok = np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0] & np.isfinite(best)
         best = np.where(ok, best, np.nan)
         move = np.where(ok, np.abs(best - s), np.inf)
-        return best, move.max(axis=-1), move.sum(axis=-1)
+        return best, move.max(axis=-1), move.sum(axis=-1), (move * move).sum(axis=-1)
 
     def branch_key(self, rows, f, b):
-        """(largest move, summed move) of branch b (per row) at free values f."""
+        """(largest move, summed move, summed squared move) of branch b (per row) at free values f."""
         cand, _ = self.candidates(rows, f)
         pick = cand[np.arange(len(rows)), b][:, None]
-        _, mx, tot = self.moves(rows, pick)
-        return mx[:, 0], tot[:, 0]
+        _, mx, tot, sq = self.moves(rows, pick)
+        return mx[:, 0], tot[:, 0], sq[:, 0]
 
 
 def _by_branch(q, counts, branch, singular):
@@ -425,9 +448,10 @@ def _by_branch(q, counts, branch, singular):
     return cand, sing
 
 
-def _better(mx1, t1, mx2, t2):
-    """(mx1, t1) strictly before (mx2, t2) in the order largest move, then summed move."""
-    return (mx1 < mx2 - TIE) | ((np.abs(mx1 - mx2) <= TIE) & (t1 < t2))
+def _better(k1, t1, k2, t2):
+    """(k1, t1) strictly before (k2, t2) in the lexicographic order, first keys closer than TIE
+    equal."""
+    return (k1 < k2 - TIE) | ((np.abs(k1 - k2) <= TIE) & (t1 < t2))
 
 
 def _free_of(kind, robot, seeds) -> np.ndarray:
@@ -440,12 +464,13 @@ def _clip(kind, f, lo, hi):
     return np.clip(f, lo, hi) if kind == "panda" else f
 
 
-def _refine(prob, kind, rows, a, b, br, f_best, m_best, t_best, flo, fhi):
+def _refine(prob, kind, rows, a, b, br, f_best, k_best, t_best, flo, fhi, key):
     """Successive grid refinement (a parallel form of golden-section search, Kiefer 1953) of the
-    branch's (largest move, summed move) on [a, b]: REFINE values inside the bracket, the bracket
-    narrowed to the neighbours of the best value seen, until narrower than FREE_TOL. Returns the
-    best (f, largest move, summed move)."""
-    f_best, m_best, t_best = f_best.copy(), m_best.copy(), t_best.copy()
+    branch's lexicographic key on [a, b]: REFINE values inside the bracket, the bracket narrowed
+    to the neighbours of the best value seen, until narrower than FREE_TOL. ``key(largest move,
+    summed move, summed squared move)`` -> (first key, second key), each (len(rows), REFINE).
+    Returns the best (f, first key, second key); (f_best, k_best, t_best) is the best so far."""
+    f_best, k_best, t_best = f_best.copy(), k_best.copy(), t_best.copy()
     frac = np.arange(1, REFINE + 1) / (REFINE + 1)
     for _ in range(40):
         if np.max(b - a) <= FREE_TOL:
@@ -453,21 +478,23 @@ def _refine(prob, kind, rows, a, b, br, f_best, m_best, t_best, flo, fhi):
         width = b - a
         fg = _clip(kind, a[:, None] + width[:, None] * frac, flo, fhi)
         rr = np.repeat(rows, REFINE)
-        mx, tot = prob.branch_key(rr, fg.reshape(-1), np.repeat(br, REFINE))
-        mx, tot = mx.reshape(-1, REFINE), tot.reshape(-1, REFINE)
-        j = np.lexsort((tot, mx), axis=-1)[:, 0]
+        mx, tot, sq = prob.branch_key(rr, fg.reshape(-1), np.repeat(br, REFINE))
+        k1, k2 = key(mx.reshape(-1, REFINE), tot.reshape(-1, REFINE), sq.reshape(-1, REFINE))
+        j = np.lexsort((k2, k1), axis=-1)[:, 0]
         k = np.arange(len(rows))
-        imp = _better(mx[k, j], tot[k, j], m_best, t_best)
+        imp = _better(k1[k, j], k2[k, j], k_best, t_best)
         f_best = np.where(imp, fg[k, j], f_best)
-        m_best, t_best = np.where(imp, mx[k, j], m_best), np.where(imp, tot[k, j], t_best)
+        k_best, t_best = np.where(imp, k1[k, j], k_best), np.where(imp, k2[k, j], t_best)
         step = width / (REFINE + 1)
         a, b = f_best - step, f_best + step
-    return f_best, m_best, t_best
+    return f_best, k_best, t_best
 
 
 def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
-    branch chosen by the 1D search of the module docstring; ``q_seed`` (7,) or (n, 7). The
+    branch chosen by the 1D search of the module docstring: on the branch of the least largest
+    single-joint move M, the free value with the least summed squared joint move among those
+    whose largest move is at most (1 + SLACK) M (SLACK = 0.5); ``q_seed`` (7,) or (n, 7). The
     record of :func:`derive.ik.select.nearest`: ``q`` at the winding nearest to the seed inside
     the limits, ``found`` (False where no solution inside the limits was found, or its largest
     move exceeds ``tol``), ``max_move``, ``total_move``, ``branch``, ``singular``. The joints a
@@ -495,7 +522,7 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
         flo, fhi = -math.pi, math.pi
     rows = np.arange(n)
 
-    # 1. and 3. the seed's own free value and values around it at several scales, and a scan of
+    # 1. the seed's own free value and values around it at several scales, and a scan of
     # the range: every branch at each; the best (value, branch) starts the search
     f0 = _clip(kind, _free_of(kind, robot, seeds), flo, fhi)
     grid = flo + (fhi - flo) * (np.arange(SCAN) + 0.5) / SCAN
@@ -503,7 +530,7 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
                            np.broadcast_to(grid, (n, SCAN))], axis=1)           # (n, 17 + SCAN)
     m = vals.shape[1]
     rr = np.repeat(rows, m)
-    _, mx, tot = prob.moves(rr, prob.candidates(rr, vals.reshape(-1))[0])
+    _, mx, tot, _ = prob.moves(rr, prob.candidates(rr, vals.reshape(-1))[0])
     mx, tot = mx.reshape(n, m * BRANCHES), tot.reshape(n, m * BRANCHES)
     j = np.lexsort((tot, mx), axis=-1)[:, 0]
     start, branch = vals[rows, j // BRANCHES], j % BRANCHES
@@ -518,11 +545,24 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     at = rows[live]
     if len(at):
         with np.errstate(invalid="ignore"):
-            f, m_, t_ = _refine(prob, kind, at, start[at] + lo_off[at], start[at] + hi_off[at],
-                                branch[at], start[at], best_mx[at], best_tot[at], flo, fhi)
-        best_f[at], best_mx[at], best_tot[at] = f, m_, t_
+            # 2. the least largest move on that branch (then the least summed move)
+            f, m_, _ = _refine(prob, kind, at, start[at] + lo_off[at], start[at] + hi_off[at],
+                               branch[at], start[at], best_mx[at], best_tot[at], flo, fhi,
+                               lambda mx_, tot_, sq_: (mx_, tot_))
+            # 3. on that branch the least summed squared move among the values whose largest
+            # move is at most (1 + SLACK) x the least: the excess over that bound, then the
+            # summed squared move; the bracket WIDE x the bound either side
+            # (SLACK = 0: the least largest move itself, the earlier rule)
+            if SLACK > 0:
+                bound = (1.0 + SLACK) * m_
+                reach = np.minimum(WIDE * bound, math.pi)
+                _, _, sq0 = prob.branch_key(at, f, branch[at])
+                f, _, _ = _refine(prob, kind, at, f - reach, f + reach, branch[at], f,
+                                  np.zeros(len(at)), sq0, flo, fhi,
+                                  lambda mx_, tot_, sq_: (np.maximum(mx_ - bound[:, None], 0.0), sq_))
+        best_f[at] = f
 
-    # the answer: the chosen branch at the chosen value, checked by the class's FK; where the
+    # 4. the answer: the chosen branch at the chosen value, checked by the class's FK; where the
     # check fails, the nearest of the checked solutions there (:func:`solve`)
     q = np.full((n, 7), np.nan)
     mx_out, tot_out = np.full(n, np.inf), np.full(n, np.inf)
@@ -531,7 +571,7 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     if len(at):
         k = np.arange(len(at))
         cand, sing = prob.candidates(at, best_f[at])
-        best, mx, tot = prob.moves(at, cand[k, branch[at]][:, None])
+        best, mx, tot, _ = prob.moves(at, cand[k, branch[at]][:, None])
         dp, dr = prob.residual(at, np.nan_to_num(best[:, 0]))
         ok = np.isfinite(mx[:, 0]) & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
         if solver is not None:          # the kernels set a free joint to 0, not the seed's
@@ -543,7 +583,7 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
         if len(redo):
             r = solve(robot, P[redo], best_f[redo], seeds[redo])
             kk = np.arange(len(redo))
-            best, mx, tot = prob.moves(redo, r.q)
+            best, mx, tot, _ = prob.moves(redo, r.q)
             choose = np.lexsort((tot, mx), axis=-1)[:, 0]
             q[redo] = best[kk, choose]
             mx_out[redo], tot_out[redo] = mx[kk, choose], tot[kk, choose]
