@@ -147,3 +147,23 @@ def test_cli_ik_with_joint_3_given(capsys):
     assert "SRS arms" in capsys.readouterr().err
     assert main(["ik", "iiwa14", "--q", *map(str, q), "--sweep", "3", "--free-joint", "3"]) == 2
     assert "give --free V" in capsys.readouterr().err
+
+
+def test_casadi_ik_q3_equals_the_q3_kernels():
+    """The CasADi function ik_q3(pose, free) of the SRS arms (the same program, in SX): on 30
+    configurations every kernel solution is its column of the branch id, within 1e-10."""
+    from derive.refinement.functions import functions
+
+    fns = functions("iiwa14")
+    ik = fns["ik_q3"]
+    assert ik.name() == "ik_q3" and ik.name_in() == ["pose", "free"]
+    assert "ik_q3" not in functions("panda")
+    rng = np.random.default_rng(33)
+    q = _inside("iiwa14", 30, rng)
+    poses = reference.fk("iiwa14", q)
+    sols, counts, branch, _ = derive.kernels("iiwa14", "c", free="q3").ik(poses, free=q[:, 2], details=True)
+    for i in range(30):
+        Q, valid = (np.array(x) for x in ik(poses[i], q[i, 2]))
+        for j in range(counts[i]):
+            assert valid[0, branch[i, j]]
+            assert _wrapped(Q[:, branch[i, j]] - sols[i, j]).max() < 1e-10

@@ -62,6 +62,8 @@ from derive.model.robot import LIBRARY_DIR, load_robot
 SAVED = ("fk", "fk_matrix", "pose_error", "pose_error_jacobian", "residual", "ik")
 #: Those every robot has.
 REQUIRED = SAVED[:-1]
+#: Written besides for the SRS arms: ``ik_q3``, joint 3 given instead of the arm angle.
+SRS_SAVED = ("ik_q3",)
 
 
 # --------------------------------------------------------------------------- #
@@ -267,7 +269,7 @@ def functions(robot, source: str | None = None) -> dict:
 
 
 def _load_or_build(robot) -> dict:
-    found = {name: find_artifact(robot.id, f"casadi/{name}") for name in SAVED}
+    found = {name: find_artifact(robot.id, f"casadi/{name}") for name in SAVED + SRS_SAVED}
     # a 7-joint arm's functions stored before its IK program existed are built again
     if all(found[name] is not None for name in REQUIRED) and (found["ik"] is not None
                                                               or redundant_kind(robot) is None):
@@ -279,7 +281,7 @@ def _load_or_build(robot) -> dict:
         fns = _functions(robot, source)
     with tempfile.TemporaryDirectory() as tmp:
         files = {}
-        for name in SAVED:
+        for name in SAVED + SRS_SAVED:
             if name in fns:
                 path = Path(tmp) / f"{identifier(robot.name)}_{name}.casadi"
                 fns[name].save(str(path))
@@ -314,6 +316,8 @@ def _functions(robot, source: str | None = None) -> dict:
         ik = _ik_function(robot)
         if ik is not None:
             fns["ik"] = ik
+        if redundant_kind(robot) == "srs":
+            fns["ik_q3"] = _ik_function(robot, "q3")
     return fns
 
 
@@ -338,21 +342,23 @@ def homotopy_function(robot, nominal):
     return memo("casadi-homotopy", (robot.id, nominal.id), lambda: build(robot))
 
 
-def _ik_function(robot):
+def _ik_function(robot, free: str | None = None):
     """The IK program's 8 branches in SX (None when the robot has no closed form):
     ``ik(pose) -> (Q, valid)``, and for a 7-joint arm ``ik(pose, free) -> (Q, valid)`` with its
-    free parameter (the arm angle psi or q7, :mod:`derive.ik.program7`)."""
+    free parameter (the arm angle psi or q7, :mod:`derive.ik.program7`); with ``free`` = "q3"
+    (SRS arms) the function ``ik_q3(pose, free)`` of the program with joint 3 given."""
     if not has_closed_form(robot) and redundant_kind(robot) is None:
         return None
     try:
-        prog = ik_program(robot)
+        prog = ik_program(robot, free)
     except DeriveError:
         return None
+    name = "ik" if free is None else f"ik_{free}"
     pose = ca.SX.sym("pose", 8)
     env = {f"p{i}": pose[i] for i in range(8)}
-    free = ca.SX.sym("free") if prog.free else None
-    if free is not None:
-        env["fv"] = free
+    fsym = ca.SX.sym("free") if prog.free else None
+    if fsym is not None:
+        env["fv"] = fsym
     sols, valid = [], []
     _run(prog.ops, 0, dict(env), ca.SX(1.0), sols, valid)
     if len(sols) != prog.branches:
@@ -362,8 +368,8 @@ def _ik_function(robot):
     order = [leaf_of(prog, [(i >> (depth - 1 - d)) & 1 for d in range(depth)]) for i in range(len(sols))]
     sols, valid = ([x for _, x in sorted(zip(order, xs), key=lambda t: t[0])] for xs in (sols, valid))
     cols = [ca.vertcat(*[wrap_angle_sx(a) for a in s]) for s in sols]
-    if free is not None:
-        return ca.Function("ik", [pose, free], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose", "free"],
+    if fsym is not None:
+        return ca.Function(name, [pose, fsym], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose", "free"],
                            ["Q", "valid"])
     return ca.Function("ik", [pose], [ca.horzcat(*cols), ca.horzcat(*valid)], ["pose"], ["Q", "valid"])
 
@@ -417,7 +423,7 @@ def write_casadi(robot, out_dir, force: bool = False) -> list[Path]:
     source = "derived" if is_library_robot(robot) and robot.exact else "product"
     fns = functions(robot, source)
     paths, roles = [], {}
-    for name in SAVED:
+    for name in SAVED + SRS_SAVED:
         if name in fns:
             p = folder / f"{identifier(robot.name)}_{name}.casadi"
             fns[name].save(str(p))
