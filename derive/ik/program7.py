@@ -252,26 +252,35 @@ def srs_program(robot) -> IKProgram:
     # 5. the shoulder's and the wrist's signs
     g2 = bld.branch("sg2", "shoulder GC2 = sign of sin q2 (+ / -)")
     t1, t2, t3 = _zyz_signed(bld, sh, g2, ("t1", "t2", "t3"))
+    return _srs_end(bld, geo, wr, (t1, t2, t3, t4), [
+        ("R_psi", "Rodrigues", ["rotation by psi about W/|W|"]),
+        ("theta1, theta2, theta3", "ZYZ of R_psi R0", ["R0 = Rz(a) Ry(b - phi), the reference plane"])],
+        free_rule=("set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the "
+                   "wrist's, sin q6 = 0), the next joint taking the rest"),
+        free="psi",
+        free_doc="psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, "
+                 "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
+
+
+def _srs_end(bld: Builder, geo, wr, shoulder: tuple, shoulder_steps: list, **doc) -> IKProgram:
+    """The last steps of the SRS programs and the program itself: branch GC6 and t5, t6, t7 from
+    the wrist decomposition ``wr``, the solution q = s theta from the shoulder and elbow angles
+    ``shoulder`` (t1, t2, t3, t4), and the step list with the programs' own shoulder steps."""
     g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
     t5, t6, t7 = _zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
-    thetas = (t1, t2, t3, t4, t5, t6, t7)
+    thetas = (*shoulder, t5, t6, t7)
     bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
     steps = [
         ("pose in the canonical frame, wrist centre W", "R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T",
          [f"SRS class, relation mismatch {geo.error:.1g}"]),
         ("theta4", "cosine law", ["|W|^2 = d_se^2 + d_ew^2 + 2 d_se d_ew cos t4"]),
-        ("R_psi", "Rodrigues", ["rotation by psi about W/|W|"]),
-        ("theta1, theta2, theta3", "ZYZ of R_psi R0", ["R0 = Rz(a) Ry(b - phi), the reference plane"]),
+        *shoulder_steps,
         ("theta5, theta6, theta7", "ZYZ of R_w", ["R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c"]),
     ]
-    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0,
-                     free_rule=("set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the "
-                                "wrist's, sin q6 = 0), the next joint taking the rest"),
-                     steps=steps, parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
+    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0, steps=steps,
+                     parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
                      branch_labels=[bld.labels[1], bld.labels[0], bld.labels[2]], bit_weights=(2, 4, 1),
-                     free="psi",
-                     free_doc="psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, "
-                              "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
+                     **doc)
 
 
 def srs_joint3_program(robot) -> IKProgram:
@@ -321,23 +330,11 @@ def srs_joint3_program(robot) -> IKProgram:
     # 3. the wrist
     wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4, s4)))
     bld.flag("singular", sp.Or(on_axis, bld.known_symbol("singular_wr")))
-    g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
-    t5, t6, t7 = _zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
-    thetas = (t1, t2, t3, t4, t5, t6, t7)
-    bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
-    steps = [
-        ("pose in the canonical frame, wrist centre W", "R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T",
-         [f"SRS class, relation mismatch {geo.error:.1g}"]),
-        ("theta4", "cosine law", ["|W|^2 = d_se^2 + d_ew^2 + 2 d_se d_ew cos t4"]),
-        ("theta1, theta2", "subproblem 2 (axes z, y)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W, t3 given"]),
-        ("theta5, theta6, theta7", "ZYZ of R_w", ["R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c"]),
-    ]
-    return IKProgram(geo.robot, 7, ops=bld.ops, branches=8, free_joint=0,
-                     free_rule=("set to 0 (q1 where the wrist centre is on axis 1; q5 at the "
-                                "wrist's alignment, sin q6 = 0), the next joint taking the rest"),
-                     steps=steps, parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
-                     branch_labels=[bld.labels[1], bld.labels[0], bld.labels[2]], bit_weights=(2, 4, 1),
-                     free="q3", free_doc="q3, the value of joint 3 (rad), returned as given in (-pi, pi]")
+    return _srs_end(bld, geo, wr, (t1, t2, t3, t4), [
+        ("theta1, theta2", "subproblem 2 (axes z, y)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W, t3 given"])],
+        free_rule=("set to 0 (q1 where the wrist centre is on axis 1; q5 at the "
+                   "wrist's alignment, sin q6 = 0), the next joint taking the rest"),
+        free="q3", free_doc="q3, the value of joint 3 (rad), returned as given in (-pi, pi]")
 
 
 # --------------------------------------------------------------------------- #
