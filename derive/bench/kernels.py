@@ -347,6 +347,11 @@ def report(r: dict) -> str:
     if "error" not in h and "nearest_batch_ns" in h:
         lines.append(f"IK batch in chunks of 1000 poses (output in cache): C harness {h['ik_batch_chunked_ns']:.1f}, "
                      f"via kernels() {r['c'].get('ik_batch_chunked_ns', float('nan')):.1f} ns per pose")
+        if "fk_batch_chunked_ns" in h:
+            lines.append(f"in chunks of 1000 poses, C harness: FK batch {h['fk_batch_chunked_ns']:.1f} ns per pose, "
+                         f"nearest {h['nearest_batch_chunked_ns']:.1f} ns per pose "
+                         f"({100 * (h['nearest_batch_chunked_ns'] / h['ik_batch_chunked_ns'] - 1):+.0f} % on the "
+                         "IK batch in chunks)")
         lines.append(f"nearest solution to a seed (IK + selection, one batch): C harness {h['nearest_batch_ns']:.1f}, "
                      f"via kernels() {r['c'].get('nearest_batch_ns', float('nan')):.1f} ns per pose "
                      f"({100 * (h['nearest_batch_ns'] / h['ik_batch_ns'] - 1):+.0f} % on the C IK batch)")

@@ -3,9 +3,10 @@
  * robot's generated kernel file, with -DPREFIX=<robot id>.
  *
  * It times, per pose, on n poses read from files: the generated FK and IK, batch and single
- * calls, the IK batch in chunks of CHUNK poses (its output then stays in the cache: the batch of
- * all n writes n x 384 bytes, which on a large n is a memory-bandwidth figure), the nearest
- * solution to a seed (the generating joints + 0.01 rad) in one batch, and the same FK done by
+ * calls, the FK and IK batches in chunks of CHUNK poses (their output then stays in the cache: the
+ * IK batch of all n writes n x 384 bytes, which on a large n is a memory-bandwidth figure), the
+ * nearest solution to a seed (the generating joints + 0.01 rad) in one batch and in chunks, and
+ * the same FK done by
  * plain 4x4 homogeneous-matrix code (standard DH,
  * T_i = Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i), libm sin/cos, a 4x4 product per joint), which is
  * what a controller would write without a kinematics library. Usage:
@@ -104,6 +105,7 @@ int main(int argc, char **argv)
         seeds[i] = q[i] + 0.01;
     }
     double t_fk = 1e9, t_fk1 = 1e9, t_mat = 1e9, t_ik = 1e9, t_ik1 = 1e9, t_ikc = 1e9, t_near = 1e9;
+    double t_fkc = 1e9, t_nearc = 1e9;
     volatile double sink = 0.0;
     for (int r = 0; r < repeats; ++r) {
         double t0 = now();
@@ -142,6 +144,19 @@ int main(int argc, char **argv)
         IK_NEAREST(n, poses, seeds, nq, nmx, ntt, nbr, nsg);
         t1 = now();
         t_near = best(t_near, t1 - t0);
+        t0 = now();
+        for (size_t i0 = 0; i0 + CHUNK <= n; i0 += CHUNK) {
+            FK_BATCH(CHUNK, q + 6 * i0, fk);
+        }
+        t1 = now();
+        t_fkc = best(t_fkc, t1 - t0);
+        t0 = now();
+        for (size_t i0 = 0; i0 + CHUNK <= n; i0 += CHUNK) {
+            IK_NEAREST(CHUNK, poses + 8 * i0, seeds + 6 * i0, nq + 6 * i0, nmx + i0, ntt + i0, nbr + i0,
+                       nsg + i0);
+        }
+        t1 = now();
+        t_nearc = best(t_nearc, t1 - t0);
     }
     size_t nfound = 0;
     for (size_t i = 0; i < n; ++i) {
@@ -155,9 +170,11 @@ int main(int argc, char **argv)
     fclose(f);
     printf("{\"fk_batch_ns\": %.3f, \"fk_single_ns\": %.3f, \"matrix_fk_ns\": %.3f, "
            "\"ik_batch_ns\": %.3f, \"ik_single_ns\": %.3f, \"ik_batch_chunked_ns\": %.3f, "
-           "\"nearest_batch_ns\": %.3f, \"nearest_found\": %zu, \"sink\": %g}\n",
+           "\"nearest_batch_ns\": %.3f, \"nearest_found\": %zu, \"fk_batch_chunked_ns\": %.3f, "
+           "\"nearest_batch_chunked_ns\": %.3f, \"sink\": %g}\n",
            t_fk / n * 1e9, t_fk1 / n * 1e9, t_mat / n * 1e9, t_ik / n * 1e9, t_ik1 / n * 1e9,
-           t_ikc / (double)(n / CHUNK * CHUNK) * 1e9, t_near / n * 1e9, nfound, sink);
+           t_ikc / (double)(n / CHUNK * CHUNK) * 1e9, t_near / n * 1e9, nfound,
+           t_fkc / (double)(n / CHUNK * CHUNK) * 1e9, t_nearc / (double)(n / CHUNK * CHUNK) * 1e9, sink);
     free(dh); free(q); free(poses); free(fk); free(mat); free(sols); free(counts);
     free(seeds); free(nq); free(nmx); free(ntt); free(nbr); free(nsg);
     return 0;
