@@ -33,6 +33,13 @@ def identifier(robot_name: str) -> str:
     return stem if stem[:1].isalpha() else "r_" + stem
 
 
+def _prefix(robot, free: str | None = None) -> str:
+    """The stem of the kernels' C identifiers and file names: the robot's identifier, and for the
+    kernels of an alternative free parameter that too (``iiwa14_q3_ik``), so that both sets can
+    be linked into one program."""
+    return identifier(robot.name) + (f"_{free}" if free else "")
+
+
 def _is_half(e) -> bool:
     return e == sp.S.Half or (e.is_Float and float(e) == 0.5)
 
@@ -149,7 +156,7 @@ def _context(robot, command: str, free: str | None = None) -> dict:
     temps = [{"name": str(n), **code(e)} for n, e in k.temps]
     outs = [code(e) for e in k.outputs]
     return {
-        "version": __version__, "command": command, "robot": robot, "id": identifier(robot.name),
+        "version": __version__, "command": command, "robot": robot, "id": _prefix(robot, free),
         "dof": robot.dof, "parameters": [(str(p), f"{float(v):.12g}") for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
@@ -395,7 +402,8 @@ def render_kernels(robot, command: str | None = None, free: str | None = None) -
     ``free``: a 7-joint arm's free parameter where its class offers a choice (the IK functions
     then take that one, :func:`derive.ik.program.ik_program`)."""
     robot = load_robot(robot)
-    command = command or f"dq-derive kernels {robot.name}"
+    command = command or (f"dq-derive kernels {robot.name}" if free is None else
+                          f"derive.kernels({robot.name!r}, free={free!r})")
     ctx = _context(robot, command, free)
     env = template_environment()
     return {role: (name.format(id=ctx["id"]), env.get_template(tpl).render(ctx))
@@ -411,7 +419,7 @@ def kernel_manifest(robot, free: str | None = None) -> dict:
         prog = ik_program(robot, free)
     except DeriveError:
         prog = None
-    out = {"id": robot.id, "robot": robot.name, "prefix": identifier(robot.name),
+    out = {"id": robot.id, "robot": robot.name, "prefix": _prefix(robot, free),
            "dof": robot.dof, "dq_derive": __version__, "format": KERNEL_FORMAT,
            "branch_labels": list(prog.branch_labels) if prog else []}
     if prog is not None and prog.free:

@@ -89,8 +89,10 @@ def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
     stderr) and stored in the user cache. Never derives when an artifact of
     the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
     ``free``: the kernels of a 7-joint arm's alternative free parameter ("q3" for the SRS
-    class), kept in the user cache beside the default ones."""
+    class, :func:`free_choice`), kept in the user cache beside the default ones, in a folder and
+    under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*."""
     robot = load_robot(robot)
+    free = free_choice(robot, free)
     key = robot.id if free is None else f"{robot.id}-{free}"
     places = (shipped_index().get(robot.id), user_folder(robot.id)) if free is None else (user_folder(key),)
     for folder in places:
@@ -204,7 +206,7 @@ class Kernels:
         self.robot = load_robot(robot)
         self.backend = backend
         self.dof = self.robot.dof
-        folder, manifest = kernel_folder(self.robot, free)
+        folder, manifest = kernel_folder(self.robot, free_choice(self.robot, free))
         self._manifest = manifest
         files = manifest["files"]
         ident = manifest["prefix"]
@@ -303,9 +305,11 @@ class Kernels:
     def _check_free(self, free):
         """InputError unless ``free`` is given exactly when the arm has a free parameter."""
         if self.free and free is None:
+            lo, hi = self.robot.limits[2]
             raise InputError(missing_free_message(self.robot) if self.free != "q3" else
                              f"{self.robot.name}: these kernels solve with joint 3 given and need "
-                             "free= (q3, the value of joint 3, rad), a number or one per pose")
+                             f"free= (q3, the value of joint 3, rad, within its limits [{lo:.4g}, "
+                             f"{hi:.4g}]), a number or one per pose")
         if free is not None and not self.free:
             raise InputError(f"free: {self.robot.name} has {self.dof} joints and no free parameter")
 
@@ -505,6 +509,19 @@ class Kernels:
         return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
 
 
+def free_choice(robot, free: str | None) -> str | None:
+    """``free`` checked against the robot's class (:data:`derive.ik.program7.FREE_CHOICES`):
+    None for the default parameter (given as None or by its name, "psi" / "q7"), else the
+    alternative ("q3"); InputError for anything else."""
+    if free is None:
+        return None
+    choices = FREE_CHOICES.get(redundant_kind(robot), ())
+    if free not in choices:
+        raise InputError(f"free: {robot.name} offers no kernels with {free!r} as the free parameter; "
+                         f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
+    return None if free == choices[0] else free
+
+
 def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
     """The generated kernels of ``robot`` (a library name, a description file under any name,
     or a :class:`~derive.model.robot.Robot`) for ``backend`` ("python", "numpy", "c"), loaded
@@ -513,16 +530,11 @@ def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
     ``free``: for a 7-joint arm, which free parameter the IK takes where the class offers a
     choice (:data:`derive.ik.program7.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
     psi by default and joint 3's value with ``free="q3"`` (derived into the user cache on first
-    use, about 15 s; ``ik_sweep``, ``nearest`` and the CasADi functions are the psi kernels')."""
+    use, about 15 s; ``ik_sweep`` and ``nearest`` search over psi: use the default kernels for
+    them; CasADi: ``functions(robot)["ik_q3"]``)."""
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
-    if free is not None:
-        choices = FREE_CHOICES.get(redundant_kind(r), ())
-        if free not in choices:
-            raise InputError(f"free: {r.name} offers no kernels with {free!r} as the free parameter; "
-                             f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
-        if free == choices[0]:
-            free = None                 # the default kernels (shipped in generated/)
+    free = free_choice(r, free)
     key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free)
     return memo("kernels", key, lambda: Kernels(r, backend, free))

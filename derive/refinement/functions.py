@@ -254,7 +254,8 @@ def _error_terms(d, t, tg):
 # --------------------------------------------------------------------------- #
 def functions(robot, source: str | None = None) -> dict:
     """The CasADi functions of a robot: fk, fk_matrix, pose_error, pose_error_jacobian,
-    residual (e and J in one call, for the refinement) and ik where the robot has a closed form.
+    residual (e and J in one call, for the refinement) and ik where the robot has a closed form
+    (for the SRS arms also ik_q3: joint 3 given instead of the arm angle).
 
     Loaded from the artifacts of the robot's identity when they exist (the shipped
     ``generated/<robot>/*.casadi``, then the user cache, :mod:`derive.cache`); otherwise built
@@ -271,8 +272,9 @@ def functions(robot, source: str | None = None) -> dict:
 def _load_or_build(robot) -> dict:
     found = {name: find_artifact(robot.id, f"casadi/{name}") for name in SAVED + SRS_SAVED}
     # a 7-joint arm's functions stored before its IK program existed are built again
-    if all(found[name] is not None for name in REQUIRED) and (found["ik"] is not None
-                                                              or redundant_kind(robot) is None):
+    kind = redundant_kind(robot)
+    if all(found[name] is not None for name in REQUIRED) and (found["ik"] is not None or kind is None) \
+            and (found["ik_q3"] is not None or kind != "srs"):
         return {name: ca.Function.load(str(path)) for name, path in found.items() if path is not None}
     source = "derived" if is_library_robot(robot) and robot.exact else "product"
     with task(robot.name):
