@@ -26,3 +26,25 @@ def trajectory(name, n, rng):
     q = c + sum(amp[k] * np.sin(2 * np.pi * (k + 1) * t + ph[k]) / (k + 1) for k in range(3))
     assert np.all((q > box[:, 0]) & (q < box[:, 1]))
     return q
+
+
+def follow(nearest, poses, q0):
+    """A path of poses solved by ``nearest(pose, seed)`` with each pose seeded with the previous
+    answer (the first with q0); every pose must have an answer. Returns the answers (n, 7) and
+    their branch ids (n,)."""
+    n = len(poses)
+    out, branch, cur = np.empty((n, 7)), np.empty(n, dtype=int), q0
+    for i in range(n):
+        r = nearest(poses[i], cur)
+        assert r.found, i
+        out[i], branch[i], cur = r.q, r.branch, r.q
+    return out, branch
+
+
+def assert_continuous(q, out, limits):
+    """The answers ``out`` of the path ``q`` lie inside the limits and no step of theirs exceeds
+    3 x the trajectory's own step (largest joint move)."""
+    assert np.all((out >= limits[:, 0] - 1e-12) & (out <= limits[:, 1] + 1e-12))
+    own = np.abs(np.diff(q, axis=0)).max(axis=1)
+    step = np.abs(np.diff(out, axis=0)).max(axis=1)
+    assert np.all(step <= 3.0 * own), float((step / own).max())

@@ -14,7 +14,7 @@ from derive import reference
 from derive.errors import InputError
 from derive.ik import redundant, srs
 from derive.refinement.functions import functions
-from paths7 import trajectory
+from paths7 import assert_continuous, follow, trajectory
 
 ROBOTS = ["panda", "fr3", "iiwa7", "iiwa14"]
 N = 10_000
@@ -185,18 +185,10 @@ def test_kernel_nearest_along_a_trajectory_is_continuous_and_on_the_generating_b
     d = _wrapped(gen.q - q[:, None]).max(axis=-1)
     gen_branch = gen.branch[np.arange(1000), np.nanargmin(d, axis=1)]
     k = derive.kernels(robot, "c")
-    out, branch, cur = np.empty((1000, 7)), np.empty(1000, dtype=int), q[0]
-    for i in range(1000):
-        r = k.nearest(poses[i], cur)
-        assert r.found, i
-        out[i], branch[i], cur = r.q, r.branch, r.q
+    out, branch = follow(k.nearest, poses, q[0])
     dp, dr = reference.pose_error(reference.fk(robot, out), poses)
     assert max(dp.max(), dr.max()) < 1e-10
-    lim = derive.load_robot(robot).limits
-    assert np.all((out >= lim[:, 0] - 1e-12) & (out <= lim[:, 1] + 1e-12))
-    own = np.abs(np.diff(q, axis=0)).max(axis=1)
-    step = np.abs(np.diff(out, axis=0)).max(axis=1)
-    assert np.all(step <= 3.0 * own), float((step / own).max())
+    assert_continuous(q, out, derive.load_robot(robot).limits)
     np.testing.assert_array_equal(branch, gen_branch)
     # batch form, every pose seeded with the generating configuration: the numpy search agrees
     a = k.nearest(poses[::10], q[::10])

@@ -14,7 +14,7 @@ from derive import reference
 from derive.cli import main
 from derive.errors import InputError
 from derive.ik import redundant, srs
-from paths7 import trajectory
+from paths7 import assert_continuous, follow, trajectory
 
 SEED = 17
 ROBOTS = ["panda", "fr3", "iiwa7", "iiwa14"]
@@ -184,17 +184,9 @@ def test_nearest_along_a_trajectory_stays_continuous_and_on_the_generating_branc
     gen = redundant.solve(name, poses, _own_free(name, q))
     d = _wrapped(gen.q - q[:, None]).max(axis=-1)
     gen_branch = gen.branch[np.arange(1000), np.nanargmin(d, axis=1)]
-    out, branch, cur = np.empty((1000, 7)), np.empty(1000, dtype=int), q[0]
-    for i in range(1000):
-        r = reference.nearest(name, poses[i], cur)
-        assert r.found, i
-        out[i], branch[i], cur = r.q, r.branch, r.q
+    out, branch = follow(lambda pose, seed: reference.nearest(name, pose, seed), poses, q[0])
     assert max(_errors(name, out, poses)) < 1e-10
-    lim = derive.load_robot(name).limits
-    assert np.all((out >= lim[:, 0] - 1e-12) & (out <= lim[:, 1] + 1e-12))
-    own_step = np.abs(np.diff(q, axis=0)).max(axis=1)
-    step = np.abs(np.diff(out, axis=0)).max(axis=1)
-    assert np.all(step <= 3.0 * own_step), float((step / own_step).max())
+    assert_continuous(q, out, derive.load_robot(name).limits)
     np.testing.assert_array_equal(branch, gen_branch)
 
 
