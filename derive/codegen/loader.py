@@ -51,8 +51,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
 from derive.ik.closed_form import ik_batch as reference_ik_batch
-from derive.ik.program7 import FREE_CHOICES
-from derive.ik.redundant import missing_free_message, redundant_kind
+from derive.ik.program import free_choice
+from derive.ik.redundant import missing_free_message
 from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
@@ -89,7 +89,7 @@ def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
     stderr) and stored in the user cache. Never derives when an artifact of
     the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
     ``free``: the kernels of a 7-joint arm's alternative free parameter ("q3" for the SRS
-    class, :func:`free_choice`), kept in the user cache beside the default ones, in a folder and
+    class, :func:`derive.ik.program.free_choice`), kept in the user cache beside the default ones, in a folder and
     under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*."""
     robot = load_robot(robot)
     free = free_choice(robot, free)
@@ -206,7 +206,7 @@ class Kernels:
         self.robot = load_robot(robot)
         self.backend = backend
         self.dof = self.robot.dof
-        folder, manifest = kernel_folder(self.robot, free_choice(self.robot, free))
+        folder, manifest = kernel_folder(self.robot, free)
         self._manifest = manifest
         files = manifest["files"]
         ident = manifest["prefix"]
@@ -507,19 +507,6 @@ class Kernels:
     def branch_labels(self) -> list:
         """The closed-form steps whose roots the bits of a branch index choose, most significant first."""
         return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
-
-
-def free_choice(robot, free: str | None) -> str | None:
-    """``free`` checked against the robot's class (:data:`derive.ik.program7.FREE_CHOICES`):
-    None for the default parameter (given as None or by its name, "psi" / "q7"), else the
-    alternative ("q3"); InputError for anything else."""
-    if free is None:
-        return None
-    choices = FREE_CHOICES.get(redundant_kind(robot), ())
-    if free not in choices:
-        raise InputError(f"free: {robot.name} offers no kernels with {free!r} as the free parameter; "
-                         f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
-    return None if free == choices[0] else free
 
 
 def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:

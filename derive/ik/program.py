@@ -95,20 +95,31 @@ def _half_factor(d, u):
     return None
 
 
+def free_choice(robot, free: str | None) -> str | None:
+    """``free`` checked against the robot's class (:data:`derive.ik.program7.FREE_CHOICES`):
+    None for the default parameter (given as None or by its name, "psi" / "q7"), else the
+    alternative ("q3"); InputError for anything else."""
+    if free is None:
+        return None
+    robot = load_robot(robot)
+    choices = FREE_CHOICES.get(redundant_kind(robot), ())
+    if free not in choices:
+        raise InputError(f"free: {robot.name} offers no IK with {free!r} as the free parameter; "
+                         f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
+    return None if free == choices[0] else free
+
+
 def ik_program(robot, free: str | None = None) -> IKProgram:
     """The IK program of a robot (raises DeriveError for chains whose extraction it cannot use);
     cached per robot identity. ``free``: a 7-joint arm's free parameter where its class offers a
-    choice (:data:`derive.ik.program7.FREE_CHOICES`: "q3" instead of psi for the SRS class)."""
+    choice (:func:`free_choice`: "q3" instead of psi for the SRS class)."""
     robot = load_robot(robot)
+    free = free_choice(robot, free)
     return memo("ik-program", (robot.id, free), lambda: _ik_program(robot, free))
 
 
 def _ik_program(robot, free) -> IKProgram:
     kind = redundant_kind(robot)
-    if free is not None and free not in FREE_CHOICES.get(kind, ()):
-        have = ", ".join(FREE_CHOICES.get(kind, ())) or "none (not a 7-joint arm of a known class)"
-        raise InputError(f"free: {robot.name} offers no IK with {free!r} as the free parameter; "
-                         f"its choices: {have}")
     if kind is not None:
         return seven_joint_program(robot, kind, free)
     geo = spherical_class(robot)
