@@ -51,8 +51,7 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
 from derive.ik.closed_form import ik_batch as reference_ik_batch
-from derive.ik.program import free_choice
-from derive.ik.redundant import missing_free_message
+from derive.ik.redundant import free_choice, missing_free_message
 from derive.kinematics.pose import as_pose, as_pose_batch
 from derive.model.robot import load_robot
 
@@ -89,7 +88,7 @@ def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
     stderr) and stored in the user cache. Never derives when an artifact of
     the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
     ``free``: the kernels of a 7-joint arm's alternative free parameter ("q3" for the SRS
-    class, :func:`derive.ik.program.free_choice`), kept in the user cache beside the default ones, in a folder and
+    class, :func:`derive.ik.redundant.free_choice`), kept in the user cache beside the default ones, in a folder and
     under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*."""
     robot = load_robot(robot)
     free = free_choice(robot, free)
@@ -515,7 +514,7 @@ def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
     from the artifacts of its identity (see :func:`kernel_folder`); once per process.
 
     ``free``: for a 7-joint arm, which free parameter the IK takes where the class offers a
-    choice (:data:`derive.ik.program7.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
+    choice (:data:`derive.ik.redundant.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
     psi by default and joint 3's value with ``free="q3"`` (derived into the user cache on first
     use, about 15 s; ``ik_sweep`` and ``nearest`` search over psi: use the default kernels for
     them; CasADi: ``functions(robot)["ik_q3"]``)."""

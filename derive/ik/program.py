@@ -39,8 +39,8 @@ from derive.cache import memo
 from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import closed_form_relation, spherical_class, ur_geometry
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
-from derive.ik.program7 import FREE_CHOICES, seven_joint_program
-from derive.ik.redundant import redundant_kind
+from derive.ik.program7 import seven_joint_program
+from derive.ik.redundant import free_choice, redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.ik.spherical import SWGeometry, canonical_robot
 from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
@@ -95,24 +95,10 @@ def _half_factor(d, u):
     return None
 
 
-def free_choice(robot, free: str | None) -> str | None:
-    """``free`` checked against the robot's class (:data:`derive.ik.program7.FREE_CHOICES`):
-    None for the default parameter (given as None or by its name, "psi" / "q7"), else the
-    alternative ("q3"); InputError for anything else."""
-    if free is None:
-        return None
-    robot = load_robot(robot)
-    choices = FREE_CHOICES.get(redundant_kind(robot), ())
-    if free not in choices:
-        raise InputError(f"free: {robot.name} offers no IK with {free!r} as the free parameter; "
-                         f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
-    return None if free == choices[0] else free
-
-
 def ik_program(robot, free: str | None = None) -> IKProgram:
     """The IK program of a robot (raises DeriveError for chains whose extraction it cannot use);
     cached per robot identity. ``free``: a 7-joint arm's free parameter where its class offers a
-    choice (:func:`free_choice`: "q3" instead of psi for the SRS class)."""
+    choice (:func:`derive.ik.redundant.free_choice`: "q3" instead of psi for the SRS class)."""
     robot = load_robot(robot)
     free = free_choice(robot, free)
     return memo("ik-program", (robot.id, free), lambda: _ik_program(robot, free))

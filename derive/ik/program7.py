@@ -442,14 +442,10 @@ def panda_program(robot) -> IKProgram:
                      free="q7", free_doc="q7, the value of joint 7 (rad), returned as given in (-pi, pi]")
 
 
-#: The free parameters each class's programs can take: the first is the default.
-FREE_CHOICES = {"srs": ("psi", "q3"), "panda": ("q7",)}
-
-
 def seven_joint_program(robot, kind: str, free: str | None = None) -> IKProgram:
     """The program of a 7R arm of class ``kind`` ("srs" or "panda",
     :func:`derive.ik.redundant.redundant_kind`) with the free parameter ``free`` (one of
-    :data:`FREE_CHOICES`; default the class's first: psi, q7)."""
+    the class's :data:`derive.ik.redundant.FREE_CHOICES`; default the class's first: psi, q7)."""
     if kind == "panda":
         return panda_program(robot)
     return srs_joint3_program(robot) if free == "q3" else srs_program(robot)

@@ -220,6 +220,24 @@ def missing_free_message(robot) -> str:
             "ik_sweep evaluates several values, nearest chooses one for a seed")
 
 
+#: The free parameters each class's IK programs and kernels can take: the first is the default.
+FREE_CHOICES = {"srs": ("psi", "q3"), "panda": ("q7",)}
+
+
+def free_choice(robot, free: str | None) -> str | None:
+    """``free`` checked against the robot's class (:data:`FREE_CHOICES`):
+    None for the default parameter (given as None or by its name, "psi" / "q7"), else the
+    alternative ("q3"); InputError for anything else."""
+    if free is None:
+        return None
+    robot = load_robot(robot)
+    choices = FREE_CHOICES.get(redundant_kind(robot), ())
+    if free not in choices:
+        raise InputError(f"free: {robot.name} offers no IK with {free!r} as the free parameter; "
+                         f"its choices: {', '.join(choices) or 'none (not a 7-joint arm of a known class)'}")
+    return None if free == choices[0] else free
+
+
 # --------------------------------------------------------------------------- #
 # Solutions at given values
 # --------------------------------------------------------------------------- #
