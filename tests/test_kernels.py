@@ -17,6 +17,7 @@ from derive import InputError, dualquat, reference
 from derive.codegen import loader
 from derive.codegen.emit import render_kernels
 from derive.codegen.loader import _compile, kernel_folder
+from derive.ik.closed_form import spherical_class
 
 UR = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e"]
 
@@ -124,6 +125,32 @@ def test_ik_elbow_singular(backend):
     filled = np.arange(8)[None, :] < counts[:, None]
     dpos, drot = reference.pose_error(reference.fk("ur5", sols[filled]), poses[rows])
     assert dpos.max() < 1e-8 and drot.max() < 1e-8
+
+
+@pytest.mark.parametrize("name", ["ur5", "irb120"])
+def test_ik_batch_duplicate_gate_per_block(name):
+    """The batch IK skips its full duplicate test in a block of 64 poses where no pose can have
+    one (derive.codegen.emit._duplicate_gates). Blocks with one pose that has duplicates (wrist
+    singular, theta5 = 0: the two theta5 roots meet) at a different place in each block, among
+    random poses, and a block with none: the batch equals one call per pose bit for bit, and the
+    counts and solution sets equal the numpy kernel's (its own merge, over the whole batch)."""
+    rng = np.random.default_rng(64)
+    n = 64 * 9
+    q = rng.uniform(-math.pi, math.pi, size=(n, 6))
+    at = [64 * b + (7 * b) % 64 for b in range(8)]   # none in the last block
+    k = derive.kernels(name, "c")
+    geo = spherical_class(name)           # irb120: the canonical chain's wrist angle at 0
+    q[at, 4] = 0.0 if geo is None else -geo.signs[4] * geo.offsets[4]
+    poses = reference.fk(name, q)
+    sols, counts, branch, sing = k.ik(poses, details=True)
+    assert np.all(sing[at].any(axis=1)) and not sing[64 * 8:].any()
+    assert np.all(counts[at] < 8)            # duplicates merged where the theta5 roots meet
+    for i in range(n):
+        s1, c1, b1, g1 = k.ik(poses[i], details=True)
+        assert c1 == counts[i] and np.array_equal(b1, branch[i]) and np.array_equal(g1, sing[i])
+        assert np.array_equal(s1, sols[i], equal_nan=True)
+    ref_s, ref_c = derive.kernels(name, "numpy").ik(poses)
+    assert set_mismatches(sols, counts, ref_s, ref_c, 1e-9) == []
 
 
 def test_ik_single_pose_and_matrix_input():

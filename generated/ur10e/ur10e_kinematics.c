@@ -988,7 +988,44 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         vb[7][j] = ok_111;
         sb[7][j] = singular_1;
     }
-    dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
+    /* the scalar pass only for a block with a singular pose (a vectorised reduction first) */
+    int any_singular = 0;
+    for (size_t j = 0; j < m; ++j) {
+        any_singular |= sb[0][j] | sb[1][j] | sb[2][j] | sb[3][j] | sb[4][j] | sb[5][j] | sb[6][j] | sb[7][j];
+    }
+    if (any_singular) {
+        dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
+    }
+    /* every pair of candidates needs one of these 7 near flags among its flags to be a
+       duplicate (the flag of a joint whose root the first differing branch step chose), and both
+       its candidates valid: where that holds for no pair and no pose of the block, which is
+       everywhere but near the sets where two roots meet, no candidate is a duplicate and the full
+       test below is skipped */
+    int gate = 0;
+    for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicate gates */
+        const int near0_4_0 = dq_adist(cb[4][0][j], cb[0][0][j]) < 1e-06;
+        gate |= near0_4_0 & ((vb[4][j] & vb[0][j]) | (vb[4][j] & vb[1][j]) | (vb[4][j] & vb[2][j]) | (vb[4][j] & vb[3][j]) | (vb[5][j] & vb[0][j]) | (vb[5][j] & vb[1][j]) | (vb[5][j] & vb[2][j]) | (vb[5][j] & vb[3][j]) | (vb[6][j] & vb[0][j]) | (vb[6][j] & vb[1][j]) | (vb[6][j] & vb[2][j]) | (vb[6][j] & vb[3][j]) | (vb[7][j] & vb[0][j]) | (vb[7][j] & vb[1][j]) | (vb[7][j] & vb[2][j]) | (vb[7][j] & vb[3][j]));
+        const int near4_2_0 = dq_adist(cb[2][4][j], cb[0][4][j]) < 1e-06;
+        gate |= near4_2_0 & ((vb[2][j] & vb[0][j]) | (vb[2][j] & vb[1][j]) | (vb[3][j] & vb[0][j]) | (vb[3][j] & vb[1][j]));
+        const int near4_6_4 = dq_adist(cb[6][4][j], cb[4][4][j]) < 1e-06;
+        gate |= near4_6_4 & ((vb[6][j] & vb[4][j]) | (vb[6][j] & vb[5][j]) | (vb[7][j] & vb[4][j]) | (vb[7][j] & vb[5][j]));
+        const int near1_1_0 = dq_adist(cb[1][1][j], cb[0][1][j]) < 1e-06;
+        gate |= near1_1_0 & ((vb[1][j] & vb[0][j]));
+        const int near1_3_2 = dq_adist(cb[3][1][j], cb[2][1][j]) < 1e-06;
+        gate |= near1_3_2 & ((vb[3][j] & vb[2][j]));
+        const int near1_5_4 = dq_adist(cb[5][1][j], cb[4][1][j]) < 1e-06;
+        gate |= near1_5_4 & ((vb[5][j] & vb[4][j]));
+        const int near1_7_6 = dq_adist(cb[7][1][j], cb[6][1][j]) < 1e-06;
+        gate |= near1_7_6 & ((vb[7][j] & vb[6][j]));
+    }
+    if (!gate) {
+        for (int b = 0; b < 8; ++b) {
+            for (size_t j = 0; j < m; ++j) {
+                kb[b][j] = vb[b][j];
+            }
+        }
+        return;
+    }
     for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicates */
         /* each distinct pair of values of a joint compared once (leaves that share a value need
            no test); candidate i is a duplicate of a when all of the pair's joints are near */
