@@ -264,7 +264,7 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
         out[backend] = {"fk_batch_ns": _time(lambda: k.fk(q[:m]), repeats if backend != "python" else 1) / m * 1e9,
                         "ik_batch_ns": _time(lambda: k.ik(poses[:m]), repeats if backend != "python" else 1) / m * 1e9}
         s = 2000
-        rep = 3 if backend == "c" else 1
+        rep = max(repeats, 3) if backend == "c" else 1   # single calls: the noisiest figure
         out[backend]["fk_single_ns"] = _time(lambda: [k.fk(row) for row in q[:s]], rep) / s * 1e9
         out[backend]["ik_single_ns"] = _time(lambda: [k.ik(row) for row in poses[:s]], rep) / s * 1e9
     k = kernels(robot, "c")

@@ -44,12 +44,13 @@ DQ_INLINE double dq_sel(int c, double a, double b)
  * 1.5 * 2^52 trick, pi/2 split in two parts as in fdlibm), then fdlibm's minimax polynomials
  * on |r| <= pi/4 (k_sin.c, degree 13, and k_cos.c, degree 14; each within 2^-58 of the function
  * there) in Horner form with fused multiply-adds where the target has them; the quadrant
- * k mod 4, found the same way, picks signs and swaps. Accurate to a few ulp for |x| up to about
- * 1e6. */
+ * k mod 4, read from the bits of the rounded value, picks signs and swaps. Accurate to a few ulp
+ * for |x| up to about 1e6. */
 DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
 {
     const double round_magic = 6755399441055744.0;
-    const double k = (x * 0.63661977236758134308 + round_magic) - round_magic;
+    const double t = x * 0.63661977236758134308 + round_magic;
+    const double k = t - round_magic;
     const double r = (x - k * 1.57079632673412561417e+00) - k * 6.07710050650619224932e-11;
     const double z = r * r;
     /* r (1 + z p(z)), not r + r z p(z): keeps the sign of r = -0.0 */
@@ -61,16 +62,19 @@ DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
                       -1.13596475577881948265e-11, 2.08757232129817482790e-09),
                       -2.75573143513906633035e-07), 2.48015872894767294178e-05),
                       -1.38888888888741095749e-03), 4.16666666666666019037e-02), DQ_FMA(-0.5, z, 1.0));
-    /* k mod 2 and k mod 4 as k - 2 round(k/2) in {-1, 0, 1} and k - 4 round(k/4) in {-2 .. 2} */
-    const double m2 = k - 2.0 * ((k * 0.5 + round_magic) - round_magic);
-    const double m4 = k - 4.0 * ((k * 0.25 + round_magic) - round_magic);
-    const int odd = (m2 > 0.5) | (m2 < -0.5);
-    /* blends, not ?: (the FK of a 7-joint arm has 27 of these in one loop body, and gcc then
-       leaves the ?: as control flow and does not vectorise the loop) */
-    const double a = dq_sel(odd, pc, ps);
-    const double b = dq_sel(odd, ps, pc);
-    *s = dq_sel((m4 > 1.5) | (m4 < -0.5), -a, a);          /* k mod 4 in {2, 3} */
-    *c = dq_sel((m4 > 0.5) | (m4 < -1.5), -b, b);          /* k mod 4 in {1, 2} */
+    /* the quadrant k mod 4 from the low bits of t = k + 1.5 * 2^52, whose mantissa holds 2^51 + k
+       (|k| < 2^51): bit 0 swaps sine and cosine, bit 1 of k (of k + 1) is the sign of the sine
+       (of the cosine), flipped in the sign bit; integer operations on the bits, which vectorise
+       (SSE2, AVX2, NEON) and cost less than finding k mod 4 in floating point */
+    uint64_t tb, us, uc, ua, ub;
+    memcpy(&tb, &t, sizeof tb);
+    memcpy(&us, &ps, sizeof us);
+    memcpy(&uc, &pc, sizeof uc);
+    const uint64_t swap = (uint64_t)0 - (tb & 1u);
+    ua = ((uc & swap) | (us & ~swap)) ^ ((tb & 2u) << 62);
+    ub = ((us & swap) | (uc & ~swap)) ^ (((tb + 1u) & 2u) << 62);
+    memcpy(s, &ua, sizeof ua);
+    memcpy(c, &ub, sizeof ub);
 }
 
 DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
@@ -406,7 +410,7 @@ void panda_fk(const double *restrict q, double *restrict out)
 
 void panda_fk_batch(size_t n, const double *restrict q, double *restrict out)
 {
-    double qb[7][DQ_BLOCK], ob[8][DQ_BLOCK];
+    double qb[7][DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -414,20 +418,14 @@ void panda_fk_batch(size_t n, const double *restrict q, double *restrict out)
                 qb[k][j] = q[(i0 + j) * 7 + k];
             }
         }
+        /* the 8 outputs of a pose are stored in place: a group of 8 (a power of two), which the
+           vectoriser interleaves with permutes (a group of 7 inputs it would load one by one) */
         for (size_t j = 0; j < m; ++j) {   /* vectorised: fk batch */
-            double qj[7], oj[8];
+            double qj[7];
             for (int k = 0; k < 7; ++k) {
                 qj[k] = qb[k][j];
             }
-            fk_core(qj, oj);
-            for (int k = 0; k < 8; ++k) {
-                ob[k][j] = oj[k];
-            }
-        }
-        for (size_t j = 0; j < m; ++j) {
-            for (int k = 0; k < 8; ++k) {
-                out[(i0 + j) * 8 + k] = ob[k][j];
-            }
+            fk_core(qj, out + (i0 + j) * 8);
         }
     }
 }
