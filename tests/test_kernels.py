@@ -535,7 +535,7 @@ def test_dq_atan2_at_extreme_magnitudes(c_helpers):
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
 @pytest.mark.parametrize("robot", ["ur5", "irb120", "iiwa14", "panda"])
 def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
-    """The batch FK loop, the main batch IK loop, the duplicate marking after it and the
+    """The batch FK loop, the main batch IK loop, the duplicate gates and marking after it and the
     nearest-solution pass of the shipped sources are branch-free (selects through dq_sel, the
     singular poses and the packing in scalar passes after them), so gcc vectorises them without
     masked stores: with AVX2, no AVX-512. The loops carry marker comments; the report must have
@@ -545,7 +545,7 @@ def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
     source = Path(__file__).resolve().parents[1] / "generated" / robot / f"{robot}_kinematics.c"
     lines = source.read_text(encoding="utf-8").splitlines()
     marked = {}
-    for marker in ("fk batch", "ik batch", "ik duplicates", "ik nearest"):
+    for marker in ("fk batch", "ik batch", "ik duplicate gates", "ik duplicates", "ik nearest"):
         at = [i + 1 for i, line in enumerate(lines) if f"/* vectorised: {marker} */" in line]
         assert len(at) == 1, (marker, at)
         assert re.match(r"\s*for \(", lines[at[0] - 1]), lines[at[0] - 1]
