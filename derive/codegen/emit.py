@@ -226,7 +226,7 @@ def _ik_context(robot, free: str | None = None) -> dict:
             for j, e in enumerate(d["q"]):
                 same_as[d["leaf"]][j] = first.setdefault((j, e), d["leaf"])
     near, dups = _duplicate_tests(same_as, prog.branches, robot.dof)
-    gates = _duplicate_gates(dups)
+    gates = _duplicate_gates(near, dups)
     step_lines = [f"{u}: {pat}" + (f" ({', '.join(e)})" if e else "") for u, pat, e in prog.steps]
     labels = list(prog.branch_labels) or [f"step {i + 1}" for i in range(k)]
     # labels are in the order of significance: weights 2^(k-1) ... 1
@@ -268,10 +268,11 @@ def _duplicate_tests(same_as, branches: int, dof: int):
     return near, dups
 
 
-def _duplicate_gates(dups) -> list:
+def _duplicate_gates(near, dups) -> list:
     """A few near flags of :func:`_duplicate_tests` such that every pair of candidates has one of
     them among the flags that must all hold for a duplicate (chosen greedily, the flag in most
-    pairs first), each with the pairs it stands for: [(flag, [(i, a), ...])]. Where no flag holds
+    pairs first), each as its comparison (flag name, joint, leaf x, leaf y) of ``near`` with the
+    pairs it stands for: [((flag, k, x, y), [(i, a), ...])]. Where no flag holds
     together with both candidates of one of its pairs being valid, for any pose of a block, no
     candidate is a duplicate and the batch loop skips the full test. For the UR, 7 of the 97
     comparisons: theta1's pair (all 16 pairs across its two roots), theta5's per theta1 root and
@@ -280,6 +281,7 @@ def _duplicate_gates(dups) -> list:
     pairs = [((i, a), set(flags)) for i, row in dups for a, flags in row]
     if not pairs or any(not f for _, f in pairs):
         return []
+    comparison = {c[0]: c for c in near}
     gates = []
     while pairs:
         count: dict = {}
@@ -287,7 +289,7 @@ def _duplicate_gates(dups) -> list:
             for f in flags:
                 count[f] = count.get(f, 0) + 1
         best = max(sorted(count), key=lambda f: count[f])    # sorted: the same choice every run
-        gates.append((best, [ia for ia, flags in pairs if best in flags]))
+        gates.append((comparison[best], [ia for ia, flags in pairs if best in flags]))
         pairs = [(ia, flags) for ia, flags in pairs if best not in flags]
     return gates
 
