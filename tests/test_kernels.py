@@ -525,8 +525,15 @@ def test_dq_atan2_of_zero_over_negative_zero(c_helpers):
     assert got[1] == math.atan2(-0.0, -0.0) == -math.pi
 
 
-def test_dq_atan2_at_extreme_magnitudes(c_helpers):
-    pairs = [(5e-324, 5e-324), (-1e-320, -2e-320), (1e308, 1e308), (1.7e308, 1e308)]
+def test_dq_atan2_at_the_edges_of_its_domain(c_helpers):
+    """dq_atan2's documented domain: |x|, |y| <= 1e307 and max(|x|, |y|) >= 1e-300 unless it is 0
+    (the IK programs' arguments lie far inside it; it spends no scaling on the rest). At its
+    edges, on both sides of the reduction (|y|/|x| = 1 and 0.3 are reduced, 0.1 is not), and with
+    the smaller magnitude deep in the subnormal range."""
+    pairs = [(sy * y, sx * x) for y, x in ((1e307, 1e307), (3e306, 1e307), (1e306, 1e307), (1e307, 1e306),
+                                           (1e-300, 1e-300), (3e-301, 1e-300), (1e-301, 1e-300),
+                                           (5e-324, 1e-300), (1e-300, 5e-324))
+             for sy in (1, -1) for sx in (1, -1)]
     got = c_helpers("a", pairs)[:, 0]
     ref = np.array([math.atan2(y, x) for y, x in pairs])
     assert np.all(np.abs(got - ref) <= 4.45e-16), list(zip(pairs, got, ref))

@@ -155,12 +155,14 @@ def _context(robot, command: str, free: str | None = None) -> dict:
 
     temps = [{"name": str(n), **code(e)} for n, e in k.temps]
     outs = [code(e) for e in k.outputs]
+    limits = _limit_context(robot)
     return {
         "version": __version__, "command": command, "robot": robot, "id": _prefix(robot, free),
         "dof": robot.dof, "parameters": [(str(p), f"{float(v):.12g}") for p, v in k.parameters.items()],
         "trig": trig, "temps": temps, "outputs": outs, "n_sincos": k.n_sincos,
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
-        "limits": _limit_context(robot),
+        "limits": limits,
+        "always_winding": all(lim["revolute"] and lim["full_turn"] for lim in limits),
         **_ik_context(robot, free),
     }
 
@@ -168,12 +170,14 @@ def _context(robot, command: str, free: str | None = None) -> dict:
 def _limit_context(robot) -> list:
     """Per joint its limits as C literals with the slack of :mod:`derive.ik.select` (``lo``,
     ``hi``; +-INFINITY where the description gives none), as written (``lo_text``,
-    ``hi_text``), and whether it is revolute (the nearest winding is chosen for those)."""
+    ``hi_text``), whether it is revolute (the nearest winding is chosen for those) and whether
+    its range spans a full turn (``full_turn``: hi - lo >= 2 pi + 1e-9, so every angle has a
+    winding inside the limits and the nearest pass skips that test)."""
     def lit(x):
         return repr(float(x)) if math.isfinite(x) else ("INFINITY" if x > 0 else "-INFINITY")
 
     return [{"lo": lit(lo - LIMIT_SLACK), "hi": lit(hi + LIMIT_SLACK), "lo_text": f"{lo:.6g}",
-             "hi_text": f"{hi:.6g}", "revolute": rev}
+             "hi_text": f"{hi:.6g}", "revolute": rev, "full_turn": bool(hi - lo >= 2.0 * math.pi + 1e-9)}
             for (lo, hi), rev in zip(robot.limits.tolist(), robot.revolute.tolist())]
 
 

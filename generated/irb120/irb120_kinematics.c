@@ -62,16 +62,21 @@ DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
                       -2.75573143513906633035e-07), 2.48015872894767294178e-05),
                       -1.38888888888741095749e-03), 4.16666666666666019037e-02), DQ_FMA(-0.5, z, 1.0));
     /* the quadrant k mod 4 from the low bits of t = k + 1.5 * 2^52, whose mantissa holds 2^51 + k
-       (|k| < 2^51): bit 0 swaps sine and cosine, bit 1 of k (of k + 1) is the sign of the sine
-       (of the cosine), flipped in the sign bit; integer operations on the bits, which vectorise
-       (SSE2, AVX2, NEON) and cost less than finding k mod 4 in floating point */
-    uint64_t tb, us, uc, ua, ub;
+       (|k| < 2^51): bit 0 of k swaps sine and cosine, bit 1 of k is the sign of the sine and
+       bit 1 of k + 1 (bit 1 xor bit 0 of k) that of the cosine. Both bits are shifted into the
+       sign bit; the swap is a select on the sign bit of tb << 63 (one blend where the target
+       has them, SSE4.1, AVX2, NEON) and the signs are xors. This costs less than finding
+       k mod 4 in floating point, and vectorises. */
+    uint64_t tb, ua, ub;
     memcpy(&tb, &t, sizeof tb);
-    memcpy(&us, &ps, sizeof us);
-    memcpy(&uc, &pc, sizeof uc);
-    const uint64_t swap = (uint64_t)0 - (tb & 1u);
-    ua = ((uc & swap) | (us & ~swap)) ^ ((tb & 2u) << 62);
-    ub = ((us & swap) | (uc & ~swap)) ^ (((tb + 1u) & 2u) << 62);
+    const uint64_t odd = tb << 63;
+    const uint64_t sign_s = (tb << 62) & ((uint64_t)1 << 63);
+    const int swap = (int64_t)odd < 0;
+    const double a = dq_sel(swap, pc, ps), b = dq_sel(swap, ps, pc);
+    memcpy(&ua, &a, sizeof ua);
+    memcpy(&ub, &b, sizeof ub);
+    ua ^= sign_s;
+    ub ^= sign_s ^ odd;
     memcpy(s, &ua, sizeof ua);
     memcpy(c, &ub, sizeof ub);
 }
@@ -280,16 +285,16 @@ void irb120_fk_batch(size_t n, const double *restrict q, double *restrict out)
  * reduced to |u| <= tan(pi/12) by atan t = pi/6 + atan((sqrt(3) t - 1)/(t + sqrt(3))) (the
  * quotient formed from |x|, |y| directly), the Taylor series of atan u to degree 29 (truncation
  * below 1e-17 there) evaluated by Estrin's scheme, then the octant. Max error 4.4e-16 against the
- * C library over 10^7 random arguments (tests/test_kernels.py checks it through the IK). */
+ * C library over 10^7 random arguments (tests/test_kernels.py checks it, directly and through
+ * the IK). Domain: |x|, |y| <= 1e307 (above, sqrt(3) max(|x|, |y|) may overflow) and, unless the
+ * larger of them is 0, max(|x|, |y|) >= 1e-300 (below, the products lose bits in the subnormal
+ * range). The IK programs' arguments, sums of products of a unit pose's components and link
+ * lengths, lie far inside it; no scaling is spent on the rest. */
 DQ_INLINE double dq_atan2(double y, double x)
 {
     const double ax = fabs(x), ay = fabs(y);
     const int swap = ay > ax;
-    const double hi0 = dq_sel(swap, ay, ax);
-    /* both scaled by a power of two (exact) so that hi * sqrt(3) neither overflows nor loses
-       bits in the subnormal range */
-    const double sc = dq_sel(hi0 > 0x1p1000, 0x1p-600, dq_sel(hi0 < 0x1p-900, 0x1p600, 1.0));
-    const double hi = hi0 * sc, lo = dq_sel(swap, ax, ay) * sc;
+    const double hi = dq_sel(swap, ay, ax), lo = dq_sel(swap, ax, ay);
     const int red = lo > 0.26794919243112270 * hi;
     const double num = dq_sel(red, lo * 1.7320508075688772 - hi, lo);
     const double den = dq_sel(red, lo + hi * 1.7320508075688772, hi);
@@ -1190,23 +1195,11 @@ void irb120_ik_batch_ex(size_t n, const double *restrict poses, double *restrict
     }
 }
 
-/* rint, floor and ceil of x (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick and a select, which
- * vectorise without SSE4.1's round instruction. */
+/* rint(x) (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick, which vectorises without SSE4.1's
+ * round instruction. */
 DQ_INLINE double dq_rint(double x)
 {
     return (x + 6755399441055744.0) - 6755399441055744.0;
-}
-
-DQ_INLINE double dq_floor(double x)
-{
-    const double r = dq_rint(x);
-    return r - dq_sel(r > x, 1.0, 0.0);
-}
-
-DQ_INLINE double dq_ceil(double x)
-{
-    const double r = dq_rint(x);
-    return r + dq_sel(r < x, 1.0, 0.0);
 }
 
 /* The joint limits of the robot description (lower, upper; rad or m), with the slack of
@@ -1217,9 +1210,11 @@ static const double dq_lim_hi[6] = {2.8797932657916436, 1.9198621771947626, 1.22
 /* n poses and n seed configurations: per pose the solution inside the joint limits, each
  * revolute joint at its 2 pi winding nearest to the seed, with the smallest largest single-joint
  * move from the seed, then the smallest summed move (the first in branch order on a tie). The
- * winding of joint k is m = rint((s - q) / 2 pi) clamped to the windings inside the limits,
- * ceil((lo - q) / 2 pi) .. floor((hi - q) / 2 pi) (the distance is convex in m); a prismatic
- * joint must lie inside its limits. Written per pose: q (n x DOF; NaN where none),
+ * winding of joint k: w = q + 2 pi rint((c - q) / 2 pi) with c the seed clamped to the limits,
+ * which lies within pi of c; w - 2 pi where w > hi, then w + 2 pi where that is < lo, and none
+ * where the result is outside the limits (the distance to the seed is convex in the winding, so
+ * the winding inside the limits nearest to c is the one nearest to the seed; a joint whose range
+ * spans a full turn always has one). A prismatic joint must lie inside its limits. Written per pose: q (n x DOF; NaN where none),
  * max_move and total_move (n; NaN where none), branch (n; -1 where none) and singular (n). */
 void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
                                double *restrict q, double *restrict max_move, double *restrict total_move,
@@ -1228,7 +1223,7 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
     double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
     int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
-    double oq[6][DQ_BLOCK], omx[DQ_BLOCK], ott[DQ_BLOCK], obr[DQ_BLOCK], osg[DQ_BLOCK];
+    double oq[6][DQ_BLOCK], omx[DQ_BLOCK], ott[DQ_BLOCK], obr[DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -1241,43 +1236,49 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
         }
         dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
         for (size_t j = 0; j < m; ++j) {   /* vectorised: ik nearest */
-            double bm = INFINITY, bt = INFINITY, mv = NAN, tv = NAN, bb = -1.0, bs = 0.0;
+            double bm = INFINITY, bt = INFINITY, mv = NAN, tv = NAN, bb = -1.0;
             double bq0 = NAN;
             double bq1 = NAN;
             double bq2 = NAN;
             double bq3 = NAN;
             double bq4 = NAN;
             double bq5 = NAN;
-            const double m0_0 = dq_rint((zb[0][j] - cb[0][0][j]) * 0.15915494309189533577);
-            const double l0_0 = dq_ceil((dq_lim_lo[0] - cb[0][0][j]) * 0.15915494309189533577);
-            const double h0_0 = dq_floor((dq_lim_hi[0] - cb[0][0][j]) * 0.15915494309189533577);
-            const double v0_0 = cb[0][0][j] + 6.28318530717958647693 * dq_sel(m0_0 < l0_0, l0_0, dq_sel(m0_0 > h0_0, h0_0, m0_0));
-            const double d0_0 = dq_sel(l0_0 <= h0_0, fabs(v0_0 - zb[0][j]), INFINITY);
-            const double m0_1 = dq_rint((zb[1][j] - cb[0][1][j]) * 0.15915494309189533577);
-            const double l0_1 = dq_ceil((dq_lim_lo[1] - cb[0][1][j]) * 0.15915494309189533577);
-            const double h0_1 = dq_floor((dq_lim_hi[1] - cb[0][1][j]) * 0.15915494309189533577);
-            const double v0_1 = cb[0][1][j] + 6.28318530717958647693 * dq_sel(m0_1 < l0_1, l0_1, dq_sel(m0_1 > h0_1, h0_1, m0_1));
-            const double d0_1 = dq_sel(l0_1 <= h0_1, fabs(v0_1 - zb[1][j]), INFINITY);
-            const double m0_2 = dq_rint((zb[2][j] - cb[0][2][j]) * 0.15915494309189533577);
-            const double l0_2 = dq_ceil((dq_lim_lo[2] - cb[0][2][j]) * 0.15915494309189533577);
-            const double h0_2 = dq_floor((dq_lim_hi[2] - cb[0][2][j]) * 0.15915494309189533577);
-            const double v0_2 = cb[0][2][j] + 6.28318530717958647693 * dq_sel(m0_2 < l0_2, l0_2, dq_sel(m0_2 > h0_2, h0_2, m0_2));
-            const double d0_2 = dq_sel(l0_2 <= h0_2, fabs(v0_2 - zb[2][j]), INFINITY);
-            const double m0_3 = dq_rint((zb[3][j] - cb[0][3][j]) * 0.15915494309189533577);
-            const double l0_3 = dq_ceil((dq_lim_lo[3] - cb[0][3][j]) * 0.15915494309189533577);
-            const double h0_3 = dq_floor((dq_lim_hi[3] - cb[0][3][j]) * 0.15915494309189533577);
-            const double v0_3 = cb[0][3][j] + 6.28318530717958647693 * dq_sel(m0_3 < l0_3, l0_3, dq_sel(m0_3 > h0_3, h0_3, m0_3));
-            const double d0_3 = dq_sel(l0_3 <= h0_3, fabs(v0_3 - zb[3][j]), INFINITY);
-            const double m0_4 = dq_rint((zb[4][j] - cb[0][4][j]) * 0.15915494309189533577);
-            const double l0_4 = dq_ceil((dq_lim_lo[4] - cb[0][4][j]) * 0.15915494309189533577);
-            const double h0_4 = dq_floor((dq_lim_hi[4] - cb[0][4][j]) * 0.15915494309189533577);
-            const double v0_4 = cb[0][4][j] + 6.28318530717958647693 * dq_sel(m0_4 < l0_4, l0_4, dq_sel(m0_4 > h0_4, h0_4, m0_4));
-            const double d0_4 = dq_sel(l0_4 <= h0_4, fabs(v0_4 - zb[4][j]), INFINITY);
-            const double m0_5 = dq_rint((zb[5][j] - cb[0][5][j]) * 0.15915494309189533577);
-            const double l0_5 = dq_ceil((dq_lim_lo[5] - cb[0][5][j]) * 0.15915494309189533577);
-            const double h0_5 = dq_floor((dq_lim_hi[5] - cb[0][5][j]) * 0.15915494309189533577);
-            const double v0_5 = cb[0][5][j] + 6.28318530717958647693 * dq_sel(m0_5 < l0_5, l0_5, dq_sel(m0_5 > h0_5, h0_5, m0_5));
-            const double d0_5 = dq_sel(l0_5 <= h0_5, fabs(v0_5 - zb[5][j]), INFINITY);
+            const double z0 = zb[0][j];
+            const double zc0 = dq_sel(z0 < dq_lim_lo[0], dq_lim_lo[0], dq_sel(z0 > dq_lim_hi[0], dq_lim_hi[0], z0));
+            const double z1 = zb[1][j];
+            const double zc1 = dq_sel(z1 < dq_lim_lo[1], dq_lim_lo[1], dq_sel(z1 > dq_lim_hi[1], dq_lim_hi[1], z1));
+            const double z2 = zb[2][j];
+            const double zc2 = dq_sel(z2 < dq_lim_lo[2], dq_lim_lo[2], dq_sel(z2 > dq_lim_hi[2], dq_lim_hi[2], z2));
+            const double z3 = zb[3][j];
+            const double zc3 = dq_sel(z3 < dq_lim_lo[3], dq_lim_lo[3], dq_sel(z3 > dq_lim_hi[3], dq_lim_hi[3], z3));
+            const double z4 = zb[4][j];
+            const double zc4 = dq_sel(z4 < dq_lim_lo[4], dq_lim_lo[4], dq_sel(z4 > dq_lim_hi[4], dq_lim_hi[4], z4));
+            const double z5 = zb[5][j];
+            const double zc5 = dq_sel(z5 < dq_lim_lo[5], dq_lim_lo[5], dq_sel(z5 > dq_lim_hi[5], dq_lim_hi[5], z5));
+            const double w0_0 = cb[0][0][j] + 6.28318530717958647693 * dq_rint((zc0 - cb[0][0][j]) * 0.15915494309189533577);
+            const double u0_0 = dq_sel(w0_0 > dq_lim_hi[0], w0_0 - 6.28318530717958647693, w0_0);
+            const double v0_0 = dq_sel(u0_0 < dq_lim_lo[0], u0_0 + 6.28318530717958647693, u0_0);
+            const double d0_0 = dq_sel((v0_0 >= dq_lim_lo[0]) & (v0_0 <= dq_lim_hi[0]), fabs(v0_0 - z0), INFINITY);
+            const double w0_1 = cb[0][1][j] + 6.28318530717958647693 * dq_rint((zc1 - cb[0][1][j]) * 0.15915494309189533577);
+            const double u0_1 = dq_sel(w0_1 > dq_lim_hi[1], w0_1 - 6.28318530717958647693, w0_1);
+            const double v0_1 = dq_sel(u0_1 < dq_lim_lo[1], u0_1 + 6.28318530717958647693, u0_1);
+            const double d0_1 = dq_sel((v0_1 >= dq_lim_lo[1]) & (v0_1 <= dq_lim_hi[1]), fabs(v0_1 - z1), INFINITY);
+            const double w0_2 = cb[0][2][j] + 6.28318530717958647693 * dq_rint((zc2 - cb[0][2][j]) * 0.15915494309189533577);
+            const double u0_2 = dq_sel(w0_2 > dq_lim_hi[2], w0_2 - 6.28318530717958647693, w0_2);
+            const double v0_2 = dq_sel(u0_2 < dq_lim_lo[2], u0_2 + 6.28318530717958647693, u0_2);
+            const double d0_2 = dq_sel((v0_2 >= dq_lim_lo[2]) & (v0_2 <= dq_lim_hi[2]), fabs(v0_2 - z2), INFINITY);
+            const double w0_3 = cb[0][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[0][3][j]) * 0.15915494309189533577);
+            const double u0_3 = dq_sel(w0_3 > dq_lim_hi[3], w0_3 - 6.28318530717958647693, w0_3);
+            const double v0_3 = dq_sel(u0_3 < dq_lim_lo[3], u0_3 + 6.28318530717958647693, u0_3);
+            const double d0_3 = dq_sel((v0_3 >= dq_lim_lo[3]) & (v0_3 <= dq_lim_hi[3]), fabs(v0_3 - z3), INFINITY);
+            const double w0_4 = cb[0][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[0][4][j]) * 0.15915494309189533577);
+            const double u0_4 = dq_sel(w0_4 > dq_lim_hi[4], w0_4 - 6.28318530717958647693, w0_4);
+            const double v0_4 = dq_sel(u0_4 < dq_lim_lo[4], u0_4 + 6.28318530717958647693, u0_4);
+            const double d0_4 = dq_sel((v0_4 >= dq_lim_lo[4]) & (v0_4 <= dq_lim_hi[4]), fabs(v0_4 - z4), INFINITY);
+            const double w0_5 = cb[0][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[0][5][j]) * 0.15915494309189533577);
+            const double u0_5 = dq_sel(w0_5 > dq_lim_hi[5], w0_5 - 6.28318530717958647693, w0_5);
+            const double v0_5 = dq_sel(u0_5 < dq_lim_lo[5], u0_5 + 6.28318530717958647693, u0_5);
+            const double d0_5 = fabs(v0_5 - z5);
             {
                 const double v0 = v0_0, d0 = d0_0;
                 const double v1 = v0_1, d1 = d0_1;
@@ -1294,7 +1295,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 0.0, bb);
-                bs = dq_sel(better, (double)sb[0][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1302,21 +1302,18 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m1_3 = dq_rint((zb[3][j] - cb[1][3][j]) * 0.15915494309189533577);
-            const double l1_3 = dq_ceil((dq_lim_lo[3] - cb[1][3][j]) * 0.15915494309189533577);
-            const double h1_3 = dq_floor((dq_lim_hi[3] - cb[1][3][j]) * 0.15915494309189533577);
-            const double v1_3 = cb[1][3][j] + 6.28318530717958647693 * dq_sel(m1_3 < l1_3, l1_3, dq_sel(m1_3 > h1_3, h1_3, m1_3));
-            const double d1_3 = dq_sel(l1_3 <= h1_3, fabs(v1_3 - zb[3][j]), INFINITY);
-            const double m1_4 = dq_rint((zb[4][j] - cb[1][4][j]) * 0.15915494309189533577);
-            const double l1_4 = dq_ceil((dq_lim_lo[4] - cb[1][4][j]) * 0.15915494309189533577);
-            const double h1_4 = dq_floor((dq_lim_hi[4] - cb[1][4][j]) * 0.15915494309189533577);
-            const double v1_4 = cb[1][4][j] + 6.28318530717958647693 * dq_sel(m1_4 < l1_4, l1_4, dq_sel(m1_4 > h1_4, h1_4, m1_4));
-            const double d1_4 = dq_sel(l1_4 <= h1_4, fabs(v1_4 - zb[4][j]), INFINITY);
-            const double m1_5 = dq_rint((zb[5][j] - cb[1][5][j]) * 0.15915494309189533577);
-            const double l1_5 = dq_ceil((dq_lim_lo[5] - cb[1][5][j]) * 0.15915494309189533577);
-            const double h1_5 = dq_floor((dq_lim_hi[5] - cb[1][5][j]) * 0.15915494309189533577);
-            const double v1_5 = cb[1][5][j] + 6.28318530717958647693 * dq_sel(m1_5 < l1_5, l1_5, dq_sel(m1_5 > h1_5, h1_5, m1_5));
-            const double d1_5 = dq_sel(l1_5 <= h1_5, fabs(v1_5 - zb[5][j]), INFINITY);
+            const double w1_3 = cb[1][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[1][3][j]) * 0.15915494309189533577);
+            const double u1_3 = dq_sel(w1_3 > dq_lim_hi[3], w1_3 - 6.28318530717958647693, w1_3);
+            const double v1_3 = dq_sel(u1_3 < dq_lim_lo[3], u1_3 + 6.28318530717958647693, u1_3);
+            const double d1_3 = dq_sel((v1_3 >= dq_lim_lo[3]) & (v1_3 <= dq_lim_hi[3]), fabs(v1_3 - z3), INFINITY);
+            const double w1_4 = cb[1][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[1][4][j]) * 0.15915494309189533577);
+            const double u1_4 = dq_sel(w1_4 > dq_lim_hi[4], w1_4 - 6.28318530717958647693, w1_4);
+            const double v1_4 = dq_sel(u1_4 < dq_lim_lo[4], u1_4 + 6.28318530717958647693, u1_4);
+            const double d1_4 = dq_sel((v1_4 >= dq_lim_lo[4]) & (v1_4 <= dq_lim_hi[4]), fabs(v1_4 - z4), INFINITY);
+            const double w1_5 = cb[1][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[1][5][j]) * 0.15915494309189533577);
+            const double u1_5 = dq_sel(w1_5 > dq_lim_hi[5], w1_5 - 6.28318530717958647693, w1_5);
+            const double v1_5 = dq_sel(u1_5 < dq_lim_lo[5], u1_5 + 6.28318530717958647693, u1_5);
+            const double d1_5 = fabs(v1_5 - z5);
             {
                 const double v0 = v0_0, d0 = d0_0;
                 const double v1 = v0_1, d1 = d0_1;
@@ -1333,7 +1330,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 1.0, bb);
-                bs = dq_sel(better, (double)sb[1][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1341,31 +1337,26 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m2_1 = dq_rint((zb[1][j] - cb[2][1][j]) * 0.15915494309189533577);
-            const double l2_1 = dq_ceil((dq_lim_lo[1] - cb[2][1][j]) * 0.15915494309189533577);
-            const double h2_1 = dq_floor((dq_lim_hi[1] - cb[2][1][j]) * 0.15915494309189533577);
-            const double v2_1 = cb[2][1][j] + 6.28318530717958647693 * dq_sel(m2_1 < l2_1, l2_1, dq_sel(m2_1 > h2_1, h2_1, m2_1));
-            const double d2_1 = dq_sel(l2_1 <= h2_1, fabs(v2_1 - zb[1][j]), INFINITY);
-            const double m2_2 = dq_rint((zb[2][j] - cb[2][2][j]) * 0.15915494309189533577);
-            const double l2_2 = dq_ceil((dq_lim_lo[2] - cb[2][2][j]) * 0.15915494309189533577);
-            const double h2_2 = dq_floor((dq_lim_hi[2] - cb[2][2][j]) * 0.15915494309189533577);
-            const double v2_2 = cb[2][2][j] + 6.28318530717958647693 * dq_sel(m2_2 < l2_2, l2_2, dq_sel(m2_2 > h2_2, h2_2, m2_2));
-            const double d2_2 = dq_sel(l2_2 <= h2_2, fabs(v2_2 - zb[2][j]), INFINITY);
-            const double m2_3 = dq_rint((zb[3][j] - cb[2][3][j]) * 0.15915494309189533577);
-            const double l2_3 = dq_ceil((dq_lim_lo[3] - cb[2][3][j]) * 0.15915494309189533577);
-            const double h2_3 = dq_floor((dq_lim_hi[3] - cb[2][3][j]) * 0.15915494309189533577);
-            const double v2_3 = cb[2][3][j] + 6.28318530717958647693 * dq_sel(m2_3 < l2_3, l2_3, dq_sel(m2_3 > h2_3, h2_3, m2_3));
-            const double d2_3 = dq_sel(l2_3 <= h2_3, fabs(v2_3 - zb[3][j]), INFINITY);
-            const double m2_4 = dq_rint((zb[4][j] - cb[2][4][j]) * 0.15915494309189533577);
-            const double l2_4 = dq_ceil((dq_lim_lo[4] - cb[2][4][j]) * 0.15915494309189533577);
-            const double h2_4 = dq_floor((dq_lim_hi[4] - cb[2][4][j]) * 0.15915494309189533577);
-            const double v2_4 = cb[2][4][j] + 6.28318530717958647693 * dq_sel(m2_4 < l2_4, l2_4, dq_sel(m2_4 > h2_4, h2_4, m2_4));
-            const double d2_4 = dq_sel(l2_4 <= h2_4, fabs(v2_4 - zb[4][j]), INFINITY);
-            const double m2_5 = dq_rint((zb[5][j] - cb[2][5][j]) * 0.15915494309189533577);
-            const double l2_5 = dq_ceil((dq_lim_lo[5] - cb[2][5][j]) * 0.15915494309189533577);
-            const double h2_5 = dq_floor((dq_lim_hi[5] - cb[2][5][j]) * 0.15915494309189533577);
-            const double v2_5 = cb[2][5][j] + 6.28318530717958647693 * dq_sel(m2_5 < l2_5, l2_5, dq_sel(m2_5 > h2_5, h2_5, m2_5));
-            const double d2_5 = dq_sel(l2_5 <= h2_5, fabs(v2_5 - zb[5][j]), INFINITY);
+            const double w2_1 = cb[2][1][j] + 6.28318530717958647693 * dq_rint((zc1 - cb[2][1][j]) * 0.15915494309189533577);
+            const double u2_1 = dq_sel(w2_1 > dq_lim_hi[1], w2_1 - 6.28318530717958647693, w2_1);
+            const double v2_1 = dq_sel(u2_1 < dq_lim_lo[1], u2_1 + 6.28318530717958647693, u2_1);
+            const double d2_1 = dq_sel((v2_1 >= dq_lim_lo[1]) & (v2_1 <= dq_lim_hi[1]), fabs(v2_1 - z1), INFINITY);
+            const double w2_2 = cb[2][2][j] + 6.28318530717958647693 * dq_rint((zc2 - cb[2][2][j]) * 0.15915494309189533577);
+            const double u2_2 = dq_sel(w2_2 > dq_lim_hi[2], w2_2 - 6.28318530717958647693, w2_2);
+            const double v2_2 = dq_sel(u2_2 < dq_lim_lo[2], u2_2 + 6.28318530717958647693, u2_2);
+            const double d2_2 = dq_sel((v2_2 >= dq_lim_lo[2]) & (v2_2 <= dq_lim_hi[2]), fabs(v2_2 - z2), INFINITY);
+            const double w2_3 = cb[2][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[2][3][j]) * 0.15915494309189533577);
+            const double u2_3 = dq_sel(w2_3 > dq_lim_hi[3], w2_3 - 6.28318530717958647693, w2_3);
+            const double v2_3 = dq_sel(u2_3 < dq_lim_lo[3], u2_3 + 6.28318530717958647693, u2_3);
+            const double d2_3 = dq_sel((v2_3 >= dq_lim_lo[3]) & (v2_3 <= dq_lim_hi[3]), fabs(v2_3 - z3), INFINITY);
+            const double w2_4 = cb[2][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[2][4][j]) * 0.15915494309189533577);
+            const double u2_4 = dq_sel(w2_4 > dq_lim_hi[4], w2_4 - 6.28318530717958647693, w2_4);
+            const double v2_4 = dq_sel(u2_4 < dq_lim_lo[4], u2_4 + 6.28318530717958647693, u2_4);
+            const double d2_4 = dq_sel((v2_4 >= dq_lim_lo[4]) & (v2_4 <= dq_lim_hi[4]), fabs(v2_4 - z4), INFINITY);
+            const double w2_5 = cb[2][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[2][5][j]) * 0.15915494309189533577);
+            const double u2_5 = dq_sel(w2_5 > dq_lim_hi[5], w2_5 - 6.28318530717958647693, w2_5);
+            const double v2_5 = dq_sel(u2_5 < dq_lim_lo[5], u2_5 + 6.28318530717958647693, u2_5);
+            const double d2_5 = fabs(v2_5 - z5);
             {
                 const double v0 = v0_0, d0 = d0_0;
                 const double v1 = v2_1, d1 = d2_1;
@@ -1382,7 +1373,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 2.0, bb);
-                bs = dq_sel(better, (double)sb[2][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1390,21 +1380,18 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m3_3 = dq_rint((zb[3][j] - cb[3][3][j]) * 0.15915494309189533577);
-            const double l3_3 = dq_ceil((dq_lim_lo[3] - cb[3][3][j]) * 0.15915494309189533577);
-            const double h3_3 = dq_floor((dq_lim_hi[3] - cb[3][3][j]) * 0.15915494309189533577);
-            const double v3_3 = cb[3][3][j] + 6.28318530717958647693 * dq_sel(m3_3 < l3_3, l3_3, dq_sel(m3_3 > h3_3, h3_3, m3_3));
-            const double d3_3 = dq_sel(l3_3 <= h3_3, fabs(v3_3 - zb[3][j]), INFINITY);
-            const double m3_4 = dq_rint((zb[4][j] - cb[3][4][j]) * 0.15915494309189533577);
-            const double l3_4 = dq_ceil((dq_lim_lo[4] - cb[3][4][j]) * 0.15915494309189533577);
-            const double h3_4 = dq_floor((dq_lim_hi[4] - cb[3][4][j]) * 0.15915494309189533577);
-            const double v3_4 = cb[3][4][j] + 6.28318530717958647693 * dq_sel(m3_4 < l3_4, l3_4, dq_sel(m3_4 > h3_4, h3_4, m3_4));
-            const double d3_4 = dq_sel(l3_4 <= h3_4, fabs(v3_4 - zb[4][j]), INFINITY);
-            const double m3_5 = dq_rint((zb[5][j] - cb[3][5][j]) * 0.15915494309189533577);
-            const double l3_5 = dq_ceil((dq_lim_lo[5] - cb[3][5][j]) * 0.15915494309189533577);
-            const double h3_5 = dq_floor((dq_lim_hi[5] - cb[3][5][j]) * 0.15915494309189533577);
-            const double v3_5 = cb[3][5][j] + 6.28318530717958647693 * dq_sel(m3_5 < l3_5, l3_5, dq_sel(m3_5 > h3_5, h3_5, m3_5));
-            const double d3_5 = dq_sel(l3_5 <= h3_5, fabs(v3_5 - zb[5][j]), INFINITY);
+            const double w3_3 = cb[3][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[3][3][j]) * 0.15915494309189533577);
+            const double u3_3 = dq_sel(w3_3 > dq_lim_hi[3], w3_3 - 6.28318530717958647693, w3_3);
+            const double v3_3 = dq_sel(u3_3 < dq_lim_lo[3], u3_3 + 6.28318530717958647693, u3_3);
+            const double d3_3 = dq_sel((v3_3 >= dq_lim_lo[3]) & (v3_3 <= dq_lim_hi[3]), fabs(v3_3 - z3), INFINITY);
+            const double w3_4 = cb[3][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[3][4][j]) * 0.15915494309189533577);
+            const double u3_4 = dq_sel(w3_4 > dq_lim_hi[4], w3_4 - 6.28318530717958647693, w3_4);
+            const double v3_4 = dq_sel(u3_4 < dq_lim_lo[4], u3_4 + 6.28318530717958647693, u3_4);
+            const double d3_4 = dq_sel((v3_4 >= dq_lim_lo[4]) & (v3_4 <= dq_lim_hi[4]), fabs(v3_4 - z4), INFINITY);
+            const double w3_5 = cb[3][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[3][5][j]) * 0.15915494309189533577);
+            const double u3_5 = dq_sel(w3_5 > dq_lim_hi[5], w3_5 - 6.28318530717958647693, w3_5);
+            const double v3_5 = dq_sel(u3_5 < dq_lim_lo[5], u3_5 + 6.28318530717958647693, u3_5);
+            const double d3_5 = fabs(v3_5 - z5);
             {
                 const double v0 = v0_0, d0 = d0_0;
                 const double v1 = v2_1, d1 = d2_1;
@@ -1421,7 +1408,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 3.0, bb);
-                bs = dq_sel(better, (double)sb[3][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1429,36 +1415,30 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m4_0 = dq_rint((zb[0][j] - cb[4][0][j]) * 0.15915494309189533577);
-            const double l4_0 = dq_ceil((dq_lim_lo[0] - cb[4][0][j]) * 0.15915494309189533577);
-            const double h4_0 = dq_floor((dq_lim_hi[0] - cb[4][0][j]) * 0.15915494309189533577);
-            const double v4_0 = cb[4][0][j] + 6.28318530717958647693 * dq_sel(m4_0 < l4_0, l4_0, dq_sel(m4_0 > h4_0, h4_0, m4_0));
-            const double d4_0 = dq_sel(l4_0 <= h4_0, fabs(v4_0 - zb[0][j]), INFINITY);
-            const double m4_1 = dq_rint((zb[1][j] - cb[4][1][j]) * 0.15915494309189533577);
-            const double l4_1 = dq_ceil((dq_lim_lo[1] - cb[4][1][j]) * 0.15915494309189533577);
-            const double h4_1 = dq_floor((dq_lim_hi[1] - cb[4][1][j]) * 0.15915494309189533577);
-            const double v4_1 = cb[4][1][j] + 6.28318530717958647693 * dq_sel(m4_1 < l4_1, l4_1, dq_sel(m4_1 > h4_1, h4_1, m4_1));
-            const double d4_1 = dq_sel(l4_1 <= h4_1, fabs(v4_1 - zb[1][j]), INFINITY);
-            const double m4_2 = dq_rint((zb[2][j] - cb[4][2][j]) * 0.15915494309189533577);
-            const double l4_2 = dq_ceil((dq_lim_lo[2] - cb[4][2][j]) * 0.15915494309189533577);
-            const double h4_2 = dq_floor((dq_lim_hi[2] - cb[4][2][j]) * 0.15915494309189533577);
-            const double v4_2 = cb[4][2][j] + 6.28318530717958647693 * dq_sel(m4_2 < l4_2, l4_2, dq_sel(m4_2 > h4_2, h4_2, m4_2));
-            const double d4_2 = dq_sel(l4_2 <= h4_2, fabs(v4_2 - zb[2][j]), INFINITY);
-            const double m4_3 = dq_rint((zb[3][j] - cb[4][3][j]) * 0.15915494309189533577);
-            const double l4_3 = dq_ceil((dq_lim_lo[3] - cb[4][3][j]) * 0.15915494309189533577);
-            const double h4_3 = dq_floor((dq_lim_hi[3] - cb[4][3][j]) * 0.15915494309189533577);
-            const double v4_3 = cb[4][3][j] + 6.28318530717958647693 * dq_sel(m4_3 < l4_3, l4_3, dq_sel(m4_3 > h4_3, h4_3, m4_3));
-            const double d4_3 = dq_sel(l4_3 <= h4_3, fabs(v4_3 - zb[3][j]), INFINITY);
-            const double m4_4 = dq_rint((zb[4][j] - cb[4][4][j]) * 0.15915494309189533577);
-            const double l4_4 = dq_ceil((dq_lim_lo[4] - cb[4][4][j]) * 0.15915494309189533577);
-            const double h4_4 = dq_floor((dq_lim_hi[4] - cb[4][4][j]) * 0.15915494309189533577);
-            const double v4_4 = cb[4][4][j] + 6.28318530717958647693 * dq_sel(m4_4 < l4_4, l4_4, dq_sel(m4_4 > h4_4, h4_4, m4_4));
-            const double d4_4 = dq_sel(l4_4 <= h4_4, fabs(v4_4 - zb[4][j]), INFINITY);
-            const double m4_5 = dq_rint((zb[5][j] - cb[4][5][j]) * 0.15915494309189533577);
-            const double l4_5 = dq_ceil((dq_lim_lo[5] - cb[4][5][j]) * 0.15915494309189533577);
-            const double h4_5 = dq_floor((dq_lim_hi[5] - cb[4][5][j]) * 0.15915494309189533577);
-            const double v4_5 = cb[4][5][j] + 6.28318530717958647693 * dq_sel(m4_5 < l4_5, l4_5, dq_sel(m4_5 > h4_5, h4_5, m4_5));
-            const double d4_5 = dq_sel(l4_5 <= h4_5, fabs(v4_5 - zb[5][j]), INFINITY);
+            const double w4_0 = cb[4][0][j] + 6.28318530717958647693 * dq_rint((zc0 - cb[4][0][j]) * 0.15915494309189533577);
+            const double u4_0 = dq_sel(w4_0 > dq_lim_hi[0], w4_0 - 6.28318530717958647693, w4_0);
+            const double v4_0 = dq_sel(u4_0 < dq_lim_lo[0], u4_0 + 6.28318530717958647693, u4_0);
+            const double d4_0 = dq_sel((v4_0 >= dq_lim_lo[0]) & (v4_0 <= dq_lim_hi[0]), fabs(v4_0 - z0), INFINITY);
+            const double w4_1 = cb[4][1][j] + 6.28318530717958647693 * dq_rint((zc1 - cb[4][1][j]) * 0.15915494309189533577);
+            const double u4_1 = dq_sel(w4_1 > dq_lim_hi[1], w4_1 - 6.28318530717958647693, w4_1);
+            const double v4_1 = dq_sel(u4_1 < dq_lim_lo[1], u4_1 + 6.28318530717958647693, u4_1);
+            const double d4_1 = dq_sel((v4_1 >= dq_lim_lo[1]) & (v4_1 <= dq_lim_hi[1]), fabs(v4_1 - z1), INFINITY);
+            const double w4_2 = cb[4][2][j] + 6.28318530717958647693 * dq_rint((zc2 - cb[4][2][j]) * 0.15915494309189533577);
+            const double u4_2 = dq_sel(w4_2 > dq_lim_hi[2], w4_2 - 6.28318530717958647693, w4_2);
+            const double v4_2 = dq_sel(u4_2 < dq_lim_lo[2], u4_2 + 6.28318530717958647693, u4_2);
+            const double d4_2 = dq_sel((v4_2 >= dq_lim_lo[2]) & (v4_2 <= dq_lim_hi[2]), fabs(v4_2 - z2), INFINITY);
+            const double w4_3 = cb[4][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[4][3][j]) * 0.15915494309189533577);
+            const double u4_3 = dq_sel(w4_3 > dq_lim_hi[3], w4_3 - 6.28318530717958647693, w4_3);
+            const double v4_3 = dq_sel(u4_3 < dq_lim_lo[3], u4_3 + 6.28318530717958647693, u4_3);
+            const double d4_3 = dq_sel((v4_3 >= dq_lim_lo[3]) & (v4_3 <= dq_lim_hi[3]), fabs(v4_3 - z3), INFINITY);
+            const double w4_4 = cb[4][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[4][4][j]) * 0.15915494309189533577);
+            const double u4_4 = dq_sel(w4_4 > dq_lim_hi[4], w4_4 - 6.28318530717958647693, w4_4);
+            const double v4_4 = dq_sel(u4_4 < dq_lim_lo[4], u4_4 + 6.28318530717958647693, u4_4);
+            const double d4_4 = dq_sel((v4_4 >= dq_lim_lo[4]) & (v4_4 <= dq_lim_hi[4]), fabs(v4_4 - z4), INFINITY);
+            const double w4_5 = cb[4][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[4][5][j]) * 0.15915494309189533577);
+            const double u4_5 = dq_sel(w4_5 > dq_lim_hi[5], w4_5 - 6.28318530717958647693, w4_5);
+            const double v4_5 = dq_sel(u4_5 < dq_lim_lo[5], u4_5 + 6.28318530717958647693, u4_5);
+            const double d4_5 = fabs(v4_5 - z5);
             {
                 const double v0 = v4_0, d0 = d4_0;
                 const double v1 = v4_1, d1 = d4_1;
@@ -1475,7 +1455,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 4.0, bb);
-                bs = dq_sel(better, (double)sb[4][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1483,21 +1462,18 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m5_3 = dq_rint((zb[3][j] - cb[5][3][j]) * 0.15915494309189533577);
-            const double l5_3 = dq_ceil((dq_lim_lo[3] - cb[5][3][j]) * 0.15915494309189533577);
-            const double h5_3 = dq_floor((dq_lim_hi[3] - cb[5][3][j]) * 0.15915494309189533577);
-            const double v5_3 = cb[5][3][j] + 6.28318530717958647693 * dq_sel(m5_3 < l5_3, l5_3, dq_sel(m5_3 > h5_3, h5_3, m5_3));
-            const double d5_3 = dq_sel(l5_3 <= h5_3, fabs(v5_3 - zb[3][j]), INFINITY);
-            const double m5_4 = dq_rint((zb[4][j] - cb[5][4][j]) * 0.15915494309189533577);
-            const double l5_4 = dq_ceil((dq_lim_lo[4] - cb[5][4][j]) * 0.15915494309189533577);
-            const double h5_4 = dq_floor((dq_lim_hi[4] - cb[5][4][j]) * 0.15915494309189533577);
-            const double v5_4 = cb[5][4][j] + 6.28318530717958647693 * dq_sel(m5_4 < l5_4, l5_4, dq_sel(m5_4 > h5_4, h5_4, m5_4));
-            const double d5_4 = dq_sel(l5_4 <= h5_4, fabs(v5_4 - zb[4][j]), INFINITY);
-            const double m5_5 = dq_rint((zb[5][j] - cb[5][5][j]) * 0.15915494309189533577);
-            const double l5_5 = dq_ceil((dq_lim_lo[5] - cb[5][5][j]) * 0.15915494309189533577);
-            const double h5_5 = dq_floor((dq_lim_hi[5] - cb[5][5][j]) * 0.15915494309189533577);
-            const double v5_5 = cb[5][5][j] + 6.28318530717958647693 * dq_sel(m5_5 < l5_5, l5_5, dq_sel(m5_5 > h5_5, h5_5, m5_5));
-            const double d5_5 = dq_sel(l5_5 <= h5_5, fabs(v5_5 - zb[5][j]), INFINITY);
+            const double w5_3 = cb[5][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[5][3][j]) * 0.15915494309189533577);
+            const double u5_3 = dq_sel(w5_3 > dq_lim_hi[3], w5_3 - 6.28318530717958647693, w5_3);
+            const double v5_3 = dq_sel(u5_3 < dq_lim_lo[3], u5_3 + 6.28318530717958647693, u5_3);
+            const double d5_3 = dq_sel((v5_3 >= dq_lim_lo[3]) & (v5_3 <= dq_lim_hi[3]), fabs(v5_3 - z3), INFINITY);
+            const double w5_4 = cb[5][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[5][4][j]) * 0.15915494309189533577);
+            const double u5_4 = dq_sel(w5_4 > dq_lim_hi[4], w5_4 - 6.28318530717958647693, w5_4);
+            const double v5_4 = dq_sel(u5_4 < dq_lim_lo[4], u5_4 + 6.28318530717958647693, u5_4);
+            const double d5_4 = dq_sel((v5_4 >= dq_lim_lo[4]) & (v5_4 <= dq_lim_hi[4]), fabs(v5_4 - z4), INFINITY);
+            const double w5_5 = cb[5][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[5][5][j]) * 0.15915494309189533577);
+            const double u5_5 = dq_sel(w5_5 > dq_lim_hi[5], w5_5 - 6.28318530717958647693, w5_5);
+            const double v5_5 = dq_sel(u5_5 < dq_lim_lo[5], u5_5 + 6.28318530717958647693, u5_5);
+            const double d5_5 = fabs(v5_5 - z5);
             {
                 const double v0 = v4_0, d0 = d4_0;
                 const double v1 = v4_1, d1 = d4_1;
@@ -1514,7 +1490,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 5.0, bb);
-                bs = dq_sel(better, (double)sb[5][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1522,31 +1497,26 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m6_1 = dq_rint((zb[1][j] - cb[6][1][j]) * 0.15915494309189533577);
-            const double l6_1 = dq_ceil((dq_lim_lo[1] - cb[6][1][j]) * 0.15915494309189533577);
-            const double h6_1 = dq_floor((dq_lim_hi[1] - cb[6][1][j]) * 0.15915494309189533577);
-            const double v6_1 = cb[6][1][j] + 6.28318530717958647693 * dq_sel(m6_1 < l6_1, l6_1, dq_sel(m6_1 > h6_1, h6_1, m6_1));
-            const double d6_1 = dq_sel(l6_1 <= h6_1, fabs(v6_1 - zb[1][j]), INFINITY);
-            const double m6_2 = dq_rint((zb[2][j] - cb[6][2][j]) * 0.15915494309189533577);
-            const double l6_2 = dq_ceil((dq_lim_lo[2] - cb[6][2][j]) * 0.15915494309189533577);
-            const double h6_2 = dq_floor((dq_lim_hi[2] - cb[6][2][j]) * 0.15915494309189533577);
-            const double v6_2 = cb[6][2][j] + 6.28318530717958647693 * dq_sel(m6_2 < l6_2, l6_2, dq_sel(m6_2 > h6_2, h6_2, m6_2));
-            const double d6_2 = dq_sel(l6_2 <= h6_2, fabs(v6_2 - zb[2][j]), INFINITY);
-            const double m6_3 = dq_rint((zb[3][j] - cb[6][3][j]) * 0.15915494309189533577);
-            const double l6_3 = dq_ceil((dq_lim_lo[3] - cb[6][3][j]) * 0.15915494309189533577);
-            const double h6_3 = dq_floor((dq_lim_hi[3] - cb[6][3][j]) * 0.15915494309189533577);
-            const double v6_3 = cb[6][3][j] + 6.28318530717958647693 * dq_sel(m6_3 < l6_3, l6_3, dq_sel(m6_3 > h6_3, h6_3, m6_3));
-            const double d6_3 = dq_sel(l6_3 <= h6_3, fabs(v6_3 - zb[3][j]), INFINITY);
-            const double m6_4 = dq_rint((zb[4][j] - cb[6][4][j]) * 0.15915494309189533577);
-            const double l6_4 = dq_ceil((dq_lim_lo[4] - cb[6][4][j]) * 0.15915494309189533577);
-            const double h6_4 = dq_floor((dq_lim_hi[4] - cb[6][4][j]) * 0.15915494309189533577);
-            const double v6_4 = cb[6][4][j] + 6.28318530717958647693 * dq_sel(m6_4 < l6_4, l6_4, dq_sel(m6_4 > h6_4, h6_4, m6_4));
-            const double d6_4 = dq_sel(l6_4 <= h6_4, fabs(v6_4 - zb[4][j]), INFINITY);
-            const double m6_5 = dq_rint((zb[5][j] - cb[6][5][j]) * 0.15915494309189533577);
-            const double l6_5 = dq_ceil((dq_lim_lo[5] - cb[6][5][j]) * 0.15915494309189533577);
-            const double h6_5 = dq_floor((dq_lim_hi[5] - cb[6][5][j]) * 0.15915494309189533577);
-            const double v6_5 = cb[6][5][j] + 6.28318530717958647693 * dq_sel(m6_5 < l6_5, l6_5, dq_sel(m6_5 > h6_5, h6_5, m6_5));
-            const double d6_5 = dq_sel(l6_5 <= h6_5, fabs(v6_5 - zb[5][j]), INFINITY);
+            const double w6_1 = cb[6][1][j] + 6.28318530717958647693 * dq_rint((zc1 - cb[6][1][j]) * 0.15915494309189533577);
+            const double u6_1 = dq_sel(w6_1 > dq_lim_hi[1], w6_1 - 6.28318530717958647693, w6_1);
+            const double v6_1 = dq_sel(u6_1 < dq_lim_lo[1], u6_1 + 6.28318530717958647693, u6_1);
+            const double d6_1 = dq_sel((v6_1 >= dq_lim_lo[1]) & (v6_1 <= dq_lim_hi[1]), fabs(v6_1 - z1), INFINITY);
+            const double w6_2 = cb[6][2][j] + 6.28318530717958647693 * dq_rint((zc2 - cb[6][2][j]) * 0.15915494309189533577);
+            const double u6_2 = dq_sel(w6_2 > dq_lim_hi[2], w6_2 - 6.28318530717958647693, w6_2);
+            const double v6_2 = dq_sel(u6_2 < dq_lim_lo[2], u6_2 + 6.28318530717958647693, u6_2);
+            const double d6_2 = dq_sel((v6_2 >= dq_lim_lo[2]) & (v6_2 <= dq_lim_hi[2]), fabs(v6_2 - z2), INFINITY);
+            const double w6_3 = cb[6][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[6][3][j]) * 0.15915494309189533577);
+            const double u6_3 = dq_sel(w6_3 > dq_lim_hi[3], w6_3 - 6.28318530717958647693, w6_3);
+            const double v6_3 = dq_sel(u6_3 < dq_lim_lo[3], u6_3 + 6.28318530717958647693, u6_3);
+            const double d6_3 = dq_sel((v6_3 >= dq_lim_lo[3]) & (v6_3 <= dq_lim_hi[3]), fabs(v6_3 - z3), INFINITY);
+            const double w6_4 = cb[6][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[6][4][j]) * 0.15915494309189533577);
+            const double u6_4 = dq_sel(w6_4 > dq_lim_hi[4], w6_4 - 6.28318530717958647693, w6_4);
+            const double v6_4 = dq_sel(u6_4 < dq_lim_lo[4], u6_4 + 6.28318530717958647693, u6_4);
+            const double d6_4 = dq_sel((v6_4 >= dq_lim_lo[4]) & (v6_4 <= dq_lim_hi[4]), fabs(v6_4 - z4), INFINITY);
+            const double w6_5 = cb[6][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[6][5][j]) * 0.15915494309189533577);
+            const double u6_5 = dq_sel(w6_5 > dq_lim_hi[5], w6_5 - 6.28318530717958647693, w6_5);
+            const double v6_5 = dq_sel(u6_5 < dq_lim_lo[5], u6_5 + 6.28318530717958647693, u6_5);
+            const double d6_5 = fabs(v6_5 - z5);
             {
                 const double v0 = v4_0, d0 = d4_0;
                 const double v1 = v6_1, d1 = d6_1;
@@ -1563,7 +1533,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 6.0, bb);
-                bs = dq_sel(better, (double)sb[6][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1571,21 +1540,18 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 bq4 = dq_sel(better, v4, bq4);
                 bq5 = dq_sel(better, v5, bq5);
             }
-            const double m7_3 = dq_rint((zb[3][j] - cb[7][3][j]) * 0.15915494309189533577);
-            const double l7_3 = dq_ceil((dq_lim_lo[3] - cb[7][3][j]) * 0.15915494309189533577);
-            const double h7_3 = dq_floor((dq_lim_hi[3] - cb[7][3][j]) * 0.15915494309189533577);
-            const double v7_3 = cb[7][3][j] + 6.28318530717958647693 * dq_sel(m7_3 < l7_3, l7_3, dq_sel(m7_3 > h7_3, h7_3, m7_3));
-            const double d7_3 = dq_sel(l7_3 <= h7_3, fabs(v7_3 - zb[3][j]), INFINITY);
-            const double m7_4 = dq_rint((zb[4][j] - cb[7][4][j]) * 0.15915494309189533577);
-            const double l7_4 = dq_ceil((dq_lim_lo[4] - cb[7][4][j]) * 0.15915494309189533577);
-            const double h7_4 = dq_floor((dq_lim_hi[4] - cb[7][4][j]) * 0.15915494309189533577);
-            const double v7_4 = cb[7][4][j] + 6.28318530717958647693 * dq_sel(m7_4 < l7_4, l7_4, dq_sel(m7_4 > h7_4, h7_4, m7_4));
-            const double d7_4 = dq_sel(l7_4 <= h7_4, fabs(v7_4 - zb[4][j]), INFINITY);
-            const double m7_5 = dq_rint((zb[5][j] - cb[7][5][j]) * 0.15915494309189533577);
-            const double l7_5 = dq_ceil((dq_lim_lo[5] - cb[7][5][j]) * 0.15915494309189533577);
-            const double h7_5 = dq_floor((dq_lim_hi[5] - cb[7][5][j]) * 0.15915494309189533577);
-            const double v7_5 = cb[7][5][j] + 6.28318530717958647693 * dq_sel(m7_5 < l7_5, l7_5, dq_sel(m7_5 > h7_5, h7_5, m7_5));
-            const double d7_5 = dq_sel(l7_5 <= h7_5, fabs(v7_5 - zb[5][j]), INFINITY);
+            const double w7_3 = cb[7][3][j] + 6.28318530717958647693 * dq_rint((zc3 - cb[7][3][j]) * 0.15915494309189533577);
+            const double u7_3 = dq_sel(w7_3 > dq_lim_hi[3], w7_3 - 6.28318530717958647693, w7_3);
+            const double v7_3 = dq_sel(u7_3 < dq_lim_lo[3], u7_3 + 6.28318530717958647693, u7_3);
+            const double d7_3 = dq_sel((v7_3 >= dq_lim_lo[3]) & (v7_3 <= dq_lim_hi[3]), fabs(v7_3 - z3), INFINITY);
+            const double w7_4 = cb[7][4][j] + 6.28318530717958647693 * dq_rint((zc4 - cb[7][4][j]) * 0.15915494309189533577);
+            const double u7_4 = dq_sel(w7_4 > dq_lim_hi[4], w7_4 - 6.28318530717958647693, w7_4);
+            const double v7_4 = dq_sel(u7_4 < dq_lim_lo[4], u7_4 + 6.28318530717958647693, u7_4);
+            const double d7_4 = dq_sel((v7_4 >= dq_lim_lo[4]) & (v7_4 <= dq_lim_hi[4]), fabs(v7_4 - z4), INFINITY);
+            const double w7_5 = cb[7][5][j] + 6.28318530717958647693 * dq_rint((zc5 - cb[7][5][j]) * 0.15915494309189533577);
+            const double u7_5 = dq_sel(w7_5 > dq_lim_hi[5], w7_5 - 6.28318530717958647693, w7_5);
+            const double v7_5 = dq_sel(u7_5 < dq_lim_lo[5], u7_5 + 6.28318530717958647693, u7_5);
+            const double d7_5 = fabs(v7_5 - z5);
             {
                 const double v0 = v4_0, d0 = d4_0;
                 const double v1 = v6_1, d1 = d6_1;
@@ -1602,7 +1568,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
                 mv = dq_sel(better, mx, mv);
                 tv = dq_sel(better, tt, tv);
                 bb = dq_sel(better, 7.0, bb);
-                bs = dq_sel(better, (double)sb[7][j], bs);
                 bq0 = dq_sel(better, v0, bq0);
                 bq1 = dq_sel(better, v1, bq1);
                 bq2 = dq_sel(better, v2, bq2);
@@ -1619,7 +1584,6 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
             omx[j] = mv;
             ott[j] = tv;
             obr[j] = bb;
-            osg[j] = bs;
         }
         for (size_t j = 0; j < m; ++j) {
             for (int k = 0; k < 6; ++k) {
@@ -1628,7 +1592,7 @@ void irb120_ik_nearest_batch(size_t n, const double *restrict poses, const doubl
             max_move[i0 + j] = omx[j];
             total_move[i0 + j] = ott[j];
             branch[i0 + j] = (int)obr[j];
-            singular[i0 + j] = (int)osg[j];
+            singular[i0 + j] = obr[j] >= 0.0 ? sb[(int)obr[j]][j] : 0;
         }
     }
 }
