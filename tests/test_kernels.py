@@ -15,9 +15,10 @@ import pytest
 import derive
 from derive import InputError, dualquat, reference
 from derive.codegen import loader
-from derive.codegen.emit import render_kernels
+from derive.codegen.emit import _magnitude_bounds, render_kernels
 from derive.codegen.loader import _compile, kernel_folder
 from derive.ik.closed_form import spherical_class
+from derive.ik.program import ik_program
 
 UR = ["ur3", "ur5", "ur10", "ur3e", "ur5e", "ur10e", "ur16e"]
 
@@ -125,6 +126,33 @@ def test_ik_elbow_singular(backend):
     filled = np.arange(8)[None, :] < counts[:, None]
     dpos, drot = reference.pose_error(reference.fk("ur5", sols[filled]), poses[rows])
     assert dpos.max() < 1e-8 and drot.max() < 1e-8
+
+
+def test_magnitude_bounds_of_the_ur_program():
+    """The C kernels leave out dq_wrap where the program's bounds prove a joint value within pi.
+    For the UR: theta3 = +-atan2(sqrt(.), .) and theta5 = +-2 atan2(|.|, |.|) (both arguments
+    square roots) are; theta1 (a sum of two atan2), theta2, theta4 and theta6 (sums) are not."""
+    b = _magnitude_bounds(ik_program(derive.load_robot("ur5")))
+    assert b["theta3"] == pytest.approx(math.pi) and b["theta5"] == pytest.approx(math.pi)
+    assert b["h9"] == pytest.approx(math.pi / 2)
+    assert all(b[n] > math.pi + 1 for n in ("theta1", "theta2", "theta4", "theta6"))
+
+
+@pytest.mark.parametrize("name", ["ur5", "irb120", "kr6-r900"])
+def test_c_candidates_lie_in_minus_pi_pi(name):
+    """Every joint of every C solution, wrapped or left as the bounds allow, lies in [-pi, pi]:
+    batch and single calls, on random poses and on wrist-singular ones (theta5 = 0)."""
+    k = derive.kernels(name, "c")
+    rng = np.random.default_rng(41)
+    q = rng.uniform(-math.pi, math.pi, size=(2000, 6))
+    q[:200, 4] = 0.0
+    sols, counts = k.ik(reference.fk(name, q))
+    filled = np.arange(sols.shape[1])[None, :] < counts[:, None]
+    assert counts.sum() > 8000
+    assert np.all(np.abs(sols[filled]) <= math.pi)
+    for i in range(0, 2000, 101):
+        one, c = k.ik(reference.fk(name, q[i]))
+        assert c == counts[i] and np.all(np.abs(one[:c]) <= math.pi)
 
 
 @pytest.mark.parametrize("name", ["ur5", "irb120"])

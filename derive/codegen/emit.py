@@ -308,6 +308,51 @@ def _singular_only(cond) -> bool:
     return any(t.is_Symbol and (t.name == "singular" or t.name.startswith("singular_")) for t in terms)
 
 
+def _magnitude_bounds(prog) -> dict:
+    """Per name of the IK program an upper bound of its magnitude (inf where none is known): an
+    atan2 is at most pi (pi/2 when both its arguments are square roots or absolute values),
+    sines, cosines and branch signs at most 1, sums and products bounded by their terms'. A
+    joint value bounded by pi already lies in [-pi, pi] and needs no wrap (dq_wrap would change
+    only -pi into pi and -0 into 0)."""
+    inf = math.inf
+    bound: dict = {}
+    nonnegative: set = set()          # names defined as a square root or an absolute value
+
+    def nonneg(e):
+        return (isinstance(e, sp.Abs) or (e.is_Pow and e.exp == sp.Rational(1, 2))
+                or (e.is_Symbol and e.name in nonnegative))
+
+    def mag(e):
+        if e.is_number:
+            return abs(float(e))
+        if e.is_Symbol:
+            return bound.get(e.name, inf)
+        if isinstance(e, sp.atan2):
+            return math.pi / 2 if all(nonneg(a) for a in e.args) else math.pi
+        if isinstance(e, (sp.sin, sp.cos)):
+            return 1.0
+        if e.is_Add:
+            return sum(mag(a) for a in e.args)
+        if e.is_Mul:
+            terms = [mag(a) for a in e.args]
+            return 0.0 if 0.0 in terms else math.prod(terms)
+        return inf
+
+    for op in prog.ops:
+        if op.kind == "branch":
+            bound[op.name] = 1.0
+        elif op.kind == "let":
+            e = sp.sympify(op.expr)
+            bound[op.name] = mag(e)
+            if nonneg(e):
+                nonnegative.add(op.name)
+        elif op.kind == "select":
+            bound[op.name] = max(mag(sp.sympify(op.expr)), mag(sp.sympify(op.other)))
+        elif op.kind in ("sincos", "double"):
+            bound[op.name] = bound[op.name2] = 1.0
+    return bound
+
+
 def _flat_ops(prog, printer, numeric) -> list:
     """The IK program with every branch unrolled (C, for the vectorised batch loop).
 
@@ -359,8 +404,15 @@ def _flat_ops(prog, printer, numeric) -> list:
         elif op.kind == "solution":
             leaf = leaf_of(prog, path)
             d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
+                 "wrap": [mag(sp.sympify(e)) > math.pi for e in op.args],
                  "sing": name("singular", path) if "singular" in depth_of else "0"}
         return [d]
+
+    bounds = _magnitude_bounds(prog)
+
+    def mag(e):
+        """The bound of a joint value that is one name of the program (inf otherwise)."""
+        return bounds.get(e.name, math.inf) if e.is_Symbol else math.inf
 
     ops = prog.ops
     out = [{"kind": "ok_init", "name": "ok"}]

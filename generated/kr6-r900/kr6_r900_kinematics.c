@@ -523,7 +523,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[0][1] = dq_wrap(theta2_00 - 1.5707963267948966);
         cand[0][2] = dq_wrap(theta3_00);
         cand[0][3] = dq_wrap(-theta4_000);
-        cand[0][4] = dq_wrap(theta5_000);
+        cand[0][4] = theta5_000;   /* in [-pi, pi] already */
         cand[0][5] = dq_wrap(-theta6_000);
         valid[0] = ok_000;
         sing[0] = singular_00;
@@ -539,7 +539,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[1][1] = dq_wrap(theta2_00 - 1.5707963267948966);
         cand[1][2] = dq_wrap(theta3_00);
         cand[1][3] = dq_wrap(-theta4_001);
-        cand[1][4] = dq_wrap(theta5_001);
+        cand[1][4] = theta5_001;   /* in [-pi, pi] already */
         cand[1][5] = dq_wrap(-theta6_001);
         valid[1] = ok_001;
         sing[1] = singular_00;
@@ -576,7 +576,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[2][1] = dq_wrap(theta2_01 - 1.5707963267948966);
         cand[2][2] = dq_wrap(theta3_01);
         cand[2][3] = dq_wrap(-theta4_010);
-        cand[2][4] = dq_wrap(theta5_010);
+        cand[2][4] = theta5_010;   /* in [-pi, pi] already */
         cand[2][5] = dq_wrap(-theta6_010);
         valid[2] = ok_010;
         sing[2] = singular_01;
@@ -592,7 +592,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[3][1] = dq_wrap(theta2_01 - 1.5707963267948966);
         cand[3][2] = dq_wrap(theta3_01);
         cand[3][3] = dq_wrap(-theta4_011);
-        cand[3][4] = dq_wrap(theta5_011);
+        cand[3][4] = theta5_011;   /* in [-pi, pi] already */
         cand[3][5] = dq_wrap(-theta6_011);
         valid[3] = ok_011;
         sing[3] = singular_01;
@@ -645,7 +645,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[4][1] = dq_wrap(theta2_10 - 1.5707963267948966);
         cand[4][2] = dq_wrap(theta3_10);
         cand[4][3] = dq_wrap(-theta4_100);
-        cand[4][4] = dq_wrap(theta5_100);
+        cand[4][4] = theta5_100;   /* in [-pi, pi] already */
         cand[4][5] = dq_wrap(-theta6_100);
         valid[4] = ok_100;
         sing[4] = singular_10;
@@ -661,7 +661,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[5][1] = dq_wrap(theta2_10 - 1.5707963267948966);
         cand[5][2] = dq_wrap(theta3_10);
         cand[5][3] = dq_wrap(-theta4_101);
-        cand[5][4] = dq_wrap(theta5_101);
+        cand[5][4] = theta5_101;   /* in [-pi, pi] already */
         cand[5][5] = dq_wrap(-theta6_101);
         valid[5] = ok_101;
         sing[5] = singular_10;
@@ -698,7 +698,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[6][1] = dq_wrap(theta2_11 - 1.5707963267948966);
         cand[6][2] = dq_wrap(theta3_11);
         cand[6][3] = dq_wrap(-theta4_110);
-        cand[6][4] = dq_wrap(theta5_110);
+        cand[6][4] = theta5_110;   /* in [-pi, pi] already */
         cand[6][5] = dq_wrap(-theta6_110);
         valid[6] = ok_110;
         sing[6] = singular_11;
@@ -714,7 +714,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][6],
         cand[7][1] = dq_wrap(theta2_11 - 1.5707963267948966);
         cand[7][2] = dq_wrap(theta3_11);
         cand[7][3] = dq_wrap(-theta4_111);
-        cand[7][4] = dq_wrap(theta5_111);
+        cand[7][4] = theta5_111;   /* in [-pi, pi] already */
         cand[7][5] = dq_wrap(-theta6_111);
         valid[7] = ok_111;
         sing[7] = singular_11;
@@ -857,7 +857,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[0][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
         cb[0][2][j] = dq_wrap(theta3_00);
         cb[0][3][j] = dq_wrap(-theta4_000);
-        cb[0][4][j] = dq_wrap(theta5_000);
+        cb[0][4][j] = theta5_000;   /* in [-pi, pi] already */
         cb[0][5][j] = dq_wrap(-theta6_000);
         vb[0][j] = ok_000;
         sb[0][j] = singular_00;
@@ -871,7 +871,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[1][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
         cb[1][2][j] = dq_wrap(theta3_00);
         cb[1][3][j] = dq_wrap(-theta4_001);
-        cb[1][4][j] = dq_wrap(theta5_001);
+        cb[1][4][j] = theta5_001;   /* in [-pi, pi] already */
         cb[1][5][j] = dq_wrap(-theta6_001);
         vb[1][j] = ok_001;
         sb[1][j] = singular_00;
@@ -905,7 +905,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[2][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
         cb[2][2][j] = dq_wrap(theta3_01);
         cb[2][3][j] = dq_wrap(-theta4_010);
-        cb[2][4][j] = dq_wrap(theta5_010);
+        cb[2][4][j] = theta5_010;   /* in [-pi, pi] already */
         cb[2][5][j] = dq_wrap(-theta6_010);
         vb[2][j] = ok_010;
         sb[2][j] = singular_01;
@@ -919,7 +919,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[3][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
         cb[3][2][j] = dq_wrap(theta3_01);
         cb[3][3][j] = dq_wrap(-theta4_011);
-        cb[3][4][j] = dq_wrap(theta5_011);
+        cb[3][4][j] = theta5_011;   /* in [-pi, pi] already */
         cb[3][5][j] = dq_wrap(-theta6_011);
         vb[3][j] = ok_011;
         sb[3][j] = singular_01;
@@ -969,7 +969,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[4][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
         cb[4][2][j] = dq_wrap(theta3_10);
         cb[4][3][j] = dq_wrap(-theta4_100);
-        cb[4][4][j] = dq_wrap(theta5_100);
+        cb[4][4][j] = theta5_100;   /* in [-pi, pi] already */
         cb[4][5][j] = dq_wrap(-theta6_100);
         vb[4][j] = ok_100;
         sb[4][j] = singular_10;
@@ -983,7 +983,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[5][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
         cb[5][2][j] = dq_wrap(theta3_10);
         cb[5][3][j] = dq_wrap(-theta4_101);
-        cb[5][4][j] = dq_wrap(theta5_101);
+        cb[5][4][j] = theta5_101;   /* in [-pi, pi] already */
         cb[5][5][j] = dq_wrap(-theta6_101);
         vb[5][j] = ok_101;
         sb[5][j] = singular_10;
@@ -1017,7 +1017,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[6][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
         cb[6][2][j] = dq_wrap(theta3_11);
         cb[6][3][j] = dq_wrap(-theta4_110);
-        cb[6][4][j] = dq_wrap(theta5_110);
+        cb[6][4][j] = theta5_110;   /* in [-pi, pi] already */
         cb[6][5][j] = dq_wrap(-theta6_110);
         vb[6][j] = ok_110;
         sb[6][j] = singular_11;
@@ -1031,7 +1031,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         cb[7][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
         cb[7][2][j] = dq_wrap(theta3_11);
         cb[7][3][j] = dq_wrap(-theta4_111);
-        cb[7][4][j] = dq_wrap(theta5_111);
+        cb[7][4][j] = theta5_111;   /* in [-pi, pi] already */
         cb[7][5][j] = dq_wrap(-theta6_111);
         vb[7][j] = ok_111;
         sb[7][j] = singular_11;
