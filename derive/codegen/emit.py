@@ -383,6 +383,12 @@ def _flat_ops(prog, printer, numeric) -> list:
     def ok(path):
         return "ok_" + "".join(map(str, path)) if path else "ok"
 
+    bounds = _magnitude_bounds(prog)
+
+    def mag(e):
+        """The bound of a joint value that is one name of the program (inf otherwise)."""
+        return bounds.get(e.name, math.inf) if e.is_Symbol else math.inf
+
     def line(op, path):
         """One op of the program on one branch path, as a flat line."""
         d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
@@ -407,12 +413,6 @@ def _flat_ops(prog, printer, numeric) -> list:
                  "wrap": [mag(sp.sympify(e)) > math.pi for e in op.args],
                  "sing": name("singular", path) if "singular" in depth_of else "0"}
         return [d]
-
-    bounds = _magnitude_bounds(prog)
-
-    def mag(e):
-        """The bound of a joint value that is one name of the program (inf otherwise)."""
-        return bounds.get(e.name, math.inf) if e.is_Symbol else math.inf
 
     ops = prog.ops
     out = [{"kind": "ok_init", "name": "ok"}]

@@ -1179,8 +1179,9 @@ static const double dq_lim_hi[6] = {6.283185307180586, 6.283185307180586, 6.2831
  * which lies within pi of c; w - 2 pi where w > hi, then w + 2 pi where that is < lo, and none
  * where the result is outside the limits (the distance to the seed is convex in the winding, so
  * the winding inside the limits nearest to c is the one nearest to the seed; a joint whose range
- * spans a full turn always has one). A prismatic joint must lie inside its limits. Written per pose: q (n x DOF; NaN where none),
- * max_move and total_move (n; NaN where none), branch (n; -1 where none) and singular (n). */
+ * spans a full turn always has one). A prismatic joint must lie inside its limits. Written per
+ * pose: q (n x DOF; NaN where none), max_move and total_move (n; NaN where none), branch (n; -1
+ * where none) and singular (n). */
 void ur5e_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
                                double *restrict q, double *restrict max_move, double *restrict total_move,
                                int *restrict branch, int *restrict singular)
