@@ -385,10 +385,6 @@ def _flat_ops(prog, printer, numeric) -> list:
 
     bounds = _magnitude_bounds(prog)
 
-    def mag(e):
-        """The bound of a joint value that is one name of the program (inf otherwise)."""
-        return bounds.get(e.name, math.inf) if e.is_Symbol else math.inf
-
     def line(op, path):
         """One op of the program on one branch path, as a flat line."""
         d = {"kind": op.kind, "name": name(op.name, path) if op.name else ""}
@@ -410,7 +406,7 @@ def _flat_ops(prog, printer, numeric) -> list:
         elif op.kind == "solution":
             leaf = leaf_of(prog, path)
             d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
-                 "wrap": [mag(sp.sympify(e)) > math.pi for e in op.args],
+                 "wrap": [bounds.get(str(e), math.inf) > math.pi for e in op.args],
                  "sing": name("singular", path) if "singular" in depth_of else "0"}
         return [d]
 

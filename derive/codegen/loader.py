@@ -224,8 +224,6 @@ class Kernels:
                 self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c, self.free)
             if self._ext is None:
                 self._load_ctypes()
-            elif self._has_ik_c:
-                self._ik_direct = self._ext.ik
         else:
             raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
 
@@ -239,7 +237,6 @@ class Kernels:
 
     _ext = None
     _tool = None
-    _ik_direct = None     # the extension's ik, called straight from ik() on its common path
 
     def _load_ctypes(self):
         """The kernels' shared library through ctypes: the path without the extension (no Python
@@ -351,11 +348,12 @@ class Kernels:
         (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
         call."""
-        direct = self._ik_direct
-        if direct is not None and not (details or within_limits) and (free is None) is (self.free is None):
+        ext = self._ext
+        if (ext is not None and self._has_ik_c and not (details or within_limits)
+                and (free is None) is (self.free is None)):
             # the common path in one C call, the input checked in C (a few hundred ns of Python
             # less per single pose than the general path below)
-            out = direct(P, self._tool, False) if free is None else direct(P, self._tool, False, free)
+            out = ext.ik(P, self._tool, False) if free is None else ext.ik(P, self._tool, False, free)
             if out is not NotImplemented:
                 return out
         self._check_free(free)
