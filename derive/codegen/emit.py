@@ -138,10 +138,16 @@ def _context(robot, command: str, free: str | None = None) -> dict:
     py, c = _Py(), _C()
     trig = []
     for s, co, a in k.trig:
-        if isinstance(a, tuple):
-            trig.append({"s": s, "c": co, "double": True, "hs": a[1], "hc": a[2]})
+        if isinstance(a, tuple) and a[0] == "double":
+            trig.append({"s": s, "c": co, "derived": True, "se": f"2.0*{a[1]}*{a[2]}",
+                         "ce": f"1.0 - 2.0*{a[1]}*{a[1]}"})
+        elif isinstance(a, tuple):             # ("sum", s_x, c_x, s_y, c_y, sign): x + sign y
+            _, sx, cx, sy, cy, sign = a
+            pm, mp = ("+", "-") if sign > 0 else ("-", "+")
+            trig.append({"s": s, "c": co, "derived": True, "se": f"{sx}*{cy} {pm} {cx}*{sy}",
+                         "ce": f"{cx}*{cy} {mp} {sx}*{sy}"})
         else:
-            trig.append({"s": s, "c": co, "double": False, "k": sum(not t["double"] for t in trig),
+            trig.append({"s": s, "c": co, "derived": False, "k": sum(not t["derived"] for t in trig),
                          "py": _arg(py, a, lambda i: f"q[{i}]"),
                          "np": _arg(py, a, lambda i: f"Q[:, {i}]"),
                          "cc": _arg(c, a, lambda i: f"q[{i}]")})

@@ -8,7 +8,8 @@ sequence of assignments:
 1. the sines and cosines the expressions need: one sin/cos pair per distinct angle
    argument (a half angle such as (q2+q3+q4)/2, or a full angle); a full angle whose
    half is also needed comes from the half by the double-angle formulas, which costs
-   two multiplications instead of a sin/cos call;
+   two multiplications instead of a sin/cos call, and an angle that is the sum or difference
+   of two others from theirs by the addition theorem (four multiplications, two additions);
 2. common subexpressions (sympy's ``cse``) over the 8 outputs.
 
 The joint variables are ``q[0] .. q[n-1]``; the outputs are the unit dual quaternion
@@ -46,7 +47,9 @@ class Kernel:
 
     robot: str
     dof: int
-    trig: list = field(default_factory=list)      # (name_s, name_c, arg expr in q, or ("double", half_s, half_c))
+    # (name_s, name_c, how): how is the argument (an expression in q: a sin/cos call), or
+    # ("double", half_s, half_c), or ("sum", s_x, c_x, s_y, c_y, sign) for the angle x + sign y
+    trig: list = field(default_factory=list)
     temps: list = field(default_factory=list)     # (name, expr)
     outputs: list = field(default_factory=list)   # expr per output
     parameters: dict = field(default_factory=dict)
@@ -139,6 +142,28 @@ def _fk_numeric(robot, qs) -> Kernel:
     return k
 
 
+def _sums(called: list) -> dict:
+    """The angles among ``called`` (arguments of sin/cos calls, linear in q) that are the sum or
+    difference of two others, {angle: (x, y, sign)} with angle = x + sign y, x and y kept as
+    calls: the sine and cosine of such an angle come from theirs by the addition theorem (four
+    multiplications and two additions instead of a call). The UR arms' q2 + q3 + q4 is the sum of
+    (q2 + q3 + q4 -+ q6) / 2. Deterministic: the angles and pairs in the order of ``called``."""
+    out, bases = {}, set()
+    for a in called:
+        if a in bases:
+            continue
+        kept = [x for x in called if x != a and x not in out]
+        pair = next(((x, y, sign) for i, x in enumerate(kept) for y in kept[i + 1:] for sign in (1, -1)
+                     if sp.expand(x + sign * y - a) == 0), None)
+        if pair is None:
+            pair = next(((y, x, -1) for i, x in enumerate(kept) for y in kept[i + 1:]
+                         if sp.expand(y - x - a) == 0), None)
+        if pair is not None:
+            out[a] = pair
+            bases.update(pair[:2])
+    return out
+
+
 def _fk_kernel(robot) -> Kernel:
     qs = sp.symbols(f"q0:{robot.dof}", real=True)
     symbolic = None
@@ -174,24 +199,28 @@ def _fk_kernel(robot) -> Kernel:
     k = Kernel(robot=robot.name, dof=robot.dof, parameters=parameters)
     rep = {}
     half_of = {sp.expand(2 * a): a for a in args}
+    # plain sin/cos calls for the arguments without a half among them and that are not the sum
+    # or difference of two other calls
+    calls = [a for a in args if not (a in half_of and half_of[a] in args)]
+    sums = _sums(calls)
+    calls = [a for a in calls if a not in sums]
     sym_of = {}
-    n = 0
-    for a in args:                       # plain sin/cos calls for arguments without a half
-        if a in half_of and half_of[a] in args:
-            continue
-        s, c = sp.Symbol(f"s{n}"), sp.Symbol(f"c{n}")
-        n += 1
-        sym_of[a] = (s, c)
-        k.trig.append((str(s), str(c), a))
-    k.n_sincos = n
-    for a in args:                       # double angles from their halves
-        if a in sym_of:
-            continue
-        hs, hc = sym_of[half_of[a]]
-        s, c = sp.Symbol(f"s{n}"), sp.Symbol(f"c{n}")
-        n += 1
-        sym_of[a] = (s, c)
-        k.trig.append((str(s), str(c), ("double", str(hs), str(hc))))
+
+    def name(a, how):
+        n = len(k.trig)
+        sym_of[a] = (sp.Symbol(f"s{n}"), sp.Symbol(f"c{n}"))
+        k.trig.append((f"s{n}", f"c{n}", how))
+
+    for a in calls:
+        name(a, a)
+    k.n_sincos = len(calls)
+    for a, (x, y, sign) in sums.items():   # by the addition theorem from two calls
+        (sx, cx), (sy, cy) = sym_of[x], sym_of[y]
+        name(a, ("sum", str(sx), str(cx), str(sy), str(cy), sign))
+    for a in args:                          # double angles from their halves
+        if a not in sym_of:
+            hs, hc = sym_of[half_of[a]]
+            name(a, ("double", str(hs), str(hc)))
     for a, (s, c) in sym_of.items():
         rep[sp.sin(a)] = s
         rep[sp.cos(a)] = c

@@ -203,9 +203,12 @@ def _fk_derived(robot, q):
     env = {f"q{i}": q[i] for i in range(robot.dof)}
     conv = _ToSX(env)
     for s, c, a in k.trig:
-        if isinstance(a, tuple):
+        if isinstance(a, tuple) and a[0] == "double":
             hs, hc = env[a[1]], env[a[2]]
             env[s], env[c] = 2 * hs * hc, 1 - 2 * hs * hs
+        elif isinstance(a, tuple):         # ("sum", s_x, c_x, s_y, c_y, sign): x + sign y
+            sx, cx, sy, cy, sign = env[a[1]], env[a[2]], env[a[3]], env[a[4]], a[5]
+            env[s], env[c] = sx * cy + sign * cx * sy, cx * cy - sign * sx * sy
         else:
             x = conv(a)
             env[s], env[c] = ca.sin(x), ca.cos(x)

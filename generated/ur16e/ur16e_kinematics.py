@@ -6,7 +6,7 @@ Parameters (m): d1 = 0.1807, a2 = -0.4784, a3 = -0.36, d4 = 0.17415, d5 = 0.1198
 
 fk(q) takes 6 joint values (rad) and returns the unit dual quaternion of the end frame
 as a tuple (real w, x, y, z, dual w, x, y, z), dual = 1/2 t real, in the sign the product of the
-joint transforms gives (-Q is the same pose). 7 sin/cos evaluations per call.
+joint transforms gives (-Q is the same pose). 6 sin/cos evaluations per call.
 
 ik(pose) takes a unit dual quaternion of the end frame (either sign) and returns the list of all
 solutions, each a tuple of 6 joint values in (-pi, pi]; an empty list when the pose is out of
@@ -40,36 +40,36 @@ def fk(q):
     c2 = cos((1/2)*q[4])
     s3 = sin(q[1] + q[2])
     c3 = cos(q[1] + q[2])
-    s4 = sin(q[1] + q[2] + q[3])
-    c4 = cos(q[1] + q[2] + q[3])
-    s5 = sin((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] - 1/2*q[5])
-    c5 = cos((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] - 1/2*q[5])
-    s6 = sin((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] + (1/2)*q[5])
-    c6 = cos((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] + (1/2)*q[5])
+    s4 = sin((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] - 1/2*q[5])
+    c4 = cos((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] - 1/2*q[5])
+    s5 = sin((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] + (1/2)*q[5])
+    c5 = cos((1/2)*q[1] + (1/2)*q[2] + (1/2)*q[3] + (1/2)*q[5])
+    s6 = s4*c5 + c4*s5
+    c6 = c4*c5 - s4*s5
     s7 = 2.0*s0*c0
     c7 = 1.0 - 2.0*s0*s0
     s8 = 2.0*s2*c2
     c8 = 1.0 - 2.0*s2*s2
     t0 = c0*s2
-    t1 = s5*t0
-    t2 = c2*s6
+    t1 = s4*t0
+    t2 = c2*s5
     t3 = s0*t2
-    t4 = c2*c6
+    t4 = c2*c5
     t5 = s0*s2
-    t6 = c0*t4 + c5*t5
+    t6 = c0*t4 + c4*t5
     t7 = -t1 - t3 + t6
     t8 = t1 + t3 + t6
-    t9 = c5*t0
-    t10 = c0*t2 - s5*t5
-    t11 = -c2*c6*s0 + t10 + t9
+    t9 = c4*t0
+    t10 = c0*t2 - s4*t5
+    t11 = -c2*c5*s0 + t10 + t9
     t12 = s0*t4 + t10 - t9
     t13 = 0.11655*s8
-    t14 = 0.11985*c4 + 0.4784*s1 + 0.36*s3 + s4*t13 - 0.1807
+    t14 = 0.11985*c6 + 0.4784*s1 + 0.36*s3 + s6*t13 - 0.1807
     t15 = 0.4784*c1
     t16 = 0.36*c3
-    t17 = 0.11985*s4
+    t17 = 0.11985*s6
     t18 = 0.11655*c8
-    t19 = c4*t13
+    t19 = c6*t13
     t20 = c7*t15 + c7*t16 - c7*t17 + c7*t19 - s7*t18 - 0.17415*s7
     t21 = c7*t18 + 0.17415*c7 + s7*t15 + s7*t16 - s7*t17 + s7*t19
     return (
