@@ -319,6 +319,10 @@ def test_kernels_reject_non_finite_joints_and_non_unit_poses(backend):
         (np.stack([pose, pose, 1.5 * pose]), r"^pose: not a unit dual quaternion \(\| \|real\| - 1 \| = 0\.5 "),
         (skew_dual, r"^pose: not a unit dual quaternion \(<real, dual> = 0\.01, must be 0 within 1e-06\)$"),
         (nan_pose, r"^pose: contains NaN at index \(5,\)$"),
+        (pose + np.r_[np.zeros(4), 1e200, 0.0, 0.0, 0.0],          # finite, but |dual|^2 overflows
+         r"^pose: not a unit dual quaternion \(the squares of its dual part overflow\)$"),
+        (np.stack([pose, pose + np.r_[np.zeros(5), 1e200, 0.0, 0.0]]),
+         r"^pose: not a unit dual quaternion \(the squares of its dual part overflow"),
         (inf_matrix, r"^pose: contains inf at index \(1, 3\)$"),
         (scaled, r"^pose: the 3x3 block is not a rotation matrix \(max \|R\^T R - I\| = 0\.21\)$"),
         (T @ np.diag([1.0, 1.0, -1.0, 1.0]), r"^pose: the 3x3 block is not a rotation matrix"),  # reflection

@@ -155,11 +155,15 @@ def check_unit(a, name: str = "pose", tol: float = UNIT_TOL) -> np.ndarray:
     a = _dq(a, name)
     p, q = a[..., :4], a[..., 4:]
     dev_n = np.abs(np.linalg.norm(p, axis=-1) - 1.0)
-    scale = np.maximum(1.0, np.linalg.norm(q, axis=-1))
+    with np.errstate(over="ignore"):     # an overflow is reported below
+        qn = np.linalg.norm(q, axis=-1)
+    scale = np.maximum(1.0, qn)
     dev_o = np.abs(np.sum(p * q, axis=-1)) / scale
     if np.any(dev_n > tol):
         raise InputError(f"{name}: not a unit dual quaternion (| |real| - 1 | = "
                          f"{float(np.max(dev_n)):.3g} > {tol:g})")
+    if np.any(np.isinf(qn)):      # finite values whose squares overflow: no orthogonality test
+        raise InputError(f"{name}: not a unit dual quaternion (the squares of its dual part overflow)")
     if np.any(dev_o > tol):
         raise InputError(f"{name}: not a unit dual quaternion (<real, dual> = "
                          f"{float(np.max(dev_o)):.3g}, must be 0 within {tol:g})")
