@@ -18,7 +18,6 @@ algorithms vectorised over a batch of configurations. Operation counts per the c
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import tempfile
 import time
@@ -27,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.codegen.loader import c_flags
+from derive.codegen.loader import c_compiler, c_flags
 
 # multiplications / additions of the building blocks as coded (C and numpy alike)
 QMUL = (16, 12)          # Hamilton product
@@ -128,7 +127,7 @@ def bench_chain_numpy(nmax: int = 50, batch: int = 2000, repeats: int = 3) -> li
 
 
 def bench_chain_c(nmax: int = 50, batch: int = 2000, repeats: int = 3) -> list:
-    compiler = shutil.which("gcc") or shutil.which("cc")
+    compiler = c_compiler()
     if compiler is None:
         return []
     with tempfile.TemporaryDirectory() as tmp:

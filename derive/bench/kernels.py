@@ -38,7 +38,7 @@ from derive.bench.machine import best_time as _time
 from derive.bench.machine import machine
 from derive.bench.redundant import bench_redundant, redundant_report
 from derive.codegen.emit import identifier
-from derive.codegen.loader import c_flags, kernel_folder, kernels
+from derive.codegen.loader import c_compiler, c_flags, kernel_folder, kernels
 from derive.errors import DeriveError
 from derive.ik.closed_form import spherical_class
 from derive.ik.redundant import redundant_kind
@@ -58,7 +58,7 @@ def dh_table(robot) -> np.ndarray:
 
 
 def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict:
-    compiler = shutil.which("gcc") or shutil.which("cc")
+    compiler = c_compiler()
     if compiler is None:
         return {"error": "no C compiler"}
     ident = identifier(robot)

@@ -40,7 +40,7 @@ import numpy as np
 from derive import reference
 from derive.bench.machine import best_time as _time
 from derive.bench.machine import machine
-from derive.codegen.loader import c_flags, kernel_folder, kernels
+from derive.codegen.loader import c_compiler, c_flags, kernel_folder, kernels
 from derive.ik import srs
 from derive.ik.redundant import redundant_kind
 from derive.model.geometry import numeric_chain
@@ -89,7 +89,7 @@ def instruction_set() -> str:
 
 
 def _harness(robot, poses, fv, sweep_free, n_sweep: int, repeats: int) -> dict:
-    compiler = shutil.which("gcc") or shutil.which("cc")
+    compiler = c_compiler()
     if compiler is None:
         return {"error": "no C compiler"}
     folder, manifest = kernel_folder(robot)
