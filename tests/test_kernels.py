@@ -598,3 +598,32 @@ def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
                   re.finditer(rf"{robot}_kinematics\.c:(\d+):\d+: optimized: loop vectorized", report)}
     for marker, line in marked.items():
         assert line in vectorised, (marker, line, report)
+
+
+@pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
+def test_extension_input_checks_vectorise_with_avx2(tmp_path):
+    """The extension's checks of joint values and poses (finite, in range, unit) are loops
+    without exits, so a batch is checked at vector speed: the -mavx2 report has a "loop
+    vectorized" line at each marked loop of the extension's source (the one the loader built)."""
+    import sysconfig
+    from pathlib import Path
+
+    k = derive.kernels("ur5", "c")
+    if k._ext is None:
+        pytest.skip("no CPython extension (Python headers missing)")
+    source = Path(k._ext.__file__).with_suffix(".c")
+    lines = source.read_text(encoding="utf-8").splitlines()
+    marked = {}
+    for marker in ("q check", "pose check"):
+        at = [i + 1 for i, line in enumerate(lines) if f"/* vectorised: {marker} */" in line]
+        assert len(at) == 1, (marker, at)
+        marked[marker] = at[0]
+    res = subprocess.run(["gcc", "-std=c99", "-O3", "-mavx2", "-mfma", "-fno-math-errno", "-fPIC",
+                          f"-I{sysconfig.get_paths()['include']}", f"-I{np.get_include()}",
+                          "-fopt-info-vec-optimized", "-c", str(source), "-o", str(tmp_path / "e.o")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    vectorised = {int(m.group(1)) for m in
+                  re.finditer(rf"{re.escape(source.name)}:(\d+):\d+: optimized: loop vectorized", res.stderr + res.stdout)}
+    for marker, line in marked.items():
+        assert line in vectorised, (marker, line)
