@@ -146,10 +146,12 @@ def _sums(called: list) -> dict:
     """The angles among ``called`` (arguments of sin/cos calls, linear in q) that are the sum or
     difference of two others, {angle: (x, y, sign)} with angle = x + sign y, x and y kept as
     calls: the sine and cosine of such an angle come from theirs by the addition theorem (four
-    multiplications and two additions instead of a call). The UR arms' q2 + q3 + q4 is the sum of
-    (q2 + q3 + q4 -+ q6) / 2. Deterministic: the angles and pairs in the order of ``called``."""
+    multiplications and two additions instead of a call): on the UR arms (q2 + q3 + q4 - q6) / 2
+    is q2 + q3 + q4 minus (q2 + q3 + q4 + q6) / 2. Greedy and deterministic: the angles with the most terms are tried
+    first (a long sum is more likely made of shorter ones, which then stay calls), the pairs in
+    the order of ``called``."""
     out, bases = {}, set()
-    for a in called:
+    for a in sorted(called, key=lambda e: -len(sp.Add.make_args(sp.expand(e)))):   # stable
         if a in bases:
             continue
         kept = [x for x in called if x != a and x not in out]

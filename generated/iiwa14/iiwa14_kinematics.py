@@ -6,7 +6,7 @@ Parameters (m): d_bs = 0.36, d_se = 0.42, d_ew = 0.4, d_wf = 0.126
 
 fk(q) takes 7 joint values (rad) and returns the unit dual quaternion of the end frame
 as a tuple (real w, x, y, z, dual w, x, y, z), dual = 1/2 t real, in the sign the product of the
-joint transforms gives (-Q is the same pose). 13 sin/cos evaluations per call.
+joint transforms gives (-Q is the same pose). 9 sin/cos evaluations per call.
 
 ik(pose, fv) takes a unit dual quaternion of the end frame (either sign) and fv, the free parameter:
 psi, the arm angle (rad): the rotation of the arm plane (shoulder, elbow, wrist centre) about the shoulder-wrist line, 0 in the reference plane. It returns the list of all solutions at that value, each a tuple of 7 joint values
@@ -28,145 +28,144 @@ def fk(q):
     """Unit dual quaternion (8-tuple) of the end frame for joint values q (length 7)."""
     if len(q) != DOF:
         raise ValueError(f"fk: expected {DOF} joint values, got {len(q)}")
-    s0 = sin((1/2)*q[2])
-    c0 = cos((1/2)*q[2])
-    s1 = sin((1/2)*q[3])
-    c1 = cos((1/2)*q[3])
-    s2 = sin((1/2)*q[0] - 1/2*q[2])
-    c2 = cos((1/2)*q[0] - 1/2*q[2])
-    s3 = sin((1/2)*q[0] - 1/2*q[4])
-    c3 = cos((1/2)*q[0] - 1/2*q[4])
-    s4 = sin((1/2)*q[1] - 1/2*q[3])
-    c4 = cos((1/2)*q[1] - 1/2*q[3])
-    s5 = sin((1/2)*q[1] - 1/2*q[5])
-    c5 = cos((1/2)*q[1] - 1/2*q[5])
-    s6 = sin((1/2)*q[2] - 1/2*q[4])
-    c6 = cos((1/2)*q[2] - 1/2*q[4])
-    s7 = sin((1/2)*q[2] + (1/2)*q[4])
-    c7 = cos((1/2)*q[2] + (1/2)*q[4])
+    s0 = sin((1/2)*q[0])
+    c0 = cos((1/2)*q[0])
+    s1 = sin((1/2)*q[1])
+    c1 = cos((1/2)*q[1])
+    s2 = sin((1/2)*q[2])
+    c2 = cos((1/2)*q[2])
+    s3 = sin((1/2)*q[3])
+    c3 = cos((1/2)*q[3])
+    s4 = sin((1/2)*q[4])
+    c4 = cos((1/2)*q[4])
+    s5 = sin((1/2)*q[5])
+    c5 = cos((1/2)*q[5])
+    s6 = sin((1/2)*q[6])
+    c6 = cos((1/2)*q[6])
+    s7 = sin((1/2)*q[0] - 1/2*q[4])
+    c7 = cos((1/2)*q[0] - 1/2*q[4])
     s8 = sin((1/2)*q[2] - 1/2*q[6])
     c8 = cos((1/2)*q[2] - 1/2*q[6])
-    s9 = sin((1/2)*q[2] + (1/2)*q[6])
-    c9 = cos((1/2)*q[2] + (1/2)*q[6])
-    s10 = sin((1/2)*q[3] - 1/2*q[5])
-    c10 = cos((1/2)*q[3] - 1/2*q[5])
-    s11 = sin((1/2)*q[3] + (1/2)*q[5])
-    c11 = cos((1/2)*q[3] + (1/2)*q[5])
-    s12 = sin((1/2)*q[0] + (1/2)*q[2] - 1/2*q[6])
-    c12 = cos((1/2)*q[0] + (1/2)*q[2] - 1/2*q[6])
-    s13 = s0*c2 + c0*s2
-    c13 = c0*c2 - s0*s2
-    s14 = s1*c4 + c1*s4
-    c14 = c1*c4 - s1*s4
-    s15 = s0*c6 - c0*s6
-    c15 = c0*c6 + s0*s6
-    s16 = s1*c10 - c1*s10
-    c16 = c1*c10 + s1*s10
-    s17 = s0*c8 - c0*s8
-    c17 = c0*c8 + s0*s8
-    s18 = s3*c7 + c3*s7
-    c18 = c3*c7 - s3*s7
-    s19 = s2*c7 + c2*s7
-    c19 = c2*c7 - s2*s7
-    s20 = s2*c8 + c2*s8
-    c20 = c2*c8 - s2*s8
-    s21 = s2*c9 + c2*s9
-    c21 = c2*c9 - s2*s9
-    s22 = s5*c11 + c5*s11
-    c22 = c5*c11 - s5*s11
-    s23 = s4*c11 + c4*s11
-    c23 = c4*c11 - s4*s11
-    s24 = s7*c9 - c7*s9
-    c24 = c7*c9 + s7*s9
-    s25 = s7*c8 - c7*s8
-    c25 = c7*c8 + s7*s8
-    s26 = s0*c3 - c0*s3
-    c26 = c0*c3 + s0*s3
-    s27 = 2.0*s13*c13
-    c27 = 1.0 - 2.0*s13*s13
-    s28 = 2.0*s14*c14
-    c28 = 1.0 - 2.0*s14*s14
-    s29 = 2.0*s0*c0
-    c29 = 1.0 - 2.0*s0*s0
-    s30 = 2.0*s1*c1
-    c30 = 1.0 - 2.0*s1*s1
-    s31 = 2.0*s15*c15
-    c31 = 1.0 - 2.0*s15*s15
-    s32 = 2.0*s16*c16
-    c32 = 1.0 - 2.0*s16*s16
-    t0 = s14*s17
-    t1 = c1*s16
-    t2 = c10*c15
-    t3 = c14*s17
-    t4 = s18*t3
-    t5 = c0*c1
-    t6 = c17*s15
-    t7 = s13*t6
-    t8 = c5*t7
-    t9 = c0*c13
-    t10 = s15*s17
-    t11 = c4*t10
-    t12 = c0*s14
-    t13 = c16*s1
-    t14 = s14*t1
-    t15 = c17*s0
-    t16 = c13*c15
-    t17 = t1*t12
-    t18 = c14*c16*c17
-    t19 = s0*s15
-    t20 = c13*t19
-    t21 = -c1*c14*c15*c16*c17*c18 + c1*t18*t20 - c13*c15*c16*c8*s1*s14 - c14*c17*s1*s15*s16*s18 - c14*c18*c24*s1*s16 - c16*c17*s0*s1*s14*s19 - c16*c22*s0*s13*s15*s17 + c16*t11*t9 + c17*t16*t17 + s13*s25*t12*t13 + s26*t0*t1 + s3*t14*t15 + t2*t4 + t5*t8
-    t22 = c1*c15
-    t23 = c0*s13
-    t24 = c17*s23*t23
-    t25 = t6*t9
-    t26 = c14*s16
-    t27 = c1*t26
-    t28 = c13*s0
-    t29 = s17*t19
-    t30 = c13*c16
-    t31 = c15*t13
-    t32 = -c1*c13*c16*c17*s14*s7 - c1*c14*c15*c18*s16*s17 - c1*c16*s13*s14*s15*s9 - c10*c15*c2*s14*s17 + c13*t26*t5*t6 - c14*c15*c16*c17*s1*s18 - c14*c16*s0*s1*s13*s25 - c17*c22*s0*s13*s15*s16 + c24*s1*s14*s16*s2 + c24*t27*t28 + c5*s1*t25 + s11*s15*t23*t3 + s22*t29*t30 + t22*t24 + t3*t31*t9
-    t33 = c13*s14
-    t34 = -c0*c10*c15*c20*s14 - c0*c13*c14*s11*s15*s17 + c0*s1*t8 - c1*c12*c14*c15*s16 - c1*c16*c17*s13*s14*s7 + c1*s13*s23*t29 + c11*s15*s9*t33 + c13*c14*c17*c6*t13 - c14*c16*c25*s0*s1*s13 - c24*s0*s1*s13*s14*s16 + s18*t27*t6 + t0*t2*t28 + t31*t4
-    t35 = s1*t26
-    t36 = -c0*c16*s13*t11 - c1*c14*c16*s21*t19 + c14*s25*t30*t5 + c15*s1*t24 - c15*s21*t17 + c2*s14*s25*t13 + c21*s7*t14 - s0*s13*t2*t3 + s0*s16*s22*t7 + s11*t0*t20 + s18*t10*t35 + s18*t18*t22 + s9*t16*t35 - t15*t31*t33 - t25*t35
-    t37 = 0.4*c30
-    t38 = 0.126*c32
-    t39 = c30*t38
-    t40 = 0.4*s30
-    t41 = c29*t40
-    t42 = 0.126*s32
-    t43 = c31*t42
-    t44 = s30*t43
-    t45 = s30*t38
-    t46 = c29*s28
-    t47 = s31*t42
-    t48 = c30*t43
-    t49 = c28*t37 + c28*t39 + c28*t44 + 0.42*c28 + s28*s29*t47 + s28*t41 + t45*t46 - t46*t48 + 0.36
-    t50 = 0.42*s28
-    t51 = c27*t40
-    t52 = s28*t37
-    t53 = c27*t47
-    t54 = c27*t45
-    t55 = s28*t39
-    t56 = c27*t48
-    t57 = c29*s27
-    t58 = c28*t57
-    t59 = s27*s29
-    t60 = s28*t44
-    t61 = -c28*s27*t41 - c28*t47*t59 + c29*t53 + s27*t50 + s27*t52 + s27*t55 + s27*t60 - s29*t51 - s29*t54 + s29*t56 - t45*t58 + t48*t58
-    t62 = c28*c29
-    t63 = c27*t50 + c27*t52 + c27*t55 + c27*t60 - c28*s29*t53 + t40*t59 + t45*t59 - t47*t57 - t48*t59 - t51*t62 - t54*t62 + t56*t62
+    s9 = s2*c7 - c2*s7
+    c9 = c2*c7 + s2*s7
+    s10 = s0*c8 + c0*s8
+    c10 = c0*c8 - s0*s8
+    s11 = s0*c2 - c0*s2
+    c11 = c0*c2 + s0*s2
+    s12 = s0*c2 + c0*s2
+    c12 = c0*c2 - s0*s2
+    s13 = s0*c4 + c0*s4
+    c13 = c0*c4 - s0*s4
+    s14 = s0*c6 - c0*s6
+    c14 = c0*c6 + s0*s6
+    s15 = s0*c6 + c0*s6
+    c15 = c0*c6 - s0*s6
+    s16 = s1*c3 - c1*s3
+    c16 = c1*c3 + s1*s3
+    s17 = s1*c3 + c1*s3
+    c17 = c1*c3 - s1*s3
+    s18 = s1*c5 - c1*s5
+    c18 = c1*c5 + s1*s5
+    s19 = s1*c5 + c1*s5
+    c19 = c1*c5 - s1*s5
+    s20 = s2*c4 - c2*s4
+    c20 = c2*c4 + s2*s4
+    s21 = s2*c4 + c2*s4
+    c21 = c2*c4 - s2*s4
+    s22 = s2*c6 + c2*s6
+    c22 = c2*c6 - s2*s6
+    s23 = s3*c5 - c3*s5
+    c23 = c3*c5 + s3*s5
+    s24 = s3*c5 + c3*s5
+    c24 = c3*c5 - s3*s5
+    s25 = s4*c6 - c4*s6
+    c25 = c4*c6 + s4*s6
+    s26 = s4*c6 + c4*s6
+    c26 = c4*c6 - s4*s6
+    s27 = 2.0*s0*c0
+    c27 = 1.0 - 2.0*s0*s0
+    s28 = 2.0*s1*c1
+    c28 = 1.0 - 2.0*s1*s1
+    s29 = 2.0*s2*c2
+    c29 = 1.0 - 2.0*s2*s2
+    s30 = 2.0*s3*c3
+    c30 = 1.0 - 2.0*s3*s3
+    s31 = 2.0*s4*c4
+    c31 = 1.0 - 2.0*s4*s4
+    s32 = 2.0*s5*c5
+    c32 = 1.0 - 2.0*s5*s5
+    t0 = c23*c4
+    t1 = c1*s6
+    t2 = s12*t1
+    t3 = s1*s6
+    t4 = c3*s5
+    t5 = c0*c2
+    t6 = s4*s6
+    t7 = c5*t6
+    t8 = c16*t7
+    t9 = c6*s4
+    t10 = c18*t9
+    t11 = c2*t10
+    t12 = c2*s1
+    t13 = c5*s3
+    t14 = s1*t4
+    t15 = c6*s2
+    t16 = c1*c5*c6
+    t17 = c0*s2
+    t18 = c0*c4
+    t19 = t12*t4
+    t20 = -c0*c4*c5*c8*s1*s3 - c1*c12*c25*s3*s5 - c1*c12*c3*c4*c5*c6 - c1*c6*s12*s3*s4*s5 - c17*c5*s0*s2*s4*s6 + c3*s0*t11 + c3*s4*t16*t17 - c5*c6*s1*s13*s2*s3 + c6*t18*t19 + s0*s26*t12*t13 + s7*t14*t15 + s9*t3*t4 + t0*t2 + t5*t8
+    t21 = c1*s5
+    t22 = c3*t21
+    t23 = c2*s0
+    t24 = s24*s4
+    t25 = c3*c4
+    t26 = c6*s19*t23
+    t27 = t5*t9
+    t28 = c4*t13
+    t29 = -c0*c3*c5*c6*s1*s21 - c1*c12*c3*c4*s5*s6 - c1*c4*c5*c6*s12*s3 - c1*c5*s0*s2*s26*s3 - c11*c23*c4*s1*s6 - c17*c6*s0*s2*s4*s5 + c25*s1*s11*s3*s5 + c25*t17*t22 - c3*c5*s0*s1*s22*s4 + s17*t17*t7 + s3*t10*t5 + t1*t23*t24 + t1*t28*t5 + t22*t27 + t25*t26
+    t30 = c0*s1
+    t31 = s0*s2
+    t32 = -c0*c1*c2*s24*s4*s6 + c0*c1*c20*c6*t13 - c1*c10*c3*c4*s5 - c1*c26*c5*s0*s2*s3 - c14*c2*c23*c4*s1 + c24*s22*s4*t30 - c25*s0*s1*s2*s3*s5 - c3*c5*c6*s0*s1*s21 + c3*s19*t31*t6 + s0*s3*t11 + s12*t22*t9 + t0*t17*t3 + t2*t28
+    t33 = c1*c3*c5
+    t34 = s3*t21
+    t35 = c11*s1*s26*t13 + c15*s21*t14 - c4*s15*t19 + c4*s3*t26 + s12*t16*t25 + s12*t34*t6 - s15*s2*s4*t33 + s17*s5*t31*t9 + s22*t18*t34 + s26*t33*t5 - t0*t1*t31 - t15*t28*t30 + t17*t24*t3 - t23*t8 - t27*t34
+    t36 = 0.4*c30
+    t37 = 0.126*c32
+    t38 = c30*t37
+    t39 = 0.4*s30
+    t40 = c29*t39
+    t41 = 0.126*s32
+    t42 = c31*t41
+    t43 = s30*t42
+    t44 = s30*t37
+    t45 = c29*s28
+    t46 = s31*t41
+    t47 = c30*t42
+    t48 = c28*t36 + c28*t38 + c28*t43 + 0.42*c28 + s28*s29*t46 + s28*t40 + t44*t45 - t45*t47 + 0.36
+    t49 = 0.42*s28
+    t50 = c27*t39
+    t51 = s28*t36
+    t52 = c27*t46
+    t53 = c27*t44
+    t54 = s28*t38
+    t55 = c27*t47
+    t56 = c29*s27
+    t57 = c28*t56
+    t58 = s27*s29
+    t59 = s28*t43
+    t60 = -c28*s27*t40 - c28*t46*t58 + c29*t52 + s27*t49 + s27*t51 + s27*t54 + s27*t59 - s29*t50 - s29*t53 + s29*t55 - t44*t57 + t47*t57
+    t61 = c28*c29
+    t62 = c27*t49 + c27*t51 + c27*t54 + c27*t59 - c28*s29*t52 + t39*t58 + t44*t58 - t46*t56 - t47*t58 - t50*t61 - t53*t61 + t55*t61
     return (
-        -t21,
+        -t20,
+        -t29,
         -t32,
-        -t34,
-        t36,
-        0.5*t32*t63 + 0.5*t34*t61 - 0.5*t36*t49,
-        -0.5*t21*t63 + 0.5*t34*t49 + 0.5*t36*t61,
-        -0.5*t21*t61 - 0.5*t32*t49 - 0.5*t36*t63,
-        -0.5*t21*t49 + 0.5*t32*t61 - 0.5*t34*t63,
+        t35,
+        0.5*t29*t62 + 0.5*t32*t60 - 0.5*t35*t48,
+        -0.5*t20*t62 + 0.5*t32*t48 + 0.5*t35*t60,
+        -0.5*t20*t60 - 0.5*t29*t48 - 0.5*t35*t62,
+        -0.5*t20*t48 + 0.5*t29*t60 - 0.5*t32*t62,
     )
 
 

@@ -93,35 +93,35 @@ DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
     double s3, c3;
     dq_sincos(q[1] + q[2], &s3, &c3);
     double s4, c4;
-    dq_sincos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5], &s4, &c4);
+    dq_sincos(q[1] + q[2] + q[3], &s4, &c4);
     double s5, c5;
     dq_sincos((1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5], &s5, &c5);
-    const double s6 = s4*c5 + c4*s5;
-    const double c6 = c4*c5 - s4*s5;
+    const double s6 = s4*c5 - c4*s5;
+    const double c6 = c4*c5 + s4*s5;
     const double s7 = 2.0*s0*c0;
     const double c7 = 1.0 - 2.0*s0*s0;
     const double s8 = 2.0*s2*c2;
     const double c8 = 1.0 - 2.0*s2*s2;
     const double t0 = c0*s2;
-    const double t1 = s4*t0;
+    const double t1 = s6*t0;
     const double t2 = c2*s5;
     const double t3 = s0*t2;
     const double t4 = c2*c5;
     const double t5 = s0*s2;
-    const double t6 = c0*t4 + c4*t5;
+    const double t6 = c0*t4 + c6*t5;
     const double t7 = -t1 - t3 + t6;
     const double t8 = t1 + t3 + t6;
-    const double t9 = c4*t0;
-    const double t10 = c0*t2 - s4*t5;
+    const double t9 = c6*t0;
+    const double t10 = c0*t2 - s6*t5;
     const double t11 = -c2*c5*s0 + t10 + t9;
     const double t12 = s0*t4 + t10 - t9;
     const double t13 = 0.0823*s8;
-    const double t14 = 0.09465*c6 + 0.425*s1 + 0.39225*s3 + s6*t13 - 0.089159;
+    const double t14 = 0.09465*c4 + 0.425*s1 + 0.39225*s3 + s4*t13 - 0.089159;
     const double t15 = 0.425*c1;
     const double t16 = 0.39225*c3;
-    const double t17 = 0.09465*s6;
+    const double t17 = 0.09465*s4;
     const double t18 = 0.0823*c8;
-    const double t19 = c6*t13;
+    const double t19 = c4*t13;
     const double t20 = c7*t15 + c7*t16 - c7*t17 + c7*t19 - s7*t18 - 0.10915*s7;
     const double t21 = c7*t18 + 0.10915*c7 + s7*t15 + s7*t16 - s7*t17 + s7*t19;
     out[0] = 0.7071067811865476*t7;
@@ -143,7 +143,7 @@ void ur5_fk(const double *restrict q, double *restrict out)
         q[1],
         (1.0/2.0)*q[4],
         q[1] + q[2],
-        (1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] - 1.0/2.0*q[5],
+        q[1] + q[2] + q[3],
         (1.0/2.0)*q[1] + (1.0/2.0)*q[2] + (1.0/2.0)*q[3] + (1.0/2.0)*q[5],
         0.0,
         0.0,
@@ -158,32 +158,32 @@ void ur5_fk(const double *restrict q, double *restrict out)
     const double s3 = sv[3], c3 = cv[3];
     const double s4 = sv[4], c4 = cv[4];
     const double s5 = sv[5], c5 = cv[5];
-    const double s6 = s4*c5 + c4*s5;
-    const double c6 = c4*c5 - s4*s5;
+    const double s6 = s4*c5 - c4*s5;
+    const double c6 = c4*c5 + s4*s5;
     const double s7 = 2.0*s0*c0;
     const double c7 = 1.0 - 2.0*s0*s0;
     const double s8 = 2.0*s2*c2;
     const double c8 = 1.0 - 2.0*s2*s2;
     const double t0 = c0*s2;
-    const double t1 = s4*t0;
+    const double t1 = s6*t0;
     const double t2 = c2*s5;
     const double t3 = s0*t2;
     const double t4 = c2*c5;
     const double t5 = s0*s2;
-    const double t6 = c0*t4 + c4*t5;
+    const double t6 = c0*t4 + c6*t5;
     const double t7 = -t1 - t3 + t6;
     const double t8 = t1 + t3 + t6;
-    const double t9 = c4*t0;
-    const double t10 = c0*t2 - s4*t5;
+    const double t9 = c6*t0;
+    const double t10 = c0*t2 - s6*t5;
     const double t11 = -c2*c5*s0 + t10 + t9;
     const double t12 = s0*t4 + t10 - t9;
     const double t13 = 0.0823*s8;
-    const double t14 = 0.09465*c6 + 0.425*s1 + 0.39225*s3 + s6*t13 - 0.089159;
+    const double t14 = 0.09465*c4 + 0.425*s1 + 0.39225*s3 + s4*t13 - 0.089159;
     const double t15 = 0.425*c1;
     const double t16 = 0.39225*c3;
-    const double t17 = 0.09465*s6;
+    const double t17 = 0.09465*s4;
     const double t18 = 0.0823*c8;
-    const double t19 = c6*t13;
+    const double t19 = c4*t13;
     const double t20 = c7*t15 + c7*t16 - c7*t17 + c7*t19 - s7*t18 - 0.10915*s7;
     const double t21 = c7*t18 + 0.10915*c7 + s7*t15 + s7*t16 - s7*t17 + s7*t19;
     out[0] = 0.7071067811865476*t7;
