@@ -571,6 +571,28 @@ def test_dq_atan2_at_the_edges_of_its_domain(c_helpers):
     assert np.all(np.abs(got - ref) <= 4.45e-16), list(zip(pairs, got, ref))
 
 
+def _assert_marked_loops_vectorise(source, markers, tmp_path, extra=()):
+    """Each loop of ``source`` marked /* vectorised: <marker> */ (exactly one per marker, on a
+    for line) has a "loop vectorized" line in gcc's -mavx2 report. The backend's gcc flag is
+    used (no narrower remainder copies of the loops: a third less compile time)."""
+    lines = source.read_text(encoding="utf-8").splitlines()
+    marked = {}
+    for marker in markers:
+        at = [i + 1 for i, line in enumerate(lines) if f"/* vectorised: {marker} */" in line]
+        assert len(at) == 1, (marker, at)
+        assert re.match(r"\s*for \(", lines[at[0] - 1]), lines[at[0] - 1]
+        marked[marker] = at[0]
+    res = subprocess.run(["gcc", "-std=c99", "-O3", "-mavx2", "-mfma", "-fno-math-errno", *GCC_FLAGS, *extra,
+                          "-fopt-info-vec-optimized", "-c", str(source), "-o", str(tmp_path / "k.o")],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    report = res.stdout + res.stderr
+    vectorised = {int(m.group(1)) for m in
+                  re.finditer(rf"{re.escape(source.name)}:(\d+):\d+: optimized: loop vectorized", report)}
+    for marker, line in marked.items():
+        assert line in vectorised, (marker, line, report)
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
 @pytest.mark.parametrize("robot", ["ur5", "irb120", "iiwa14", "panda"])
 def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
@@ -582,23 +604,8 @@ def test_batch_loops_vectorise_with_avx2(tmp_path, robot):
     from pathlib import Path
 
     source = Path(__file__).resolve().parents[1] / "generated" / robot / f"{robot}_kinematics.c"
-    lines = source.read_text(encoding="utf-8").splitlines()
-    marked = {}
-    for marker in ("fk batch", "ik batch", "ik duplicate gates", "ik duplicates", "ik nearest"):
-        at = [i + 1 for i, line in enumerate(lines) if f"/* vectorised: {marker} */" in line]
-        assert len(at) == 1, (marker, at)
-        assert re.match(r"\s*for \(", lines[at[0] - 1]), lines[at[0] - 1]
-        marked[marker] = at[0]
-    # the backend's gcc flag (no narrower remainder copies of the loops: a third less compile time)
-    res = subprocess.run(["gcc", "-std=c99", "-O3", "-mavx2", "-mfma", "-fno-math-errno", *GCC_FLAGS,
-                          "-fopt-info-vec-optimized", "-c", str(source), "-o", str(tmp_path / "k.o")],
-                         capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr
-    report = res.stdout + res.stderr
-    vectorised = {int(m.group(1)) for m in
-                  re.finditer(rf"{robot}_kinematics\.c:(\d+):\d+: optimized: loop vectorized", report)}
-    for marker, line in marked.items():
-        assert line in vectorised, (marker, line, report)
+    _assert_marked_loops_vectorise(
+        source, ("fk batch", "ik batch", "ik duplicate gates", "ik duplicates", "ik nearest"), tmp_path)
 
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
@@ -612,23 +619,8 @@ def test_extension_input_checks_vectorise_with_avx2(tmp_path):
     k = derive.kernels("ur5", "c")
     if k._ext is None:
         pytest.skip("no CPython extension (Python headers missing)")
-    source = Path(k._ext.__file__).with_suffix(".c")
-    lines = source.read_text(encoding="utf-8").splitlines()
-    marked = {}
-    for marker in ("q check", "pose check"):
-        at = [i + 1 for i, line in enumerate(lines) if f"/* vectorised: {marker} */" in line]
-        assert len(at) == 1, (marker, at)
-        marked[marker] = at[0]
-    res = subprocess.run(["gcc", "-std=c99", "-O3", "-mavx2", "-mfma", "-fno-math-errno", *GCC_FLAGS, "-fPIC",
-                          f"-I{sysconfig.get_paths()['include']}", f"-I{np.get_include()}",
-                          "-fopt-info-vec-optimized", "-c", str(source), "-o", str(tmp_path / "e.o")],
-                         capture_output=True, text=True)
-    assert res.returncode == 0, res.stderr
-    vectorised = {int(m.group(1)) for m in
-                  re.finditer(rf"{re.escape(source.name)}:(\d+):\d+: optimized: loop vectorized", res.stderr + res.stdout)}
-    for marker, line in marked.items():
-        assert line in vectorised, (marker, line)
-
+    _assert_marked_loops_vectorise(Path(k._ext.__file__).with_suffix(".c"), ("q check", "pose check"), tmp_path,
+                                   ("-fPIC", f"-I{sysconfig.get_paths()['include']}", f"-I{np.get_include()}"))
 
 def test_fk_angle_sums_come_from_two_called_angles():
     """derive.codegen.fk._sums: an angle that is x + y, x - y or y - x of two other called

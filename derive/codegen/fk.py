@@ -147,19 +147,16 @@ def _sums(called: list) -> dict:
     difference of two others, {angle: (x, y, sign)} with angle = x + sign y, x and y kept as
     calls: the sine and cosine of such an angle come from theirs by the addition theorem (four
     multiplications and two additions instead of a call): on the UR arms (q2 + q3 + q4 - q6) / 2
-    is q2 + q3 + q4 minus (q2 + q3 + q4 + q6) / 2. Greedy and deterministic: the angles with the most terms are tried
-    first (a long sum is more likely made of shorter ones, which then stay calls), the pairs in
-    the order of ``called``."""
+    is q2 + q3 + q4 minus (q2 + q3 + q4 + q6) / 2. Greedy and deterministic: the angles with the
+    most terms are tried first (a long sum is more likely made of shorter ones, which then stay
+    calls), the ordered pairs in the order of ``called``."""
     out, bases = {}, set()
     for a in sorted(called, key=lambda e: -len(sp.Add.make_args(sp.expand(e)))):   # stable
         if a in bases:
             continue
         kept = [x for x in called if x != a and x not in out]
-        pair = next(((x, y, sign) for i, x in enumerate(kept) for y in kept[i + 1:] for sign in (1, -1)
+        pair = next(((x, y, sign) for x in kept for y in kept if y is not x for sign in (1, -1)
                      if sp.expand(x + sign * y - a) == 0), None)
-        if pair is None:
-            pair = next(((y, x, -1) for i, x in enumerate(kept) for y in kept[i + 1:]
-                         if sp.expand(y - x - a) == 0), None)
         if pair is not None:
             out[a] = pair
             bases.update(pair[:2])
