@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import derive
-from derive import InputError, reference
-from derive.codegen.loader import kernels
+from derive import InputError, dualquat, reference
+from derive.codegen.loader import Kernels, kernels
 
 SEED = 16
 
@@ -172,6 +172,53 @@ def test_single_and_batch_calls_agree_bit_for_bit(robot):
         assert np.array_equal(b, B[i]) and np.array_equal(g, G[i])
         s2, c2 = k.ik(list(poses[i]))
         assert c2 == C[i] and np.array_equal(s2, S[i], equal_nan=True)
+
+
+def test_bound_fk_and_ik_are_the_methods_without_a_python_frame():
+    """With the extension, k.fk / k.ik are bound C callables (Kernels._bind): each call, plain or
+    not, gives what the method gives, bit for bit, also with a tool set at run time, and the same
+    errors; calls they do not take themselves (keywords, matrices) reach the method."""
+    k = kernels("ur5", "c")
+    assert type(k.ik).__name__ == "builtin_function_or_method" and k.ik is not Kernels.ik.__get__(k)
+    tool = derive.dualquat.from_rt(derive.quaternion.from_axis_angle([1, 0, 0], 0.4), [0.0, 0.03, 0.1])
+    rng = np.random.default_rng(SEED + 9)
+    q = rng.uniform(-3, 3, size=(40, 6))
+    for kk in (k, k.with_tool(tool), k.with_tool(tool).with_tool(None)):
+        fk_m, ik_m = Kernels.fk.__get__(kk), Kernels.ik.__get__(kk)
+        for i in range(40):
+            f = kk.fk(q[i])
+            assert np.array_equal(f, fk_m(q[i])) and np.array_equal(kk.fk(Q=q[i]), f)
+            s, c = kk.ik(f)
+            s_m, c_m = ik_m(f)
+            assert c == c_m and type(c) is type(c_m) and np.array_equal(s, s_m, equal_nan=True)
+            assert c >= 1 and np.abs(_wrapped(s[:c] - q[i])).max(axis=1).min() < 1e-9
+            s_k, c_k = kk.ik(f, within_limits=False, details=False)
+            assert c_k == c and np.array_equal(s_k, s, equal_nan=True)
+            s_d, c_d, _, _ = kk.ik(f, details=True)                      # to the method
+            assert c_d == c and np.array_equal(s_d, s, equal_nan=True)
+            m = dualquat.to_matrix(f)                                    # NotImplemented in C
+            s_x, c_x = kk.ik(m)
+            assert c_x == c and np.allclose(s_x[:c], s[:c], atol=1e-9)
+    assert np.array_equal(k.with_tool(tool).fk(q[0]), dualquat._mul(k.fk(q[0])[None], tool[None])[0])
+    for bad, match in (([1, 2], "got shape"), (np.ones(8), "not a unit dual quaternion")):
+        with pytest.raises(InputError, match=match):
+            k.ik(bad)
+        with pytest.raises(InputError, match=match):
+            Kernels.ik(k, bad)
+    with pytest.raises(InputError, match="no free parameter"):
+        k.ik(k.fk(q[0]), free=0.1)
+    with pytest.raises(TypeError):
+        k.ik()
+    with pytest.raises(InputError, match="Q: contains NaN"):
+        k.fk([0, 0, float("nan"), 0, 0, 0])
+    p = kernels("panda", "c")
+    qp = np.array([0.1, 0.2, 0.3, -1.2, 0.1, 1.0, 0.4])
+    fp = p.fk(qp)
+    s, c = p.ik(fp, free=0.4)
+    s_m, c_m = Kernels.ik(p, fp, free=0.4)
+    assert c == c_m >= 1 and np.array_equal(s, s_m, equal_nan=True)
+    with pytest.raises(InputError, match="needs free="):
+        p.ik(fp)
 
 
 def test_branch_ids_are_stable_and_singular_flags_set():

@@ -262,6 +262,8 @@ class Kernels:
                 self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c, self.free)
             if self._ext is None:
                 self._load_ctypes()
+            else:
+                self._bind()
         else:
             raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
 
@@ -294,6 +296,14 @@ class Kernels:
             g.restype = None
             self._ik_batch = g
 
+    def _bind(self):
+        """The extension's bound ``fk`` and ``ik`` (``bind`` of templates/pyext.c.j2) in place of
+        the methods on this instance: they run the plain call, ``fk(Q)`` and ``ik(P)`` (with
+        ``free=`` for a 7-joint arm), in C with this instance's tool and without a Python frame
+        (a few hundred ns of a single call), and hand any other call to the method."""
+        for name in ("fk", "ik") if self._has_ik_c else ("fk",):
+            self.__dict__[name] = self._ext.bind(name, self._tool, getattr(Kernels, name).__get__(self))
+
     @property
     def library(self) -> Path:
         """The compiled shared library of the C kernels (compiled on first use)."""
@@ -306,13 +316,16 @@ class Kernels:
         the tool frame (as P T^-1). No regeneration; ``with_tool(None)`` removes it."""
         k = copy.copy(self)
         k._tool = None if tool is None else as_pose(tool, "tool")
+        if k._ext is not None:
+            k._bind()
         return k
 
     def fk(self, Q) -> np.ndarray:
-        """Unit dual quaternions (n, 8) of the end frame (sign as the product gives)."""
-        ext = self._ext             # the common path first, with few lookups (single calls)
-        if ext is not None:
-            return ext.fk(Q, self._tool)
+        """Unit dual quaternions (n, 8) of the end frame (sign as the product gives). With the C
+        extension, ``k.fk`` is its bound fk (:meth:`_bind`), which comes here only for calls with
+        keywords."""
+        if self._ext is not None:
+            return self._ext.fk(Q, self._tool)
         q, single = self._q(Q)
         if self.backend == "python":
             out = _rows(self._mod.fk, q, 8)
@@ -386,15 +399,11 @@ class Kernels:
         closed-form step took, :attr:`branch_labels`; -1 in the padding) and its singular flag:
         (solutions, counts, branch, singular). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`), padded to the largest count of the
-        call."""
-        ext = self._ext
-        if (ext is not None and self._has_ik_c and not details and not within_limits
-                and (free is None) is (self.free is None)):
-            # the common path in one C call, the input checked in C (a few hundred ns of Python
-            # less per single pose than the general path below)
-            out = ext.ik(P, self._tool, False) if free is None else ext.ik(P, self._tool, False, free)
-            if out is not NotImplemented:
-                return out
+        call.
+
+        With the C extension, ``k.ik`` is its bound ik (:meth:`_bind`): the plain call (poses as
+        dual quaternions, ``free`` for a 7-joint arm, nothing else) runs in C, the input checked
+        there, and every other call comes here."""
         self._check_free(free)
         self._require_ik()
         if details or within_limits:
@@ -408,8 +417,7 @@ class Kernels:
                                               else (sols3, cnt, b3, g3))
             return (sols, counts, branch, sing) if details else (sols, counts)
         if self._ext is not None:
-            poses, single = as_pose_batch(P)
-            return self._ext.ik(poses[0] if single else poses, self._tool, False, *self._ext_args(free))
+            return self._ext_ik(P, False, free)
         poses, single = self._tool_free(P)
         n = poses.shape[0]
         fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
@@ -441,10 +449,15 @@ class Kernels:
             sols, counts = self.ik(P, free=free)
             shape = sols.shape[:-1]
             return sols, counts, np.full(shape, -1), np.zeros(shape, dtype=bool)
-        out = self._ext.ik(P, self._tool, True, *self._ext_args(free))
+        return self._ext_ik(P, True, free)
+
+    def _ext_ik(self, P, details: bool, free):
+        """The extension's ik of poses P of the tool frame: dual quaternions are read and checked
+        in C, 4x4 matrices converted here first (the extension returns NotImplemented for them)."""
+        out = self._ext.ik(P, self._tool, details, *self._ext_args(free))
         if out is NotImplemented:
             poses, single = as_pose_batch(P)
-            out = self._ext.ik(poses[0] if single else poses, self._tool, True, *self._ext_args(free))
+            out = self._ext.ik(poses[0] if single else poses, self._tool, details, *self._ext_args(free))
         return out
 
     def _tool_free(self, P):
