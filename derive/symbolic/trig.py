@@ -20,12 +20,83 @@ checked symbolically.
 from __future__ import annotations
 
 import sympy as sp
+from sympy.core.mul import _keep_coeff
+from sympy.polys.polyerrors import BasePolynomialError
+from sympy.polys.rings import ring
 from sympy.simplify.fu import TR10i
 
 
+def _factor_list(p):
+    """(content, [(factor, multiplicity)]) of ``p``, a sparse polynomial over the integers.
+
+    The factors are irreducible, primitive, with a positive leading coefficient (lex order of
+    the ring's generators), as ``factor_list`` gives them; a factorisation so normalised is
+    unique, so this is exactly sympy's answer. It is found cheaply when ``p`` has degree 1 in
+    some generator x (the chain products are linear in each sine and cosine): with
+    ``p = x A + B`` and ``h = gcd(A, B)``, ``p = h (x A/h + B/h)`` and the cofactor is
+    irreducible (degree 1 in x, its coefficients A/h, B/h coprime), so only ``h``, which lacks
+    x, is left to factor. Without such a generator sympy's ``factor_list`` does the work.
+    """
+    cont, p = p.primitive()
+    if p.LC < 0:
+        cont, p = -cont, -p
+    if p.is_ground:
+        return cont * p.LC, []
+    k = next((k for k, d in enumerate(p.degrees()) if d == 1), None)
+    if k is None:
+        c, factors = p.factor_list()
+        return cont * c, factors
+    ring_ = p.ring
+    a = ring_({m[:k] + (0,) + m[k + 1:]: c for m, c in p.terms() if m[k]})
+    b = ring_({m: c for m, c in p.terms() if not m[k]})
+    h, a, b = a.cofactors(b)
+    if h.is_ground:
+        return cont, [(p, 1)]
+    q = ring_.gens[k] * a + b
+    c, factors = _factor_list(h)
+    if q.LC < 0:
+        q, c = -q, -c
+    return cont * c, factors + [(q, 1)]
+
+
+def _factor(c: sp.Expr) -> sp.Expr:
+    """``sp.factor(c)``, the same expression, faster for polynomials in sines, cosines and symbols.
+
+    ``sp.factor`` factors each factor of ``c`` as a polynomial and multiplies the normalised
+    irreducible factors back with ``_keep_coeff``; by unique factorisation the result does not
+    depend on how ``c`` is split, so each factor of ``c`` is factored by :func:`_factor_list`
+    and the product built the same way. Anything else (rational or algebraic coefficients,
+    other functions) is left to ``sp.factor``.
+    """
+    if not isinstance(c, sp.Expr) or c.is_Number:
+        return sp.factor(c)
+    coeff, factors = sp.S.One, {}
+    for arg in sp.Mul.make_args(c):
+        if arg.is_Number:
+            coeff *= arg
+            continue
+        base, e = arg.as_base_exp() if arg.is_Pow else (arg, sp.S.One)
+        if not (e.is_Integer and e > 0):
+            return sp.factor(c)
+        try:
+            poly = sp.Poly(base)
+        except BasePolynomialError:
+            return sp.factor(c)
+        if poly.domain != sp.ZZ or not all(g.is_Symbol or isinstance(g, (sp.sin, sp.cos)) for g in poly.gens):
+            return sp.factor(c)
+        ring_ = ring(poly.gens, sp.ZZ)[0]
+        cont, fs = _factor_list(ring_.from_dict(dict(poly.terms())))
+        coeff *= sp.Integer(cont) ** e
+        for f, k in fs:
+            f = f.as_expr()
+            factors[f] = factors.get(f, 0) + k * e
+    return _keep_coeff(coeff, sp.Mul(*[f**k for f, k in factors.items()]))
+
+
 def _fold(c: sp.Expr) -> sp.Expr:
+    """Factor ``c`` and fold it with ``TR10i``, repeated until nothing changes (at most 4 times)."""
     for _ in range(4):
-        new = TR10i(sp.factor(c))
+        new = TR10i(_factor(c))
         if new == c:
             break
         c = new
