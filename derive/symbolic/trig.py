@@ -19,6 +19,8 @@ checked symbolically.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import sympy as sp
 from sympy.core.mul import _keep_coeff
 from sympy.polys.polyerrors import BasePolynomialError
@@ -93,8 +95,13 @@ def _factor(c: sp.Expr) -> sp.Expr:
     return _keep_coeff(coeff, sp.Mul(*[f**k for f, k in factors.items()]))
 
 
+@lru_cache(maxsize=2048)
 def _fold(c: sp.Expr) -> sp.Expr:
-    """Factor ``c`` and fold it with ``TR10i``, repeated until nothing changes (at most 4 times)."""
+    """Factor ``c`` and fold it with ``TR10i``, repeated until nothing changes (at most 4 times).
+
+    Cached: the same coefficient comes back in many equations, sets and robots, and the result
+    depends on ``c`` only (sympy expressions are immutable and compare structurally).
+    """
     for _ in range(4):
         new = TR10i(_factor(c))
         if new == c:
