@@ -146,8 +146,18 @@ def half_angle_normal_form(expr: sp.Expr, thetas) -> sp.Expr:
     left. The result is unique, so a difference of two expressions is zero
     exactly when its normal form is 0.
     """
+    return _normal_form(expr, tuple(thetas))
+
+
+@lru_cache(maxsize=1024)
+def _normal_form(expr: sp.Expr, thetas: tuple) -> sp.Expr:
+    """:func:`half_angle_normal_form`, cached: the robots of a family verify the same differences.
+
+    theta_i -> 2 phi_i is a plain replacement of symbols (``xreplace``, the same expression
+    as ``subs`` gives, without its pattern matching).
+    """
     phis = [sp.Dummy(f"phi{k}") for k in range(len(thetas))]
-    e = expr.subs({t: 2 * p for t, p in zip(thetas, phis)}, simultaneous=True)
+    e = expr.xreplace({t: 2 * p for t, p in zip(thetas, phis)})
     e = sp.expand_trig(e)
     cs = [sp.Dummy(f"C{k}") for k in range(len(thetas))]
     ss = [sp.Dummy(f"S{k}") for k in range(len(thetas))]
