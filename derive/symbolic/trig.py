@@ -149,27 +149,77 @@ def half_angle_normal_form(expr: sp.Expr, thetas) -> sp.Expr:
     return _normal_form(expr, tuple(thetas))
 
 
+@lru_cache(maxsize=None)
+def _symbols(n: int) -> tuple:
+    """(phi, C, S): the dummies of n joint angles, made once so that expansions can be cached."""
+    return tuple(tuple(sp.Dummy(f"{x}{k}") for k in range(n)) for x in ("phi", "C", "S"))
+
+
+def _in_half_angles(e: sp.Expr, thetas: tuple) -> sp.Expr:
+    """``e`` with theta_i = 2 phi_i (a plain replacement, ``xreplace``), its sines and cosines
+    expanded (``expand_trig``) into polynomials in C_i = cos(phi_i), S_i = sin(phi_i)."""
+    phis, cs, ss = _symbols(len(thetas))
+    e = sp.expand_trig(e.xreplace({t: 2 * p for t, p in zip(thetas, phis)}))
+    rep = {h(p): x for p, c, s in zip(phis, cs, ss) for h, x in ((sp.cos, c), (sp.sin, s))}
+    return sp.expand(e.xreplace(rep))
+
+
+#: :func:`_in_half_angles` of one sine or cosine, cached.
+_expanded = lru_cache(maxsize=4096)(_in_half_angles)
+
+
+class _NotPolynomial(Exception):
+    """Raised by :func:`_to_ring` for anything but sums, products and powers of its atoms."""
+
+
+def _to_ring(e: sp.Expr, images: dict, ring_):
+    """``e`` (sums, products and powers of ``images``' keys and rationals) in ``ring_``."""
+    if e in images:
+        return images[e]
+    if e.is_Rational:
+        return ring_(e)
+    if e.is_Add:
+        return ring_.add(*[_to_ring(a, images, ring_) for a in e.args])
+    if e.is_Mul:
+        out = ring_.one
+        for a in e.args:
+            out *= _to_ring(a, images, ring_)
+        return out
+    if e.is_Pow and e.exp.is_Integer and e.exp > 0:
+        return _to_ring(e.base, images, ring_) ** int(e.exp)
+    raise _NotPolynomial
+
+
 @lru_cache(maxsize=1024)
 def _normal_form(expr: sp.Expr, thetas: tuple) -> sp.Expr:
     """:func:`half_angle_normal_form`, cached: the robots of a family verify the same differences.
 
-    theta_i -> 2 phi_i is a plain replacement of symbols (``xreplace``, the same expression
-    as ``subs`` gives, without its pattern matching).
+    Each sine and cosine is expanded once (:func:`_expanded`), the expression is multiplied out
+    with sparse polynomials over the rationals, and its remainder modulo S_i^2 + C_i^2 - 1 (a
+    Groebner basis: the leading terms S_i^2 are coprime) is the unique normal form. Other
+    coefficients (algebraic numbers, floats) take the way of sympy expressions.
     """
-    phis = [sp.Dummy(f"phi{k}") for k in range(len(thetas))]
-    e = expr.xreplace({t: 2 * p for t, p in zip(thetas, phis)})
-    e = sp.expand_trig(e)
-    cs = [sp.Dummy(f"C{k}") for k in range(len(thetas))]
-    ss = [sp.Dummy(f"S{k}") for k in range(len(thetas))]
-    rep = {}
-    for p, c, s in zip(phis, cs, ss):
-        rep[sp.cos(p)] = c
-        rep[sp.sin(p)] = s
-    e = sp.expand(e.xreplace(rep))
+    phis, cs, ss = _symbols(len(thetas))
+    others = sorted(expr.free_symbols - set(thetas), key=sp.default_sort_key)
+    ring_ = ring(ss + cs + tuple(others), sp.QQ)[0]
+    images = {x: g for x, g in zip(ss + cs + tuple(others), ring_.gens)}
+    try:
+        for f in expr.atoms(sp.sin, sp.cos):
+            images[f] = _to_ring(_expanded(f, thetas), images, ring_)
+        poly = _to_ring(expr, images, ring_)
+    except _NotPolynomial:
+        return _normal_form_expanded(expr, thetas)
+    rem = poly.rem([ring_(s**2 + c**2 - 1) for s, c in zip(ss, cs)])
+    return sp.expand(rem.as_expr())
+
+
+def _normal_form_expanded(expr: sp.Expr, thetas: tuple) -> sp.Expr:
+    """:func:`half_angle_normal_form` with sympy expressions."""
+    phis, cs, ss = _symbols(len(thetas))
+    e = _in_half_angles(expr, thetas)
     if e.has(*phis):
         raise ValueError("expression has angles that are not sums of joint angles")
     poly = sp.Poly(e, *ss, *cs)
-    # reduce modulo S^2 + C^2 - 1 (a Groebner basis: the leading terms S_i^2 are coprime)
     basis = [s**2 + c**2 - 1 for s, c in zip(ss, cs)]
     _, rem = sp.reduced(poly.as_expr(), basis, *ss, *cs)
     return sp.expand(rem)
