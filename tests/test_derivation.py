@@ -22,7 +22,7 @@ from derive.symbolic.equations import (
     derive_set,
     verify_numeric,
 )
-from derive.symbolic.trig import half_angle_normal_form
+from derive.symbolic.trig import _factor, half_angle_normal_form
 
 #: one pytest-xdist worker runs the tests of group "ur-derivation" (make test: --dist loadgroup),
 #: so the symbolic work they share (the UR family's equations, memoised in the process) is done once
@@ -99,6 +99,24 @@ def test_symbolic_check_rejects_a_wrong_side(ur3):
     assert half_angle_normal_form(wrong.rhs - eset.raw["C.12"][1], thetas) == 0
     assert half_angle_normal_form(wrong.rhs + 2 * a2 - eset.raw["C.12"][1], thetas) != 0
     assert half_angle_normal_form(sp.cos(t2 + t3) - sp.cos(t2 - t3), thetas) != 0
+
+
+def test_factor_is_sympy_factor():
+    """The cheap factorisation gives sympy's expression, also where it falls back to sympy."""
+    c1, s1, c5, s5 = sp.cos(t1 / 2), sp.sin(t1 / 2), sp.cos(t5 / 2), sp.sin(t5 / 2)
+    irreducible = c1 * c5 + s1 * s5 * d1 - a2
+    cases = [
+        sp.expand(-2 * (c1 * c5 - s1 * s5) * (c1 * s5 + s1 * c5) * a2),    # two factors, content -2
+        sp.expand(irreducible),
+        sp.expand(3 * c1 * s1**2 * (c5 + s5) ** 2),                      # squares: sympy's factor_list
+        sp.expand(6 * (c1 + s1) * a2),                                   # a lone sum keeps 6 outside
+        -d1, sp.Integer(0), sp.Integer(5),
+        sp.expand((c1 + s1) * (c5 - s5) / 2),                            # rational: sympy
+        sp.expand(sp.sqrt(2) * (c1 + s1) * (c5 - s5)),                   # algebraic: sympy
+        (c1 + s1) * sp.expand((c5 - s5) * (c1 - s5)) * d1,               # a product of sums
+    ]
+    for e in cases:
+        assert sp.srepr(_factor(e)) == sp.srepr(sp.factor(e)), e
 
 
 def test_numeric_check_rejects_a_wrong_equation():
