@@ -363,7 +363,7 @@ def test_c_compiles_cleanly_and_runs_standalone(tmp_path, extra):
         "  ur10e_ik_batch(50, &P[0][0], sols, counts);\n"
         "  for (int i = 0; i < 50; ++i) {\n    const int c = ur10e_ik(P[i], one);\n"
         "    printf(\"%d %d\\n\", counts[i], c);\n"
-        "    for (int k = 0; k < 48; ++k) {\n      printf(\"%.17g %.17g\\n\", sols[i * 48 + k], k < 6 * c ? one[k] : 0.0 / 0.0);\n    }\n  }\n"
+        "    for (int k = 0; k < 48; ++k) {\n      printf(\"%.17g %.17g\\n\", sols[i * 48 + k], one[k]);\n    }\n  }\n"
         "  return 0;\n}\n")
     flags = ["-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", *extra]
     res = subprocess.run(["gcc", *flags, "-o", str(tmp_path / "t"), str(tmp_path / "main.c"),
@@ -641,3 +641,64 @@ def test_fk_angle_sums_come_from_two_called_angles():
         k = fk_kernel(robot)
         assert k.n_sincos == calls
         assert sum(isinstance(t[2], tuple) and t[2][0] == "sum" for t in k.trig) == sums
+
+
+def _c_batches(lib, ident, poses, fv, seeds):
+    """ik_batch_ex, nearest_batch and the single-pose ik of a compiled kernel library (ctypes):
+    every array they write, for a bit-for-bit comparison."""
+    n, dof = seeds.shape
+    nmax = 8
+    pz, sz = np.ascontiguousarray(poses), np.ascontiguousarray(seeds)
+    lead = [pz.ctypes.data] + ([np.ascontiguousarray(fv).ctypes.data] if fv is not None else [])
+    sols, counts = np.empty((n, nmax, dof)), np.empty(n, dtype=np.intc)
+    branch, sing = np.empty((n, nmax), dtype=np.intc), np.empty((n, nmax), dtype=np.intc)
+    f = getattr(lib, f"{ident}_ik_batch_ex")
+    f.restype = None
+    f(ctypes.c_size_t(n), *map(ctypes.c_void_p, lead + [sols.ctypes.data, counts.ctypes.data,
+                                                        branch.ctypes.data, sing.ctypes.data]))
+    q, mx, tt = np.empty((n, dof)), np.empty(n), np.empty(n)
+    nb, ns = np.empty(n, dtype=np.intc), np.empty(n, dtype=np.intc)
+    g = getattr(lib, f"{ident}_ik_nearest_batch")
+    g.restype = None
+    g(ctypes.c_size_t(n), *map(ctypes.c_void_p, lead + [sz.ctypes.data, q.ctypes.data, mx.ctypes.data,
+                                                        tt.ctypes.data, nb.ctypes.data, ns.ctypes.data]))
+    one = np.full((n, nmax, dof), 7.0)
+    h = getattr(lib, f"{ident}_ik")
+    h.restype = ctypes.c_int
+    c1 = np.array([h(ctypes.c_void_p(pz[i].ctypes.data),
+                     *([ctypes.c_double(fv[i])] if fv is not None else []),
+                     ctypes.c_void_p(one[i].ctypes.data)) for i in range(n)])
+    return [sols, counts, branch, sing, q, mx, tt, nb, ns, one, c1]
+
+
+@pytest.mark.skipif(loader.c_compiler() is None, reason="no C compiler")
+@pytest.mark.parametrize("robot", ["ur5", "panda"])
+def test_block_size_changes_no_bit(robot, monkeypatch):
+    """DQ_BLOCK (the poses per block of the batch loops, on the stack) is a build option for small
+    stacks: with -DDQ_BLOCK=8 the IK batch with details, the nearest batch and the single-pose IK
+    (a batch of one, NaN past its count) write the same bits as the default build of 64, on
+    random and singular poses that straddle the blocks of both sizes."""
+    rng = np.random.default_rng(8)
+    lim = derive.load_robot(robot).limits
+    dof = len(lim)
+    q = rng.uniform(np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi), size=(150, dof))
+    q[5::11, 4 if dof == 6 else 1] = 0.0          # wrist (UR) or shoulder (Panda, q2) singular
+    poses = reference.fk(robot, q)
+    fv = q[:, 6].copy() if dof == 7 else None      # the Panda's free parameter is q7
+    seeds = q + rng.normal(0, 0.05, size=q.shape)
+    k = derive.kernels(robot, "c")
+    default = _c_batches(ctypes.CDLL(str(k.library)), k._ident, poses, fv, seeds)
+    monkeypatch.setenv("DQ_DERIVE_CFLAGS", " ".join(loader.c_flags() + ["-DDQ_BLOCK=8"]))
+    small = _c_batches(ctypes.CDLL(str(_compile(k._c_source, k._ident))), k._ident, poses, fv, seeds)
+    for a, b in zip(default, small):
+        np.testing.assert_array_equal(a, b)
+    sols, counts, branch, sing, q_near, *_, one, c1 = default
+    np.testing.assert_array_equal(c1, counts)
+    np.testing.assert_array_equal(one, sols)                  # the batch of one, NaN padding included
+    assert np.all(np.isnan(sols) == (np.arange(8)[None, :, None] >= counts[:, None, None]))
+    regular = np.ones(len(q), dtype=bool)
+    regular[5::11] = False
+    assert sing[~regular].any() and counts.min() >= 1 and not np.isnan(q_near[regular]).any()
+    # the solutions are real ones: each reproduces its pose (the reference FK, plain products)
+    rows = np.nonzero(np.arange(8)[None, :] < counts[:, None])
+    assert mod_sign(reference.fk(robot, sols[rows]), poses[rows[0]]) < 1e-9

@@ -378,8 +378,13 @@ void iiwa7_fk(const double *restrict q, double *restrict out)
 }
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
- * over the poses of a block has unit stride and the compiler can vectorise it. */
+ * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
+ * the stack, so the stack of the batch functions (and of iiwa7_ik, a batch of one) grows with
+ * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define DQ_BLOCK smaller
+ * (a multiple of 8, e.g. -DDQ_BLOCK=8) for a small stack; the results do not depend on it. */
+#ifndef DQ_BLOCK
 #define DQ_BLOCK 64
+#endif
 
 void iiwa7_fk_batch(size_t n, const double *restrict q, double *restrict out)
 {
@@ -460,208 +465,6 @@ DQ_INLINE double dq_max(double a, double b)
     return dq_sel(a > b, a, b);
 }
 
-/* Candidates without near-duplicates (the first of each group kept), packed into sols; where
- * ids is not NULL, ids[k] is the branch (leaf) index of solution k. */
-static int dq_merge(const double cand[8][7], const int valid[8], double *restrict sols,
-                    int *restrict ids)
-{
-    int count = 0;
-    for (int i = 0; i < 8; ++i) {
-        if (!valid[i]) {
-            continue;
-        }
-        int dup = 0;
-        for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_max(dq_adist(cand[i][5], cand[j][5]), dq_adist(cand[i][6], cand[j][6]))))))) < 1e-06) {
-                dup = 1;
-            }
-        }
-        if (!dup) {
-            for (int k = 0; k < 7; ++k) {
-                sols[count * 7 + k] = cand[i][k];
-            }
-            if (ids) {
-                ids[count] = i;
-            }
-            ++count;
-        }
-    }
-    return count;
-}
-
-int iiwa7_ik(const double *restrict pose, double fv, double *restrict sols)
-{
-    double cand[8][7];
-    int valid[8] = {0};
-    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
-    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
-    const double pr00 = -2.0*p2*p2 - 2.0*p3*p3 + 1.0;
-    const double pr01 = -2.0*p0*p3 + 2.0*p1*p2;
-    const double pr02 = 2.0*p0*p2 + 2.0*p1*p3;
-    const double pr10 = 2.0*p0*p3 + 2.0*p1*p2;
-    const double pr11 = -2.0*p1*p1 - 2.0*p3*p3 + 1.0;
-    const double pr12 = -2.0*p0*p1 + 2.0*p2*p3;
-    const double pr20 = -2.0*p0*p2 + 2.0*p1*p3;
-    const double pr21 = 2.0*p0*p1 + 2.0*p2*p3;
-    const double pr22 = -2.0*p1*p1 - 2.0*p2*p2 + 1.0;
-    const double pt0 = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-    const double pt1 = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
-    const double pt2 = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
-    const double rc00 = pr00;
-    const double rc01 = pr01;
-    const double rc02 = pr02;
-    const double rc10 = pr10;
-    const double rc11 = pr11;
-    const double rc12 = pr12;
-    const double rc20 = pr20;
-    const double rc21 = pr21;
-    const double rc22 = pr22;
-    const double w0 = pt0 - 0.1259999999999999*rc02;
-    const double w1 = pt1 - 0.1259999999999999*rc12;
-    const double w2 = pt2 - 0.1259999999999999*rc22 - 0.34;
-    const double ww = w0*w0 + w1*w1 + w2*w2;
-    if (!(ww > 1.0000000000000001e-20)) {
-        return 0;
-    }
-    const double ce = 3.124999999999999*ww - 1.0;
-    if (!(fabs(ce) <= 1.0000000001)) {
-        return 0;
-    }
-    const double ct4_lo = (ce <= -0.99999999999999) ? -1.0 : ce;
-    const double ct4 = (ce >= 0.99999999999999) ? 1.0 : ct4_lo;
-    const double st4a = sqrt(dq_sel((1 - ct4*ct4) > 0.0, 1 - ct4*ct4, 0.0));
-    const double t4a = dq_atan2(st4a, ct4);
-    const double nw = sqrt(ww);
-    const double x0 = w0/nw;
-    const double x1 = w1/nw;
-    const double x2 = w2/nw;
-    double s1, c1;
-    dq_sincos(fv, &s1, &c1);
-    const double rq00 = -c1*x0*x0 + c1 + x0*x0;
-    const double rq01 = -c1*x0*x1 - s1*x2 + x0*x1;
-    const double rq02 = -c1*x0*x2 + s1*x1 + x0*x2;
-    const double rq10 = -c1*x0*x1 + s1*x2 + x0*x1;
-    const double rq11 = -c1*x1*x1 + c1 + x1*x1;
-    const double rq12 = -c1*x1*x2 - s1*x0 + x1*x2;
-    const double rq20 = -c1*x0*x2 - s1*x1 + x0*x2;
-    const double rq21 = -c1*x1*x2 + s1*x0 + x1*x2;
-    const double rq22 = -c1*x2*x2 + c1 + x2*x2;
-    const double rho = sqrt(w0*w0 + w1*w1);
-    const double rho_d = (rho > 1e-12) ? rho : 1.0;
-    const double ca0 = (rho > 1e-12) ? w0/rho_d : 1.0;
-    const double sa0 = (rho > 1e-12) ? w1/rho_d : 0;
-    const double cb0 = w2/nw;
-    const double sb0 = rho/nw;
-    for (int b1 = 0; b1 < 2; ++b1) {
-        const double sg1 = b1 ? -1.0 : 1.0;
-        const double st4 = sg1*st4a;
-        const double t4 = sg1*t4a;
-        const double vx = 0.40000000000000013*st4;
-        const double vz = 0.40000000000000013*ct4 + 0.39999999999999997;
-        const double nv = sqrt(vx*vx + vz*vz);
-        const double cphi = vz/nv;
-        const double sphi = vx/nv;
-        const double cbe = cb0*cphi + sb0*sphi;
-        const double sbe = -cb0*sphi + cphi*sb0;
-        const double rs00 = ca0*cbe*rq00 + cbe*rq01*sa0 - rq02*sbe;
-        const double rs01 = ca0*rq01 - rq00*sa0;
-        const double rs02 = ca0*rq00*sbe + cbe*rq02 + rq01*sa0*sbe;
-        const double rs10 = ca0*cbe*rq10 + cbe*rq11*sa0 - rq12*sbe;
-        const double rs11 = ca0*rq11 - rq10*sa0;
-        const double rs12 = ca0*rq10*sbe + cbe*rq12 + rq11*sa0*sbe;
-        const double rs20 = ca0*cbe*rq20 + cbe*rq21*sa0 - rq22*sbe;
-        const double rs21 = ca0*rq21 - rq20*sa0;
-        const double rs22 = ca0*rq20*sbe + cbe*rq22 + rq21*sa0*sbe;
-        const double sh_hs = sqrt(rs02*rs02 + rs12*rs12);
-        const int singular_sh = sh_hs < 1e-11;
-        const double sh_a = (singular_sh) ? 0 : dq_atan2(rs12, rs02);
-        const double sh_bs = (rs22 >= 0) ? 0 : 3.141592653589793;
-        const double sh_b = (singular_sh) ? sh_bs : dq_atan2(sh_hs, rs22);
-        const double sh_cb = (singular_sh) ? copysign(1.0, rs22) : rs22;
-        const double sh_off = (singular_sh) ? 0 : 3.141592653589793;
-        const double sh_hd = (singular_sh) ? 1.0 : sh_hs;
-        const double sh_ca = (singular_sh) ? 1.0 : rs02/sh_hd;
-        const double sh_sa = (singular_sh) ? 0 : rs12/sh_hd;
-        const double sh_sb = (singular_sh) ? 0 : sh_hs;
-        const double sh_ny = -rs00*sh_sa + rs10*sh_ca;
-        const double sh_nx = -rs20*sh_sb + sh_cb*(rs00*sh_ca + rs10*sh_sa);
-        const double sh_c = dq_atan2(sh_ny, sh_nx);
-        const double sh_nn = sqrt(sh_nx*sh_nx + sh_ny*sh_ny);
-        const double sh_cc = sh_nx/sh_nn;
-        const double sh_sc = sh_ny/sh_nn;
-        const double ma00 = rc00*sh_ca + rc10*sh_sa;
-        const double ma01 = rc01*sh_ca + rc11*sh_sa;
-        const double ma02 = rc02*sh_ca + rc12*sh_sa;
-        const double ma10 = -rc00*sh_sa + rc10*sh_ca;
-        const double ma11 = -rc01*sh_sa + rc11*sh_ca;
-        const double ma12 = -rc02*sh_sa + rc12*sh_ca;
-        const double ma20 = rc20;
-        const double ma21 = rc21;
-        const double ma22 = rc22;
-        const double mb00 = ma00*sh_cb - ma20*sh_sb;
-        const double mb01 = ma01*sh_cb - ma21*sh_sb;
-        const double mb02 = ma02*sh_cb - ma22*sh_sb;
-        const double mb10 = ma10;
-        const double mb11 = ma11;
-        const double mb12 = ma12;
-        const double mb20 = ma00*sh_sb + ma20*sh_cb;
-        const double mb21 = ma01*sh_sb + ma21*sh_cb;
-        const double mb22 = ma02*sh_sb + ma22*sh_cb;
-        const double mc00 = mb00*sh_cc + mb10*sh_sc;
-        const double mc01 = mb01*sh_cc + mb11*sh_sc;
-        const double mc02 = mb02*sh_cc + mb12*sh_sc;
-        const double mc10 = -mb00*sh_sc + mb10*sh_cc;
-        const double mc11 = -mb01*sh_sc + mb11*sh_cc;
-        const double mc12 = -mb02*sh_sc + mb12*sh_cc;
-        const double mc20 = mb20;
-        const double mc21 = mb21;
-        const double mc22 = mb22;
-        const double rw00 = ct4*mc00 - mc20*st4;
-        const double rw01 = ct4*mc01 - mc21*st4;
-        const double rw02 = ct4*mc02 - mc22*st4;
-        const double rw10 = mc10;
-        const double rw11 = mc11;
-        const double rw12 = mc12;
-        const double rw20 = ct4*mc20 + mc00*st4;
-        const double rw21 = ct4*mc21 + mc01*st4;
-        const double rw22 = ct4*mc22 + mc02*st4;
-        const double wr_hs = sqrt(rw02*rw02 + rw12*rw12);
-        const int singular_wr = wr_hs < 1e-11;
-        const double wr_a = (singular_wr) ? 0 : dq_atan2(rw12, rw02);
-        const double wr_bs = (rw22 >= 0) ? 0 : 3.141592653589793;
-        const double wr_b = (singular_wr) ? wr_bs : dq_atan2(wr_hs, rw22);
-        const double wr_cb = (singular_wr) ? copysign(1.0, rw22) : rw22;
-        const double wr_off = (singular_wr) ? 0 : 3.141592653589793;
-        const double wr_ny = (singular_wr) ? rw10 : -rw00*rw12 + rw02*rw10;
-        const double wr_nx = (singular_wr) ? rw00*wr_cb : -rw20*wr_hs*wr_hs + rw22*(rw00*rw02 + rw10*rw12);
-        const double wr_c = dq_atan2(wr_ny, wr_nx);
-        const int singular = (singular_sh) | (singular_wr) | (st4a < 1e-11);
-        for (int b2 = 0; b2 < 2; ++b2) {
-            const double sg2 = b2 ? -1.0 : 1.0;
-            const double t1 = sh_a + sh_off*(0.5 - 0.5*sg2);
-            const double t2 = sg2*sh_b;
-            const double t3 = sh_c + sh_off*(0.5 - 0.5*sg2);
-            for (int b3 = 0; b3 < 2; ++b3) {
-                const double sg3 = b3 ? -1.0 : 1.0;
-                const double t5 = wr_a + wr_off*(0.5 - 0.5*sg3);
-                const double t6 = sg3*wr_b;
-                const double t7 = wr_c + wr_off*(0.5 - 0.5*sg3);
-                {
-                    double *const cq = cand[2*b1 + 4*b2 + b3];
-                    cq[0] = dq_wrap(t1);
-                    cq[1] = dq_wrap(t2);
-                    cq[2] = dq_wrap(t3);
-                    cq[3] = dq_wrap(-t4);
-                    cq[4] = dq_wrap(t5);
-                    cq[5] = dq_wrap(t6);
-                    cq[6] = dq_wrap(t7);
-                    valid[2*b1 + 4*b2 + b3] = 1;
-                }
-            }
-        }
-    }
-    return dq_merge((const double (*)[7])cand, valid, sols, NULL);
-}
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
@@ -1060,10 +863,10 @@ static void dq_singular_block(size_t m, const double pb[9][DQ_BLOCK], double cb[
 }
 
 /* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
- * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
- * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
- * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
- * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
+ * every joint: the first of each group of near-duplicates kept) packed in branch order and
+ * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
+ * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and the slot advances only when it is kept,
  * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
  * are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][7][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
@@ -1097,7 +900,7 @@ static void dq_pack_block(size_t m, double cb[][7][DQ_BLOCK], int kb[][DQ_BLOCK]
 /* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
  * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
  * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
- * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, as above).
  * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
  * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
  * loops over them). */
@@ -1595,6 +1398,16 @@ void iiwa7_ik_batch_ex(size_t n, const double *restrict poses, const double *res
         dq_pack_block(m, cb, kb, sb, sols + i0 * 56, counts + i0,
                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
     }
+}
+
+/* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
+ * program without data-dependent branches is faster than a branching one). sols (IK_MAX x DOF)
+ * is NaN past the returned count. */
+int iiwa7_ik(const double *restrict pose, double fv, double *restrict sols)
+{
+    int count;
+    iiwa7_ik_batch_ex(1, pose, &fv, sols, &count, NULL, NULL);
+    return count;
 }
 
 /* rint(x) (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick, which vectorises without SSE4.1's

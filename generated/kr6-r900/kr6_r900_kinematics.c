@@ -266,8 +266,13 @@ void kr6_r900_fk(const double *restrict q, double *restrict out)
 }
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
- * over the poses of a block has unit stride and the compiler can vectorise it. */
+ * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
+ * the stack, so the stack of the batch functions (and of kr6_r900_ik, a batch of one) grows with
+ * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define DQ_BLOCK smaller
+ * (a multiple of 8, e.g. -DDQ_BLOCK=8) for a small stack; the results do not depend on it. */
+#ifndef DQ_BLOCK
 #define DQ_BLOCK 64
+#endif
 
 void kr6_r900_fk_batch(size_t n, const double *restrict q, double *restrict out)
 {
@@ -348,115 +353,6 @@ DQ_INLINE double dq_max(double a, double b)
     return dq_sel(a > b, a, b);
 }
 
-/* Candidates without near-duplicates (the first of each group kept), packed into sols; where
- * ids is not NULL, ids[k] is the branch (leaf) index of solution k. */
-static int dq_merge(const double cand[8][6], const int valid[8], double *restrict sols,
-                    int *restrict ids)
-{
-    int count = 0;
-    for (int i = 0; i < 8; ++i) {
-        if (!valid[i]) {
-            continue;
-        }
-        int dup = 0;
-        for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_adist(cand[i][5], cand[j][5])))))) < 1e-06) {
-                dup = 1;
-            }
-        }
-        if (!dup) {
-            for (int k = 0; k < 6; ++k) {
-                sols[count * 6 + k] = cand[i][k];
-            }
-            if (ids) {
-                ids[count] = i;
-            }
-            ++count;
-        }
-    }
-    return count;
-}
-
-int kr6_r900_ik(const double *restrict pose, double *restrict sols)
-{
-    double cand[8][6];
-    int valid[8] = {0};
-    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
-    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
-    const double x_w = -0.18*p0*p2 + 2.0*p0*p5 - 0.18*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-    const double y_w = 0.18*p0*p1 + 2.0*p0*p6 - 2.0*p1*p7 - 0.18*p2*p3 - 2.0*p2*p4 + 2.0*p3*p5;
-    const double z_w = 2.0*p0*p7 + 0.18*p1*p1 + 2.0*p1*p6 + 0.18*p2*p2 - 2.0*p2*p5 - 2.0*p3*p4 - 0.09;
-    const double k1 = y_w;
-    const double k2 = -x_w;
-    const double k3 = 0;
-    const double k4 = k1*k1 + k2*k2 - k3*k3;
-    if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return 0;
-    }
-    const double k5 = dq_atan2(k1, -k2);
-    const double k6 = sqrt(dq_sel((k4) > 0.0, k4, 0.0));
-    for (int b1 = 0; b1 < 2; ++b1) {
-        const double sg1 = b1 ? -1.0 : 1.0;
-        const double theta1 = k5 - dq_atan2(-k3, k6*sg1);
-        double s1, c1;
-        dq_sincos(0.5*theta1, &s1, &c1);
-        const double s2 = 2.0*s1*c1;
-        const double c2 = 1.0 - 2.0*s1*s1;
-        const double w7 = c2*x_w + s2*y_w - 0.025;
-        const double w8 = z_w - 0.4;
-        const double k9 = 0.3822;
-        const double k10 = 0.022750000000000003;
-        const double k11 = -w7*w7 - w8*w8 + 0.38405;
-        const double k12 = k10*k10 - k11*k11 + k9*k9;
-        if (!(k12 >= -1e-10*dq_sel((1.0) > (k11*k11), 1.0, k11*k11))) {
-            continue;
-        }
-        const double k13 = dq_atan2(k10, k9);
-        const double k14 = dq_atan2(sqrt(dq_sel((k12) > 0.0, k12, 0.0)), -k11);
-        for (int b2 = 0; b2 < 2; ++b2) {
-            const double sg2 = b2 ? -1.0 : 1.0;
-            const double theta3 = k13 + k14*sg2;
-            double s3, c3;
-            dq_sincos(theta3, &s3, &c3);
-            const double k15 = copysign(1.0, -0.3822*c3 - 0.022750000000000003*s3 - 0.38405);
-            const double theta2 = dq_atan2(k15*(-0.42*c3*w7 - 0.025*c3*w8 - 0.025*s3*w7 + 0.42*s3*w8 - 0.455*w7), k15*(0.025*c3*w7 - 0.42*c3*w8 - 0.42*s3*w7 - 0.025*s3*w8 - 0.455*w8));
-            double s4, c4;
-            dq_sincos(0.5*theta2 + 0.5*theta3, &s4, &c4);
-            const double w_r = c1*c4*p0 + c1*p2*s4 + c4*p3*s1 - p1*s1*s4;
-            const double a_r = c1*c4*p1 - c1*p3*s4 + c4*p2*s1 + p0*s1*s4;
-            const double b_r = c1*c4*p2 - c1*p0*s4 - c4*p1*s1 - p3*s1*s4;
-            const double c_r = c1*c4*p3 + c1*p1*s4 - c4*p0*s1 + p2*s1*s4;
-            const double h16 = sqrt(c_r*c_r + w_r*w_r);
-            const double h17 = dq_atan2(c_r, w_r);
-            const double h18 = sqrt(a_r*a_r + b_r*b_r);
-            const double h19 = dq_atan2(-a_r, b_r);
-            const double h20 = dq_atan2(h18, h16);
-            const double h21 = 2.0*h16*h18/(h16*h16 + h18*h18);
-            const int singular = h21 < 1e-11;
-            const int cos_small = h16 < h18;
-            for (int b3 = 0; b3 < 2; ++b3) {
-                const double sg3 = b3 ? -1.0 : 1.0;
-                const double theta5_singular = (cos_small) ? 3.141592653589793 : 0;
-                const double theta5 = (singular) ? theta5_singular : 2.0*h20*sg3;
-                const double h22 = h19 - 1.5707963267948966*sg3 + 1.5707963267948966;
-                const double theta4 = (singular) ? 0 : h17 + h22;
-                const double theta6_singular = (cos_small) ? -2.0*h22 : 2.0*h17;
-                const double theta6 = (singular) ? theta6_singular : h17 - h22;
-                {
-                    double *const cq = cand[4*b1 + 2*b2 + b3];
-                    cq[0] = dq_wrap(-theta1);
-                    cq[1] = dq_wrap(theta2 - 1.5707963267948966);
-                    cq[2] = dq_wrap(theta3);
-                    cq[3] = dq_wrap(-theta4);
-                    cq[4] = dq_wrap(theta5);
-                    cq[5] = dq_wrap(-theta6);
-                    valid[4*b1 + 2*b2 + b3] = 1;
-                }
-            }
-        }
-    }
-    return dq_merge((const double (*)[6])cand, valid, sols, NULL);
-}
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
@@ -755,10 +651,10 @@ static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[
 }
 
 /* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
- * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
- * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
- * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
- * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
+ * every joint: the first of each group of near-duplicates kept) packed in branch order and
+ * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
+ * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and the slot advances only when it is kept,
  * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
  * are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
@@ -792,7 +688,7 @@ static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK]
 /* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
  * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
  * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
- * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, as above).
  * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
  * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
  * loops over them). */
@@ -1205,6 +1101,16 @@ void kr6_r900_ik_batch_ex(size_t n, const double *restrict poses, double *restri
         dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
     }
+}
+
+/* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
+ * program without data-dependent branches is faster than a branching one). sols (IK_MAX x DOF)
+ * is NaN past the returned count. */
+int kr6_r900_ik(const double *restrict pose, double *restrict sols)
+{
+    int count;
+    kr6_r900_ik_batch_ex(1, pose, sols, &count, NULL, NULL);
+    return count;
 }
 
 /* rint(x) (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick, which vectorises without SSE4.1's

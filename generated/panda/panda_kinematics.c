@@ -411,8 +411,13 @@ void panda_fk(const double *restrict q, double *restrict out)
 }
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
- * over the poses of a block has unit stride and the compiler can vectorise it. */
+ * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
+ * the stack, so the stack of the batch functions (and of panda_ik, a batch of one) grows with
+ * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define DQ_BLOCK smaller
+ * (a multiple of 8, e.g. -DDQ_BLOCK=8) for a small stack; the results do not depend on it. */
+#ifndef DQ_BLOCK
 #define DQ_BLOCK 64
+#endif
 
 void panda_fk_batch(size_t n, const double *restrict q, double *restrict out)
 {
@@ -493,168 +498,6 @@ DQ_INLINE double dq_max(double a, double b)
     return dq_sel(a > b, a, b);
 }
 
-/* Candidates without near-duplicates (the first of each group kept), packed into sols; where
- * ids is not NULL, ids[k] is the branch (leaf) index of solution k. */
-static int dq_merge(const double cand[8][7], const int valid[8], double *restrict sols,
-                    int *restrict ids)
-{
-    int count = 0;
-    for (int i = 0; i < 8; ++i) {
-        if (!valid[i]) {
-            continue;
-        }
-        int dup = 0;
-        for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_max(dq_adist(cand[i][5], cand[j][5]), dq_adist(cand[i][6], cand[j][6]))))))) < 1e-06) {
-                dup = 1;
-            }
-        }
-        if (!dup) {
-            for (int k = 0; k < 7; ++k) {
-                sols[count * 7 + k] = cand[i][k];
-            }
-            if (ids) {
-                ids[count] = i;
-            }
-            ++count;
-        }
-    }
-    return count;
-}
-
-int panda_ik(const double *restrict pose, double fv, double *restrict sols)
-{
-    double cand[8][7];
-    int valid[8] = {0};
-    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
-    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
-    const double fr00 = -2.0*p2*p2 - 2.0*p3*p3 + 1.0;
-    const double fr01 = -2.0*p0*p3 + 2.0*p1*p2;
-    const double fr02 = 2.0*p0*p2 + 2.0*p1*p3;
-    const double fr10 = 2.0*p0*p3 + 2.0*p1*p2;
-    const double fr11 = -2.0*p1*p1 - 2.0*p3*p3 + 1.0;
-    const double fr12 = -2.0*p0*p1 + 2.0*p2*p3;
-    const double fr20 = -2.0*p0*p2 + 2.0*p1*p3;
-    const double fr21 = 2.0*p0*p1 + 2.0*p2*p3;
-    const double fr22 = -2.0*p1*p1 - 2.0*p2*p2 + 1.0;
-    const double ft0 = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-    const double ft1 = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
-    const double ft2 = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
-    double s1, c1;
-    dq_sincos(fv, &s1, &c1);
-    const double x6_0 = c1*fr00 - fr01*s1;
-    const double x6_1 = c1*fr10 - fr11*s1;
-    const double x6_2 = c1*fr20 - fr21*s1;
-    const double z6_0 = c1*fr01 + fr00*s1;
-    const double z6_1 = c1*fr11 + fr10*s1;
-    const double z6_2 = c1*fr21 + fr20*s1;
-    const double o6_0 = -0.107*fr02 + ft0 - 0.088*x6_0;
-    const double o6_1 = -0.107*fr12 + ft1 - 0.088*x6_1;
-    const double o6_2 = -0.107*fr22 + ft2 - 0.088*x6_2;
-    const double v0 = -o6_0*x6_0 - o6_1*x6_1 + x6_2*(0.333 - o6_2);
-    const double v1 = fr02*o6_0 + fr12*o6_1 - fr22*(0.333 - o6_2);
-    const double v2 = -o6_0*z6_0 - o6_1*z6_1 + z6_2*(0.333 - o6_2);
-    const double ce = 3.897936888950783*v0*v0 + 3.897936888950783*v1*v1 + 3.897936888950783*v2*v2 - 1.0170672337810385;
-    if (!(fabs(ce) <= 1.0000000001)) {
-        return 0;
-    }
-    const double ca4_lo = (ce <= -0.9999999999999) ? -1.0 : ce;
-    const double ca4 = (ce >= 0.9999999999999) ? 1.0 : ca4_lo;
-    const double sa4 = sqrt(dq_sel((1 - ca4*ca4) > 0.0, 1 - ca4*ca4, 0.0));
-    const double an4 = dq_atan2(sa4, ca4);
-    const double rho6 = sqrt(v0*v0 + v1*v1);
-    const int singular_q6 = rho6 < 1e-11;
-    const double rho6_d = (singular_q6) ? 1.0 : rho6;
-    const double cps6 = v1/rho6_d;
-    const double sps6 = v0/rho6_d;
-    const double ps6 = dq_atan2(v0, v1);
-    for (int b1 = 0; b1 < 2; ++b1) {
-        const double sg1 = b1 ? -1.0 : 1.0;
-        const double q4 = an4*sg1 - 0.46700242365301164;
-        const double cq4 = 0.892921841804845*ca4 + 0.45021171067381544*sa4*sg1;
-        const double sq4 = -0.45021171067381544*ca4 + 0.892921841804845*sa4*sg1;
-        const double xe = -0.0825*cq4 - 0.316*sq4 + 0.0825;
-        const double ze = -0.316*cq4 + 0.0825*sq4 - 0.384;
-        const double ce6 = ze/rho6_d;
-        if (!((fabs(ce6) <= 1.0000000001) & ((!(singular_q6)) | (fabs(ze) <= 1e-11)))) {
-            continue;
-        }
-        const double ca6_lo = (ce6 <= -0.9999999999999) ? -1.0 : ce6;
-        const double ca6 = (ce6 >= 0.9999999999999) ? 1.0 : ca6_lo;
-        const double sa6 = sqrt(dq_sel((1 - ca6*ca6) > 0.0, 1 - ca6*ca6, 0.0));
-        const double an6 = dq_atan2(sa6, ca6);
-        for (int b2 = 0; b2 < 2; ++b2) {
-            const double sg2 = b2 ? -1.0 : 1.0;
-            const double q6 = (singular_q6) ? 0 : an6*sg2 + ps6;
-            const double cq6 = (singular_q6) ? 1.0 : ca6*cps6 - sa6*sg2*sps6;
-            const double sq6 = (singular_q6) ? 0 : ca6*sps6 + cps6*sa6*sg2;
-            const int singular_q5 = fabs(xe) < 1e-11;
-            const double sgx = copysign(1.0, xe);
-            const double u5 = sgx*(cq6*v0 - sq6*v1);
-            const double w5 = sgx*v2;
-            const double n5 = (singular_q5) ? 1.0 : sqrt(u5*u5 + w5*w5);
-            const double q5 = (singular_q5) ? 0 : dq_atan2(w5, u5);
-            const double cq5 = (singular_q5) ? 1.0 : u5/n5;
-            const double sq5 = (singular_q5) ? 0 : w5/n5;
-            const double ra00 = cq6*x6_0 + fr02*sq6;
-            const double ra01 = -cq6*fr02 + sq6*x6_0;
-            const double ra02 = z6_0;
-            const double ra10 = cq6*x6_1 + fr12*sq6;
-            const double ra11 = -cq6*fr12 + sq6*x6_1;
-            const double ra12 = z6_1;
-            const double ra20 = cq6*x6_2 + fr22*sq6;
-            const double ra21 = -cq6*fr22 + sq6*x6_2;
-            const double ra22 = z6_2;
-            const double rb00 = cq5*ra00 + ra02*sq5;
-            const double rb01 = ra01;
-            const double rb02 = cq5*ra02 - ra00*sq5;
-            const double rb10 = cq5*ra10 + ra12*sq5;
-            const double rb11 = ra11;
-            const double rb12 = cq5*ra12 - ra10*sq5;
-            const double rb20 = cq5*ra20 + ra22*sq5;
-            const double rb21 = ra21;
-            const double rb22 = cq5*ra22 - ra20*sq5;
-            const double r300 = cq4*rb00 - rb01*sq4;
-            const double r301 = -rb02;
-            const double r302 = cq4*rb01 + rb00*sq4;
-            const double r310 = cq4*rb10 - rb11*sq4;
-            const double r311 = -rb12;
-            const double r312 = cq4*rb11 + rb10*sq4;
-            const double r320 = cq4*rb20 - rb21*sq4;
-            const double r321 = -rb22;
-            const double r322 = cq4*rb21 + rb20*sq4;
-            const double sh_hs = sqrt(r302*r302 + r312*r312);
-            const int singular_q1 = sh_hs < 1e-11;
-            const double sh_a = (singular_q1) ? 0 : dq_atan2(r312, r302);
-            const double sh_bs = (r322 >= 0) ? 0 : 3.141592653589793;
-            const double sh_b = (singular_q1) ? sh_bs : dq_atan2(sh_hs, r322);
-            const double sh_cb = (singular_q1) ? copysign(1.0, r322) : r322;
-            const double sh_off = (singular_q1) ? 0 : 3.141592653589793;
-            const double sh_ny = (singular_q1) ? r310 : -r300*r312 + r302*r310;
-            const double sh_nx = (singular_q1) ? r300*sh_cb : -r320*sh_hs*sh_hs + r322*(r300*r302 + r310*r312);
-            const double sh_c = dq_atan2(sh_ny, sh_nx);
-            const int singular = (singular_q1) | (singular_q5) | (singular_q6);
-            for (int b3 = 0; b3 < 2; ++b3) {
-                const double sg3 = b3 ? -1.0 : 1.0;
-                const double q1 = sh_a + sh_off*(0.5 - 0.5*sg3);
-                const double q2 = sg3*sh_b;
-                const double q3 = sh_c + sh_off*(0.5 - 0.5*sg3);
-                {
-                    double *const cq = cand[4*b1 + 2*b2 + b3];
-                    cq[0] = dq_wrap(q1);
-                    cq[1] = dq_wrap(q2);
-                    cq[2] = dq_wrap(q3);
-                    cq[3] = dq_wrap(q4);
-                    cq[4] = dq_wrap(q5);
-                    cq[5] = dq_wrap(q6);
-                    cq[6] = dq_wrap(fv);
-                    valid[4*b1 + 2*b2 + b3] = 1;
-                }
-            }
-        }
-    }
-    return dq_merge((const double (*)[7])cand, valid, sols, NULL);
-}
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
@@ -1080,10 +923,10 @@ static void dq_singular_block(size_t m, const double pb[9][DQ_BLOCK], double cb[
 }
 
 /* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
- * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
- * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
- * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
- * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
+ * every joint: the first of each group of near-duplicates kept) packed in branch order and
+ * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
+ * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and the slot advances only when it is kept,
  * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
  * are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][7][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
@@ -1117,7 +960,7 @@ static void dq_pack_block(size_t m, double cb[][7][DQ_BLOCK], int kb[][DQ_BLOCK]
 /* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
  * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
  * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
- * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, as above).
  * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
  * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
  * loops over them). */
@@ -1646,6 +1489,16 @@ void panda_ik_batch_ex(size_t n, const double *restrict poses, const double *res
         dq_pack_block(m, cb, kb, sb, sols + i0 * 56, counts + i0,
                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
     }
+}
+
+/* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
+ * program without data-dependent branches is faster than a branching one). sols (IK_MAX x DOF)
+ * is NaN past the returned count. */
+int panda_ik(const double *restrict pose, double fv, double *restrict sols)
+{
+    int count;
+    panda_ik_batch_ex(1, pose, &fv, sols, &count, NULL, NULL);
+    return count;
 }
 
 /* rint(x) (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick, which vectorises without SSE4.1's

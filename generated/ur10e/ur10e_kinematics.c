@@ -197,8 +197,13 @@ void ur10e_fk(const double *restrict q, double *restrict out)
 }
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
- * over the poses of a block has unit stride and the compiler can vectorise it. */
+ * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
+ * the stack, so the stack of the batch functions (and of ur10e_ik, a batch of one) grows with
+ * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define DQ_BLOCK smaller
+ * (a multiple of 8, e.g. -DDQ_BLOCK=8) for a small stack; the results do not depend on it. */
+#ifndef DQ_BLOCK
 #define DQ_BLOCK 64
+#endif
 
 void ur10e_fk_batch(size_t n, const double *restrict q, double *restrict out)
 {
@@ -279,134 +284,6 @@ DQ_INLINE double dq_max(double a, double b)
     return dq_sel(a > b, a, b);
 }
 
-/* Candidates without near-duplicates (the first of each group kept), packed into sols; where
- * ids is not NULL, ids[k] is the branch (leaf) index of solution k. */
-static int dq_merge(const double cand[8][6], const int valid[8], double *restrict sols,
-                    int *restrict ids)
-{
-    int count = 0;
-    for (int i = 0; i < 8; ++i) {
-        if (!valid[i]) {
-            continue;
-        }
-        int dup = 0;
-        for (int j = 0; j < i && !dup; ++j) {
-            if (valid[j] && dq_max(dq_adist(cand[i][0], cand[j][0]), dq_max(dq_adist(cand[i][1], cand[j][1]), dq_max(dq_adist(cand[i][2], cand[j][2]), dq_max(dq_adist(cand[i][3], cand[j][3]), dq_max(dq_adist(cand[i][4], cand[j][4]), dq_adist(cand[i][5], cand[j][5])))))) < 1e-06) {
-                dup = 1;
-            }
-        }
-        if (!dup) {
-            for (int k = 0; k < 6; ++k) {
-                sols[count * 6 + k] = cand[i][k];
-            }
-            if (ids) {
-                ids[count] = i;
-            }
-            ++count;
-        }
-    }
-    return count;
-}
-
-int ur10e_ik(const double *restrict pose, double *restrict sols)
-{
-    double cand[8][6];
-    int valid[8] = {0};
-    const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
-    const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
-    const double w = 0.7071067811865476*p0 + 0.7071067811865476*p1;
-    const double a = -0.7071067811865476*p0 + 0.7071067811865476*p1;
-    const double b = 0.7071067811865476*p2 - 0.7071067811865476*p3;
-    const double c = 0.7071067811865476*p2 + 0.7071067811865476*p3;
-    const double r11 = -2.0*b*b - 2.0*c*c + 1.0;
-    const double r12 = 2.0*a*b - 2.0*c*w;
-    const double r13 = 2.0*a*c + 2.0*b*w;
-    const double r21 = 2.0*a*b + 2.0*c*w;
-    const double r22 = -2.0*a*a - 2.0*c*c + 1.0;
-    const double r23 = -2.0*a*w + 2.0*b*c;
-    const double r31 = 2.0*a*c - 2.0*b*w;
-    const double r32 = 2.0*a*w + 2.0*b*c;
-    const double r33 = -2.0*a*a - 2.0*b*b + 1.0;
-    const double x = 2.0*p0*p5 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
-    const double y = 2.0*p0*p6 - 2.0*p1*p7 - 2.0*p2*p4 + 2.0*p3*p5;
-    const double z = 2.0*p0*p7 + 2.0*p1*p6 - 2.0*p2*p5 - 2.0*p3*p4;
-    const double y5 = 0.11655*r22 + y;
-    const double x5 = 0.11655*r12 + x;
-    const double k1 = -y5;
-    const double k2 = x5;
-    const double k3 = -0.17415;
-    const double k4 = k1*k1 + k2*k2 - k3*k3;
-    const double k5 = dq_atan2(k2, k1);
-    const double k6 = dq_atan2(sqrt(dq_sel((k4) > 0.0, k4, 0.0)), -k3);
-    if (!(k4 >= -1e-10*dq_sel((1.0) > (k3*k3), 1.0, k3*k3))) {
-        return 0;
-    }
-    for (int b1 = 0; b1 < 2; ++b1) {
-        const double sg1 = b1 ? -1.0 : 1.0;
-        const double theta1 = k5 + k6*sg1;
-        double s1, c1;
-        dq_sincos(0.5*theta1, &s1, &c1);
-        const double h7 = sqrt((a*c1 + b*s1)*(a*c1 + b*s1) + (-c*c1 + s1*w)*(-c*c1 + s1*w));
-        const double h8 = sqrt((-a*s1 + b*c1)*(-a*s1 + b*c1) + (-c*s1 - c1*w)*(-c*s1 - c1*w));
-        const double h9 = dq_atan2(h7, h8);
-        const double h10 = 2.0*h7*h8/(h7*h7 + h8*h8);
-        const double h11 = dq_atan2(a*s1 - b*c1, c*s1 + c1*w);
-        const double h12 = dq_atan2(a*c1 + b*s1, -c*c1 + s1*w);
-        const double s2 = 2.0*s1*c1;
-        const double c2 = 1.0 - 2.0*s1*s1;
-        const double f13 = 0.11655*c2*r12 + c2*x + 0.11655*r22*s2 + s2*y;
-        const double f14 = 0.11985*c2*r11 + 0.11985*r21*s2;
-        const double f15 = 0.11985*c2*r13 + 0.11985*r23*s2;
-        const double f16 = 0.11655*r32 + z - 0.1807;
-        const double f17 = 0.11985*r31;
-        const double f18 = 0.11985*r33;
-        const double f19 = 1.4278017006745949*f13*f13 + 0.7139008503372974*f14*f14 + 0.7139008503372974*f15*f15 + 1.4278017006745949*f16*f16 + 0.7139008503372974*f17*f17 + 0.7139008503372974*f18*f18 - 1.0024177287452907;
-        const double f20 = 2.8556034013491898*f13*f15 + 2.8556034013491898*f16*f18;
-        const double f21 = 2.8556034013491898*f13*f14 + 2.8556034013491898*f16*f17;
-        const double f22 = -f19*f19 + f20*f20 + f21*f21;
-        const double f23 = dq_atan2(f21, f20) + dq_atan2(sqrt(dq_sel((f22) > 0.0, f22, 0.0)), -f19);
-        const int singular = h10 < 1e-11;
-        const int cos_small = h8 < h7;
-        for (int b2 = 0; b2 < 2; ++b2) {
-            const double sg2 = b2 ? -1.0 : 1.0;
-            const double theta5_singular = (cos_small) ? 3.141592653589793 : 0;
-            const double theta5 = (singular) ? theta5_singular : 2.0*h9*sg2;
-            const double h24 = h12 - 1.5707963267948966*sg2 + 1.5707963267948966;
-            const double sigma1 = ((singular) & (!(cos_small))) ? -f23 + h11 : h24;
-            const double sigma2 = ((cos_small) & (singular)) ? f23 + h24 : h11;
-            const double theta6 = -sigma1 + sigma2;
-            double s3, c3;
-            dq_sincos(theta6, &s3, &c3);
-            const double x4 = 0.11985*c2*c3*r13 + 0.11985*c2*r11*s3 + 0.11655*c2*r12 + c2*x + 0.11985*c3*r23*s2 + 0.11985*r21*s2*s3 + 0.11655*r22*s2 + s2*y;
-            const double z4 = 0.11985*c3*r33 + 0.11985*r31*s3 + 0.11655*r32 + z - 0.1807;
-            const double k25 = 1.4278017006745949*x4*x4 + 1.4278017006745949*z4*z4 - 1.0024177287452907;
-            if (!(fabs(k25) <= 1.0000000001)) {
-                continue;
-            }
-            const double k26 = sqrt(dq_sel((1 - k25*k25) > 0.0, 1 - k25*k25, 0.0));
-            const double k27 = dq_atan2(k26, k25);
-            for (int b3 = 0; b3 < 2; ++b3) {
-                const double sg3 = b3 ? -1.0 : 1.0;
-                const double theta3 = k27*sg3;
-                const double k28 = copysign(1.0, -x4*x4 - z4*z4);
-                const double sigma3 = dq_atan2(k28*(0.6127*k25*z4 + 0.6127*k26*sg3*x4 + 0.57155*z4), k28*(0.6127*k25*x4 - 0.6127*k26*sg3*z4 + 0.57155*x4));
-                const double theta2 = sigma3 - theta3;
-                const double theta4 = sigma1 + sigma2 - sigma3;
-                {
-                    double *const cq = cand[4*b1 + 2*b2 + b3];
-                    cq[0] = dq_wrap(theta1);
-                    cq[1] = dq_wrap(theta2);
-                    cq[2] = dq_wrap(theta3);
-                    cq[3] = dq_wrap(theta4);
-                    cq[4] = dq_wrap(theta5);
-                    cq[5] = dq_wrap(theta6);
-                    valid[4*b1 + 2*b2 + b3] = 1;
-                }
-            }
-        }
-    }
-    return dq_merge((const double (*)[6])cand, valid, sols, NULL);
-}
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
@@ -712,10 +589,10 @@ static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[
 }
 
 /* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
- * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance, the
- * same rule as dq_merge) packed in branch order and NaN-padded, with their count, and (where
- * branch is not NULL) each solution's branch index and singular flag (-1 and 0 in the padding).
- * Every candidate is written at the next free slot and the slot advances only when it is kept,
+ * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
+ * every joint: the first of each group of near-duplicates kept) packed in branch order and
+ * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
+ * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and the slot advances only when it is kept,
  * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
  * are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
@@ -749,7 +626,7 @@ static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK]
 /* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
  * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
  * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
- * to keep (kb: valid and no earlier valid candidate within the merge tolerance, dq_merge's rule).
+ * to keep (kb: valid and no earlier valid candidate within the merge tolerance, as above).
  * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
  * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
  * loops over them). */
@@ -1161,6 +1038,16 @@ void ur10e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict 
         dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
                       branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
     }
+}
+
+/* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
+ * program without data-dependent branches is faster than a branching one). sols (IK_MAX x DOF)
+ * is NaN past the returned count. */
+int ur10e_ik(const double *restrict pose, double *restrict sols)
+{
+    int count;
+    ur10e_ik_batch_ex(1, pose, sols, &count, NULL, NULL);
+    return count;
 }
 
 /* rint(x) (|x| < 2^51, or +-inf) by the 1.5 * 2^52 trick, which vectorises without SSE4.1's
