@@ -28,8 +28,9 @@
    already. The large vectorised loops of the batch IK spill less with it on AVX2's 16 vector
    registers: UR5 IK batch 138 -> 122 ns per pose, nearest 143 -> 126 ns (an Intel Xeon,
    -march=x86-64-v3, docs/benchmarks.md). Scheduling reorders instructions, never changes a
-   result. The FK and single-pose functions ran slower with it and go without. */
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__))
+   result. The FK and single-pose functions, and the IK loops where they are not vectorised
+   (no AVX: SSE2 has no 64-bit blends), ran slower with it and go without. */
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && defined(__AVX__)
 #define DQ_SCHED __attribute__((optimize("schedule-insns", "sched-pressure")))
 #else
 #define DQ_SCHED
