@@ -242,7 +242,7 @@ def _ik_context(robot, free: str | None = None) -> dict:
     # labels are in the order of significance: weights 2^(k-1) ... 1
     bits = [f"{2 ** (k - 1 - i)} x ({lab}: 1 for the second root)" for i, lab in enumerate(labels)]
     branch_doc = "index = " + " + ".join(bits) if bits else "always 0"
-    return {"ik": {"ops": ops, "branches": prog.branches, "depth": max(o.depth for o in prog.ops),
+    return {"ik": {"ops": ops, "branches": prog.branches,
                    "branch_doc": branch_doc, "branch_labels": labels,
                    "free_joint": prog.free_joint, "free_rule": prog.free_rule,
                    "leaf": leaf or "0", "flat": flat, "flat_full": flat_full, "merge_tol": repr(MERGE_TOL), "steps": step_lines,

@@ -27,9 +27,10 @@
    -fsched-pressure: aware of register pressure) only where asked; other targets do it at -O2
    already. The large vectorised loops of the batch IK run faster with it on AVX2, with as many
    instructions as before (valgrind) in a better order: UR5 IK batch 138 -> 122 ns per pose,
-   nearest 143 -> 126 ns (an Intel Xeon, -march=x86-64-v3, docs/benchmarks.md). Scheduling reorders instructions, never changes a
-   result. The FK and single-pose functions, and the IK loops where they are not vectorised
-   (no AVX: SSE2 has no 64-bit blends), ran slower with it and go without. */
+   nearest 143 -> 126 ns (an Intel Xeon, -march=x86-64-v3, docs/benchmarks.md). Scheduling
+   reorders instructions, never changes a result. The FK and single-pose functions, and the IK
+   loops where they are not vectorised (no AVX: SSE2 has no 64-bit blends), ran slower with it
+   and go without. */
 #if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && defined(__AVX__)
 #define DQ_SCHED __attribute__((optimize("schedule-insns", "sched-pressure")))
 #else
@@ -605,9 +606,9 @@ static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[
  * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
  * every joint: the first of each group of near-duplicates kept) packed in branch order and
  * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
- * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and the slot advances only when it is kept,
- * so the pass has no data-dependent branch. Kept out of the batch function so that its loops
- * are the vectorised ones only. */
+ * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and
+ * the slot advances only when it is kept, so the pass has no data-dependent branch. Kept out of
+ * the batch function so that its loops are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
                           double *restrict sols, int *restrict counts, int *restrict branch,
                           int *restrict singular)
