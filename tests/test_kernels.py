@@ -339,10 +339,21 @@ def test_kernels_reject_non_finite_joints_and_non_unit_poses(backend):
     assert count == 8 and np.min(np.abs(np.remainder(sols - q + np.pi, 2 * np.pi) - np.pi).max(-1)) < 1e-12
 
 
+def _has_avx2() -> bool:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            return platform.machine() in ("x86_64", "AMD64") and " avx2 " in f.read()
+    except OSError:
+        return False
+
+
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
-@pytest.mark.parametrize("extra", [[], ["-fsanitize=address,undefined", "-fno-omit-frame-pointer"]])
+@pytest.mark.parametrize("extra", [[], ["-fsanitize=address,undefined", "-fno-omit-frame-pointer"],
+                                   pytest.param(["-O3", "-mavx2", "-mfma"], marks=pytest.mark.skipif(
+                                       not _has_avx2(), reason="no AVX2 to run it"))])
 def test_c_compiles_cleanly_and_runs_standalone(tmp_path, extra):
-    """FK batch, IK single and IK batch from a plain C program (also under the sanitizers)."""
+    """FK batch, IK single and IK batch from a plain C program (also under the sanitizers, and
+    vectorised with AVX2, where the batch functions carry DQ_SCHED's attribute)."""
     for name, text in render_kernels("ur10e").values():         # {role: (file name, text)}
         (tmp_path / name).write_text(text)
     rng = np.random.default_rng(3)
@@ -649,7 +660,8 @@ def _c_batches(lib, ident, poses, fv, seeds):
     n, dof = seeds.shape
     nmax = 8
     pz, sz = np.ascontiguousarray(poses), np.ascontiguousarray(seeds)
-    lead = [pz.ctypes.data] + ([np.ascontiguousarray(fv).ctypes.data] if fv is not None else [])
+    fz = None if fv is None else np.ascontiguousarray(fv)      # kept alive while C reads it
+    lead = [pz.ctypes.data] + ([fz.ctypes.data] if fz is not None else [])
     sols, counts = np.empty((n, nmax, dof)), np.empty(n, dtype=np.intc)
     branch, sing = np.empty((n, nmax), dtype=np.intc), np.empty((n, nmax), dtype=np.intc)
     f = getattr(lib, f"{ident}_ik_batch_ex")
@@ -672,12 +684,13 @@ def _c_batches(lib, ident, poses, fv, seeds):
 
 
 @pytest.mark.skipif(loader.c_compiler() is None, reason="no C compiler")
-@pytest.mark.parametrize("robot", ["ur5", "panda"])
-def test_block_size_changes_no_bit(robot, monkeypatch):
+@pytest.mark.parametrize("robot, block", [("ur5", 8), ("ur5", 1), ("panda", 8)])
+def test_block_size_changes_no_bit(robot, block, monkeypatch):
     """DQ_BLOCK (the poses per block of the batch loops, on the stack) is a build option for small
-    stacks: with -DDQ_BLOCK=8 the IK batch with details, the nearest batch and the single-pose IK
-    (a batch of one, NaN past its count) write the same bits as the default build of 64, on
-    random and singular poses that straddle the blocks of both sizes."""
+    stacks: with -DDQ_BLOCK=8 or 1 the IK batch with details, the nearest batch and the
+    single-pose IK (a batch of one, NaN past its count) write the same bits as the default build
+    of 64, on random and singular poses that straddle the blocks. -Werror: a DQ_BLOCK that the
+    source redefined instead of taking would be a warning, and so a failure here."""
     rng = np.random.default_rng(8)
     lim = derive.load_robot(robot).limits
     dof = len(lim)
@@ -688,7 +701,7 @@ def test_block_size_changes_no_bit(robot, monkeypatch):
     seeds = q + rng.normal(0, 0.05, size=q.shape)
     k = derive.kernels(robot, "c")
     default = _c_batches(ctypes.CDLL(str(k.library)), k._ident, poses, fv, seeds)
-    monkeypatch.setenv("DQ_DERIVE_CFLAGS", " ".join(loader.c_flags() + ["-DDQ_BLOCK=8"]))
+    monkeypatch.setenv("DQ_DERIVE_CFLAGS", " ".join(loader.c_flags() + [f"-DDQ_BLOCK={block}", "-Werror"]))
     small = _c_batches(ctypes.CDLL(str(_compile(k._c_source, k._ident))), k._ident, poses, fv, seeds)
     for a, b in zip(default, small):
         np.testing.assert_array_equal(a, b)

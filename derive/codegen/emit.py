@@ -195,7 +195,8 @@ def _ik_context(robot, free: str | None = None) -> dict:
         prog = ik_program(robot, free)
     except DeriveError as exc:
         return {"ik": None, "ik_missing": str(exc)}
-    printers = {"py": _Py(), "np": _Np(), "cc": _C()}
+    # the branching program is printed for the Python kernels; the C kernels run the flat one
+    printers = {"py": _Py(), "np": _Np()}
 
     def numeric(e):
         e = sp.sympify(e)
@@ -225,7 +226,7 @@ def _ik_context(robot, free: str | None = None) -> dict:
         ops.append(d)
     k = len(branch_index)
     leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
-    flat_full = _flat_ops(prog, printers["cc"], numeric)
+    flat_full = _flat_ops(prog, _C(), numeric)
     flat = _live(flat_full)
     # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
     # is common to four leaves of the UR, ...): the nearest pass computes each value's winding once
@@ -253,8 +254,8 @@ def _ik_context(robot, free: str | None = None) -> dict:
 
 
 def _duplicate_tests(same_as, branches: int, dof: int):
-    """The batch loop's duplicate test (dq_merge's rule: candidate i is dropped when an earlier
-    valid candidate a is within the merge tolerance in every joint) with each distinct pair of
+    """The batch loop's duplicate test (candidate i is dropped when an earlier valid candidate a
+    is within the merge tolerance in every joint, as the Python kernels' merge) with each distinct pair of
     values compared once. Leaves whose value of joint k is the same expression (``same_as``) are
     equal there and need no test; theta1 is one of two values for all 8 leaves of the UR, so its
     28 leaf pairs need 1 comparison. Returns the comparisons [(flag name, joint, leaf x, leaf y)]

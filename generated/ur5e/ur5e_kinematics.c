@@ -23,15 +23,14 @@
 #define DQ_FMA(a, b, c) ((a) * (b) + (c))
 #endif
 
-/* gcc on x86 schedules instructions before register allocation (-fschedule-insns, with
-   -fsched-pressure: aware of register pressure) only where asked; other targets do it at -O2
-   already. The large vectorised loops of the batch IK run faster with it on AVX2, with as many
+/* gcc on x86 schedules instructions before register allocation (-fschedule-insns) only where
+   asked (many other targets do at -O2); -fsched-pressure makes it aware of register pressure. The large vectorised loops of the batch IK run faster with it on AVX2, with as many
    instructions as before (valgrind) in a better order: UR5 IK batch 138 -> 122 ns per pose,
    nearest 143 -> 126 ns (an Intel Xeon, -march=x86-64-v3, docs/benchmarks.md). Scheduling
    reorders instructions, never changes a result. The FK and single-pose functions, and the IK
-   loops where they are not vectorised (no AVX: SSE2 has no 64-bit blends), ran slower with it
-   and go without. */
-#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && defined(__AVX__)
+   loops where they are not vectorised (SSE2 has no 64-bit blends), ran slower with it and go
+   without; it is set for AVX2 and later only, where it was measured. */
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__)) && defined(__AVX2__)
 #define DQ_SCHED __attribute__((optimize("schedule-insns", "sched-pressure")))
 #else
 #define DQ_SCHED
@@ -213,10 +212,14 @@ void ur5e_fk(const double *restrict q, double *restrict out)
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
  * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
  * the stack, so the stack of the batch functions (and of ur5e_ik, a batch of one) grows with
- * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define DQ_BLOCK smaller
- * (a multiple of 8, e.g. -DDQ_BLOCK=8) for a small stack; the results do not depend on it. */
+ * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define it smaller for a
+ * small stack (-DDQ_BLOCK=8: a few vectors per block still; -DDQ_BLOCK=1: the least stack, no
+ * vectorisation); the results do not depend on it. */
 #ifndef DQ_BLOCK
 #define DQ_BLOCK 64
+#endif
+#if DQ_BLOCK < 1
+#error "DQ_BLOCK must be at least 1"
 #endif
 
 void ur5e_fk_batch(size_t n, const double *restrict q, double *restrict out)
@@ -292,7 +295,7 @@ DQ_INLINE double dq_adist(double a, double b)
     return dq_sel(e < d, e, d);
 }
 
-/* The larger of a and b (a select, which vectorises; both are finite here). */
+/* The larger of a and b (a select, which vectorises; neither is NaN here, either may be inf). */
 DQ_INLINE double dq_max(double a, double b)
 {
     return dq_sel(a > b, a, b);
@@ -1056,7 +1059,7 @@ DQ_INLINE void dq_ik_batch(size_t n, const double *restrict poses, double *restr
 }
 
 DQ_SCHED void ur5e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols,
-                                  int *restrict counts, int *restrict branch, int *restrict singular)
+                                 int *restrict counts, int *restrict branch, int *restrict singular)
 {
     dq_ik_batch(n, poses, sols, counts, branch, singular);
 }
@@ -1094,8 +1097,8 @@ static const double dq_lim_hi[6] = {6.283185307180586, 6.283185307180586, 6.2831
  * pose: q (n x DOF; NaN where none), max_move and total_move (n; NaN where none), branch (n; -1
  * where none) and singular (n). */
 DQ_SCHED void ur5e_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
-                               double *restrict q, double *restrict max_move, double *restrict total_move,
-                               int *restrict branch, int *restrict singular)
+                                        double *restrict q, double *restrict max_move, double *restrict total_move,
+                                        int *restrict branch, int *restrict singular)
 {
     double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
