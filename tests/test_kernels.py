@@ -339,10 +339,11 @@ def test_kernels_reject_non_finite_joints_and_non_unit_poses(backend):
     assert count == 8 and np.min(np.abs(np.remainder(sols - q + np.pi, 2 * np.pi) - np.pi).max(-1)) < 1e-12
 
 
-def _has_avx2() -> bool:
+def _x86_has(flag: str) -> bool:
+    """The x86 CPU lists this feature flag in /proc/cpuinfo (False elsewhere)."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
-            return platform.machine() in ("x86_64", "AMD64") and " avx2 " in f.read()
+            return platform.machine() in ("x86_64", "AMD64") and f" {flag} " in f.read()
     except OSError:
         return False
 
@@ -350,7 +351,7 @@ def _has_avx2() -> bool:
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
 @pytest.mark.parametrize("extra", [[], ["-fsanitize=address,undefined", "-fno-omit-frame-pointer"],
                                    pytest.param(["-O3", "-mavx2", "-mfma"], marks=pytest.mark.skipif(
-                                       not _has_avx2(), reason="no AVX2 to run it"))])
+                                       not _x86_has("avx2"), reason="no AVX2 to run it"))])
 def test_c_compiles_cleanly_and_runs_standalone(tmp_path, extra):
     """FK batch, IK single and IK batch from a plain C program (also under the sanitizers, and
     vectorised with AVX2, where the batch functions carry DQ_SCHED's attribute)."""
@@ -435,14 +436,6 @@ int main(void)
 """
 
 
-def _has_fma() -> bool:
-    try:
-        with open("/proc/cpuinfo", encoding="utf-8") as f:
-            return platform.machine() in ("x86_64", "AMD64") and " fma " in f.read()
-    except OSError:
-        return False
-
-
 @pytest.fixture(scope="module", params=["portable", "fma"])
 def c_helpers(request, tmp_path_factory):
     """run(kind, args) -> the helpers' results (floats, bit exact) for a list of arguments; once
@@ -453,7 +446,7 @@ def c_helpers(request, tmp_path_factory):
         pytest.skip("no C compiler (gcc or cc) on PATH")
     extra = []
     if request.param == "fma":
-        if not _has_fma():
+        if not _x86_has("fma"):
             pytest.skip("this CPU has no x86 FMA")
         extra = ["-mfma", "-mavx2"]
     source, header, _ = _c_sources("ur5")
