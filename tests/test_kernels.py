@@ -688,7 +688,9 @@ def test_block_size_changes_no_bit(robot, block, monkeypatch):
     lim = derive.load_robot(robot).limits
     dof = len(lim)
     q = rng.uniform(np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi), size=(150, dof))
-    q[5::11, 4 if dof == 6 else 1] = 0.0          # wrist (UR) or shoulder (Panda, q2) singular
+    on_set = np.zeros(len(q), dtype=bool)
+    on_set[5::11] = True
+    q[on_set, 4 if dof == 6 else 1] = 0.0          # wrist (UR) or shoulder (Panda, q2) singular
     poses = reference.fk(robot, q)
     fv = q[:, 6].copy() if dof == 7 else None      # the Panda's free parameter is q7
     seeds = q + rng.normal(0, 0.05, size=q.shape)
@@ -702,9 +704,7 @@ def test_block_size_changes_no_bit(robot, block, monkeypatch):
     np.testing.assert_array_equal(c1, counts)
     np.testing.assert_array_equal(one, sols)                  # the batch of one, NaN padding included
     assert np.all(np.isnan(sols) == (np.arange(8)[None, :, None] >= counts[:, None, None]))
-    regular = np.ones(len(q), dtype=bool)
-    regular[5::11] = False
-    assert sing[~regular].any() and counts.min() >= 1 and not np.isnan(q_near[regular]).any()
+    assert sing[on_set].any() and counts.min() >= 1 and not np.isnan(q_near[~on_set]).any()
     # the solutions are real ones: each reproduces its pose (the reference FK, plain products)
     rows = np.nonzero(np.arange(8)[None, :] < counts[:, None])
     assert mod_sign(reference.fk(robot, sols[rows]), poses[rows[0]]) < 1e-9

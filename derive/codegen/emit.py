@@ -255,8 +255,8 @@ def _ik_context(robot, free: str | None = None) -> dict:
 
 def _duplicate_tests(same_as, branches: int, dof: int):
     """The batch loop's duplicate test (candidate i is dropped when an earlier valid candidate a
-    is within the merge tolerance in every joint, as the Python kernels' merge) with each distinct pair of
-    values compared once. Leaves whose value of joint k is the same expression (``same_as``) are
+    is within the merge tolerance in every joint, as the Python kernels' merge) with each
+    distinct pair of values compared once. Leaves whose value of joint k is the same expression (``same_as``) are
     equal there and need no test; theta1 is one of two values for all 8 leaves of the UR, so its
     28 leaf pairs need 1 comparison. Returns the comparisons [(flag name, joint, leaf x, leaf y)]
     and per leaf i > 0 the list [(a, [flag names])] of its earlier leaves and the flags that must

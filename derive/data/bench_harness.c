@@ -129,10 +129,10 @@ int main(int argc, char **argv)
     double *dh = load(argv[3], 18), *q = load(argv[4], n * 6), *poses = load(argv[5], n * 8);
     double *fk = alloc(n * 8 * sizeof(double)), *mat = alloc(n * 16 * sizeof(double));
     double *sols = alloc(n * 48 * sizeof(double)), one[48];
-    int *counts = malloc(n * sizeof(int));
+    int *counts = alloc(n * sizeof(int));
     double *seeds = alloc(n * 6 * sizeof(double)), *nq = alloc(n * 6 * sizeof(double));
-    double *nmx = malloc(n * sizeof(double)), *ntt = malloc(n * sizeof(double));
-    int *nbr = malloc(n * sizeof(int)), *nsg = malloc(n * sizeof(int));
+    double *nmx = alloc(n * sizeof(double)), *ntt = alloc(n * sizeof(double));
+    int *nbr = alloc(n * sizeof(int)), *nsg = alloc(n * sizeof(int));
     for (size_t i = 0; i < n * 6; ++i) {
         seeds[i] = q[i] + 0.01;
     }

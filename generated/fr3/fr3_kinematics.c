@@ -24,7 +24,8 @@
 #endif
 
 /* gcc on x86 schedules instructions before register allocation (-fschedule-insns) only where
-   asked (many other targets do at -O2); -fsched-pressure makes it aware of register pressure. The large vectorised loops of the batch IK run faster with it on AVX2, with as many
+   asked (many other targets do at -O2); -fsched-pressure makes it aware of register pressure.
+   The large vectorised loops of the batch IK run faster with it on AVX2, with as many
    instructions as before (valgrind) in a better order: UR5 IK batch 138 -> 122 ns per pose,
    nearest 143 -> 126 ns (an Intel Xeon, -march=x86-64-v3, docs/benchmarks.md). Scheduling
    reorders instructions, never changes a result. The FK and single-pose functions, and the IK
@@ -425,10 +426,10 @@ void fr3_fk(const double *restrict q, double *restrict out)
 
 /* Batches go through blocks of DQ_BLOCK poses transposed to one array per joint, so the loop
  * over the poses of a block has unit stride and the compiler can vectorise it. A block lives on
- * the stack, so the stack of the batch functions (and of fr3_ik, a batch of one) grows with
- * DQ_BLOCK: tens of KiB at 64 (gcc's -fstack-usage gives the figure). Define it smaller for a
- * small stack (-DDQ_BLOCK=8: a few vectors per block still; -DDQ_BLOCK=1: the least stack, no
- * vectorisation); the results do not depend on it. */
+ * the stack, so the stack of the batch functions grows with DQ_BLOCK: tens of KiB at 64 (gcc's
+ * -fstack-usage gives the figure; fr3_ik, a batch of one, keeps a few KiB). Define it smaller
+ * for a small stack (-DDQ_BLOCK=8: a few vectors per block still; -DDQ_BLOCK=1: the least stack,
+ * no vectorisation); the results do not depend on it. */
 #ifndef DQ_BLOCK
 #define DQ_BLOCK 64
 #endif

@@ -29,10 +29,11 @@ void iiwa7_fk_batch(size_t n, const double *restrict q, double *restrict out);
  * quaternions (|real| = 1, <real, dual> = 0, to rounding: other input gives meaningless
  * results, it is not detected). The Python layer (derive.kernels) checks all of this.
  *
- * All IK solutions of one pose, as a batch of one (the same numbers as iiwa7_ik_batch bit for bit,
- * and its stack: see DQ_BLOCK in the .c): pose[8] a unit dual quaternion of the end frame (either
- * sign); writes up to 8 solutions of 7 angles in (-pi, pi] to sols (8 x 7, row-major, NaN
- * past the count) and returns their number (0: out of reach). Solutions closer than 1e-06 rad in every
+ * All IK solutions of one pose, as a batch of one (the same numbers as iiwa7_ik_batch bit
+ * for bit; its stack: see DQ_BLOCK in the .c): pose[8] a unit dual quaternion of the end frame
+ * (either sign); writes up to 8 solutions of 7 angles in (-pi, pi] to sols
+ * (8 x 7, row-major, NaN past the count) and returns their number (0: out of reach).
+ * Solutions closer than 1e-06 rad in every
  * joint are one; on a singular set the free joint is set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the wrist's, sin q6 = 0), the next joint taking the rest. */
 int iiwa7_ik(const double *restrict pose, double fv, double *restrict sols);
 

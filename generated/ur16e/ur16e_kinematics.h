@@ -27,10 +27,11 @@ void ur16e_fk_batch(size_t n, const double *restrict q, double *restrict out);
  * quaternions (|real| = 1, <real, dual> = 0, to rounding: other input gives meaningless
  * results, it is not detected). The Python layer (derive.kernels) checks all of this.
  *
- * All IK solutions of one pose, as a batch of one (the same numbers as ur16e_ik_batch bit for bit,
- * and its stack: see DQ_BLOCK in the .c): pose[8] a unit dual quaternion of the end frame (either
- * sign); writes up to 8 solutions of 6 angles in (-pi, pi] to sols (8 x 6, row-major, NaN
- * past the count) and returns their number (0: out of reach). Solutions closer than 1e-06 rad in every
+ * All IK solutions of one pose, as a batch of one (the same numbers as ur16e_ik_batch bit
+ * for bit; its stack: see DQ_BLOCK in the .c): pose[8] a unit dual quaternion of the end frame
+ * (either sign); writes up to 8 solutions of 6 angles in (-pi, pi] to sols
+ * (8 x 6, row-major, NaN past the count) and returns their number (0: out of reach).
+ * Solutions closer than 1e-06 rad in every
  * joint are one; at a singular set (sin theta5 = 0) joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). */
 int ur16e_ik(const double *restrict pose, double *restrict sols);
 
