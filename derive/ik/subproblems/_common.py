@@ -268,7 +268,13 @@ def two_circles(m, b):
         det = block[:, 0, 0] * block[:, 1, 1] - block[:, 0, 1] * block[:, 1, 0]
         return np.abs(det) / np.maximum(np.sum(block ** 2, axis=(-2, -1)), 1e-300)
 
-    ca, cb = cond(m[:, :, 0:2]), cond(m[:, :, 2:4])
+    # One angle enters neither equation (its block vanishes): it is free, returned as 0, and the
+    # other unit vector is the block's solution (kept by the caller only if its residual is small).
+    free_a = np.linalg.norm(m[:, :, 0:2], axis=(-2, -1)) <= SP_RANK_TOL
+    free_b = np.linalg.norm(m[:, :, 2:4], axis=(-2, -1)) <= SP_RANK_TOL
+    degenerate |= free_a | free_b
+    ca = np.where(free_a, 0.0, cond(m[:, :, 0:2]))
+    cb = np.where(free_b, 0.0, cond(m[:, :, 2:4]))
     swap = ca > cb
     rank1 = np.maximum(ca, cb) < SP_RANK_TOL
     ms = np.where(swap[:, None, None], m[:, :, [2, 3, 0, 1]], m)
@@ -282,6 +288,9 @@ def two_circles(m, b):
     for i in np.flatnonzero(rank1 & ~degenerate):
         ta[i], tb[i], ok[i], deg = _rank_one(ms[i], b[i])
         degenerate[i] = deg
+    for i in np.flatnonzero((free_a ^ free_b) & (np.maximum(ca, cb) >= SP_RANK_TOL)):
+        x = np.linalg.solve(ms[i][:, 2:4], b[i])         # ms has the free block first
+        ta[i, 0], tb[i, 0], ok[i, 0] = 0.0, np.arctan2(x[0], x[1]), True
     ta, tb = np.where(swap[:, None], tb, ta), np.where(swap[:, None], ta, tb)
     return ta, tb, ok, degenerate
 

@@ -29,8 +29,10 @@ def sp6(h, k, p, d) -> SubproblemSolutions:
     unit); d (..., 2). Slots m = 4, angles j = 2 (t1, t2); ``residual`` = the 2-norm of the two
     equations' errors (units of h^T p).
 
-    Degenerate (``degenerate``, nothing returned): M of rank below 2 (an angle that enters
-    neither equation, or the two equations proportional): a continuum of solutions or none.
+    Degenerate (``degenerate``): an angle that enters neither equation (for example h1 and h3
+    along k1 and k3): it is free, returned as 0, with the other angle from the two equations
+    (one slot, when they have a solution); M of rank below 2 (the two equations proportional,
+    or both angles absent): a continuum of solutions or none, nothing returned.
     Wrong shapes, NaN or non-unit axes: InputError.
     """
     h = as_finite_array(h, "sp6 h", last_dim=3, ndim_min=2)
