@@ -390,3 +390,97 @@ def test_every_residual_is_the_equation():
     s5 = sp5(*args)
     ref = sp5_res([a[:, None] for a in args], s5.theta)
     assert np.abs(ref - s5.residual)[s5.valid].max() < 1e-13
+
+
+# --- the C twin of sp1-sp4 (templates/subproblems.h.j2) against numpy -------------------------
+
+C_WRAPPERS = r"""
+#include "subproblems.h"
+#define LOOP for (i = 0; i < n; ++i)
+void b_sp1(int n, const double *k, const double *p1, const double *p2, double *t, double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp1(k + 3 * i, p1 + 3 * i, p2 + 3 * i, t + i, r + i, f + i); }
+void b_sp2(int n, const double *k1, const double *k2, const double *p1, const double *p2, double *t1,
+           double *t2, double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp2(k1 + 3 * i, k2 + 3 * i, p1 + 3 * i, p2 + 3 * i, t1 + 2 * i, t2 + 2 * i, r + 2 * i, f + i); }
+void b_sp3(int n, const double *k, const double *p1, const double *p2, const double *d, double *t, double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp3(k + 3 * i, p1 + 3 * i, p2 + 3 * i, d[i], t + 2 * i, r + 2 * i, f + i); }
+void b_sp4(int n, const double *h, const double *k, const double *p, const double *d, double *t, double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp4(h + 3 * i, k + 3 * i, p + 3 * i, d[i], t + 2 * i, r + 2 * i, f + i); }
+"""
+
+
+@pytest.fixture(scope="module")
+def c_subproblems(tmp_path_factory):
+    import ctypes
+    import shutil
+    import subprocess
+
+    from derive.codegen.subproblems import subproblems_header
+    cc, cxx = shutil.which("gcc"), shutil.which("g++")
+    if cc is None:
+        pytest.skip("no gcc")
+    d = tmp_path_factory.mktemp("sp_c")
+    (d / "subproblems.h").write_text(subproblems_header(), encoding="utf-8")
+    (d / "wrap.c").write_text(C_WRAPPERS, encoding="utf-8")
+    warn = ["-Wall", "-Wextra", "-Wpedantic", "-Werror"]
+    res = subprocess.run([cc, "-std=c99", "-O2", *warn, "-fPIC", "-shared", "-o", str(d / "libsp.so"),
+                          str(d / "wrap.c"), "-lm"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    if cxx is not None:                       # the header compiles as C++ with warnings as errors
+        res = subprocess.run([cxx, "-x", "c++", "-std=c++11", *warn, "-fsyntax-only", str(d / "wrap.c")],
+                             capture_output=True, text=True)
+        assert res.returncode == 0, res.stderr
+    return ctypes.CDLL(str(d / "libsp.so"))
+
+
+def call_c(lib, name, n, slots, *arrays, angles=1):
+    import ctypes
+    ins = [np.ascontiguousarray(a, dtype=np.float64) for a in arrays]
+    outs = [np.zeros((n, slots)) for _ in range(angles)] + [np.zeros((n, slots))]
+    flags, count = np.zeros(n, dtype=np.intc), np.zeros(n, dtype=np.intc)
+    ptr = lambda a: a.ctypes.data_as(ctypes.c_void_p)
+    getattr(lib, name)(ctypes.c_int(n), *map(ptr, ins), *map(ptr, outs), ptr(flags), ptr(count))
+    return outs[:-1], outs[-1], flags, count
+
+
+def agree(sol, c_angles, c_res, flags, count):
+    assert np.array_equal(sol.count, count)
+    assert np.array_equal(sol.exact, (flags & 1) == 1)
+    assert np.array_equal(sol.degenerate, (flags & 2) == 2)
+    for j, t in enumerate(c_angles):
+        assert wrapped(sol.theta[..., j], t)[sol.valid].max() < 1e-12
+    assert np.abs(sol.residual - c_res)[sol.valid].max() < 1e-12
+    assert sol.ls.any() and sol.exact.any() and sol.degenerate.any()    # all three kinds compared
+
+
+def mixed(rng, n):
+    """Random vectors with a tenth on the axis (degenerate) and axes."""
+    k, p = unit(rng, n), rng.normal(size=(n, 3))
+    p[: n // 10] = k[: n // 10] * rng.normal(size=(n // 10, 1))
+    return k, p
+
+
+def test_c_sp1_sp4_agree_with_numpy(c_subproblems):
+    rng = np.random.default_rng(20)
+    n = 400
+    k, p1 = mixed(rng, n)
+    t = rng.uniform(-np.pi, np.pi, n)
+    p2 = np.where(np.arange(n)[:, None] % 2 == 0, Rp(k, t, p1), rng.normal(size=(n, 3)))  # exact / ls
+    angles, res, flags, count = call_c(c_subproblems, "b_sp1", n, 1, k, p1, p2)
+    agree(sp1(k, p1, p2), angles, res, flags, count)
+
+    k1, k2, q1, q2, t2 = sp2_instance(rng, n)
+    q1[1::2] *= 1.3                                             # half least-squares
+    k2[: n // 10] = k1[: n // 10]                               # a tenth coaxial
+    angles, res, flags, count = call_c(c_subproblems, "b_sp2", n, 2, k1, k2, q1, q2, angles=2)
+    agree(sp2(k1, k2, q1, q2), angles, res, flags, count)
+
+    p2 = rng.normal(size=(n, 3))
+    d = np.linalg.norm(Rp(k, t, p1) - p2, axis=-1) * np.where(np.arange(n) % 3 == 0, 3.0, 1.0)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp3", n, 2, k, p1, p2, d)
+    agree(sp3(k, p1, p2, d), angles, res, flags, count)
+
+    h = unit(rng, n)
+    d = np.einsum("ni,ni->n", h, Rp(k, t, p1)) + np.where(np.arange(n) % 3 == 0, 2.0, 0.0)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp4", n, 2, h, k, p1, d)
+    agree(sp4(h, k, p1, d), angles, res, flags, count)

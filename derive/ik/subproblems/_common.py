@@ -298,7 +298,7 @@ def two_circles(m, b):
 def finish(theta, valid, residual, degenerate) -> SubproblemSolutions:
     """Blank invalid slots with NaN (flagged by ``valid``) and set ``exact`` from the residuals."""
     valid = valid & np.all(np.isfinite(theta), axis=-1) & np.isfinite(residual)
-    exact = np.all(~valid | (residual <= SP_EXACT_TOL), axis=-1) & valid.any(axis=-1)
+    exact = np.asarray(np.all(~valid | (residual <= SP_EXACT_TOL), axis=-1) & valid.any(axis=-1))
     theta = np.where(valid[..., None], theta, np.nan)
     residual = np.where(valid, residual, np.nan)
     return SubproblemSolutions(theta=theta, valid=valid, residual=residual, exact=exact,
