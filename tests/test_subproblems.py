@@ -73,6 +73,15 @@ def test_sp1_least_squares_minimises():
         assert sol.residual[0] == pytest.approx(np.linalg.norm(Rp(k, sol.theta[0, 0], p1) - p2), abs=1e-14)
 
 
+def test_angles_in_half_open_interval():
+    """A half turn is +pi, never -pi (atan2 gives -pi for a -0.0 sine): (-pi, pi]."""
+    z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    assert np.arctan2(np.cross(z, x) @ -x, x @ -x) in (np.pi, -np.pi)
+    assert sp1(z, x, -x).theta[0, 0] == np.pi
+    assert sp1(z, [1.0, -0.0, 0.0], [-1.0, -0.0, 0.0]).theta[0, 0] == np.pi
+    assert sp4(-x, z, x, 1.0).solutions().ravel().tolist() == [np.pi, np.pi]
+
+
 def test_sp1_degenerate():
     k = np.array([0.0, 0.0, 1.0])
     on_axis = sp1(k, [0, 0, 2.0], [0, 0, 2.0])          # any theta solves it
@@ -466,7 +475,9 @@ def test_c_sp1_sp4_agree_with_numpy(c_subproblems):
     k, p1 = mixed(rng, n)
     t = rng.uniform(-np.pi, np.pi, n)
     p2 = np.where(np.arange(n)[:, None] % 2 == 0, Rp(k, t, p1), rng.normal(size=(n, 3)))  # exact / ls
+    k[-1], p1[-1], p2[-1] = [0, 0, 1.0], [1.0, -0.0, 0], [-1.0, -0.0, 0]   # a half turn: +pi
     angles, res, flags, count = call_c(c_subproblems, "b_sp1", n, 1, k, p1, p2)
+    assert angles[0][-1, 0] == np.pi
     agree(sp1(k, p1, p2), angles, res, flags, count)
 
     k1, k2, q1, q2, t2 = sp2_instance(rng, n)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from derive.algebra.angles import wrap_angle
 from derive.errors import InputError, as_finite_array
 from derive.ik.tolerances import (SP_AXIS_UNIT_TOL, SP_EXACT_TOL, SP_FREE_ANGLE, SP_RANK_TOL,
                                   SP_ROOT_MODULUS)
@@ -296,10 +297,11 @@ def two_circles(m, b):
 
 
 def finish(theta, valid, residual, degenerate) -> SubproblemSolutions:
-    """Blank invalid slots with NaN (flagged by ``valid``) and set ``exact`` from the residuals."""
+    """Wrap the angles to (-pi, pi], blank invalid slots with NaN (flagged by ``valid``) and set
+    ``exact`` from the residuals."""
     valid = valid & np.all(np.isfinite(theta), axis=-1) & np.isfinite(residual)
     exact = np.asarray(np.all(~valid | (residual <= SP_EXACT_TOL), axis=-1) & valid.any(axis=-1))
-    theta = np.where(valid[..., None], theta, np.nan)
+    theta = np.where(valid[..., None], wrap_angle(np.where(valid[..., None], theta, 0.0)), np.nan)
     residual = np.where(valid, residual, np.nan)
     return SubproblemSolutions(theta=theta, valid=valid, residual=residual, exact=exact,
                                degenerate=np.asarray(degenerate, dtype=bool))
