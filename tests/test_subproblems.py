@@ -248,9 +248,7 @@ def sp6_root_count(h, k, p, d, n=20001):
     """Independent count: for t1 on a grid, equation 1 gives t2 (two branches, closed form);
     roots are the sign changes of equation 2 along each branch, polished with brentq."""
     def branch(t1, sign):
-        a = Rp(k[1], np.pi / 2, p[1]) - Rp(k[1], 0.0, p[1]) + (k[1] @ p[1]) * k[1]   # = k x p
         a_s, a_c = np.cross(k[1], p[1]) @ h[1], (p[1] - (k[1] @ p[1]) * k[1]) @ h[1]
-        del a
         rhs = d[0] - Rp(k[0], t1, p[0]) @ h[0] - (k[1] @ p[1]) * (k[1] @ h[1])
         amp = np.hypot(a_s, a_c)
         phi = np.arctan2(a_s, a_c)                       # a_s sin t + a_c cos t = amp cos(t - phi)

@@ -229,7 +229,7 @@ def _rank_one(mi, bi):
     Returns (ta (4,), tb (4,), ok (4,), degenerate)."""
     ta, tb, ok = np.zeros(4), np.zeros(4), np.zeros(4, dtype=bool)
     u, s, _vt = np.linalg.svd(mi[:, 2:4])
-    if s[0] <= SP_FREE_ANGLE:
+    if s[0] <= SP_RANK_TOL:                # rows are unit: relative
         return ta, tb, ok, True            # x_b does not enter: t_b free
     u1, u2 = u[:, 0], u[:, 1]
     th_a, two_a, free_a = circle_line(u2 @ mi[:, 0:2], np.asarray(u2 @ bi))

@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape, dot,
-                                           finish, rot, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape, finish,
+                                           rot, vector)
 from derive.ik.tolerances import SP_FREE_ANGLE
 
 
 def angle_sp1(k, p1, p2):
-    """theta (..., 2) as (sin, cos)-coefficient solve of R(k, theta) p1 = p2, no input checks.
+    """The core of ``sp1`` without input checks, for arrays already broadcast (..., 3).
 
-    Returns (theta, degenerate); theta = atan2((k x p1) . p2, (p1 - (k . p1) k) . p2).
+    Returns (theta (...), degenerate (...)); theta = atan2((k x p1) . p2, (p1 - (k . p1) k) . p2),
+    0 where degenerate (p1 or p2 within SP_FREE_ANGLE of the axis).
     """
     a, _axial = a_matrix(k, p1)
     coef = np.einsum("...ij,...i->...j", a, p2)
