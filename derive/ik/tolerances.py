@@ -31,8 +31,9 @@ SP_AXIS_UNIT_TOL = 1e-9
 #: (dimensionless: 1/2 for a scaled rotation, 0 at rank 1); a whole M whose second singular value
 #: over its first is below it has a continuum of solutions (degenerate).
 SP_RANK_TOL = 1e-9
-#: A root z of the quartic in z = exp(i theta) (sp5, sp6) is taken as a real angle when
-#: | |z| - 1 | is below this (dimensionless; a double root, a tangency, splits off the unit circle
-#: by about the square root of rounding). The candidate is still kept only if its residual is
-#: within SP_EXACT_TOL.
+#: A root u of the quartic in the tangent half-angle (sp5, sp6) is taken as a real angle when
+#: 2 |Im u| / (1 + |u|^2) is below this (dimensionless: the distance of exp(i theta) from the
+#: unit circle, to first order; a double root, a tangency, splits off the real axis by about the
+#: square root of rounding). The candidate is still kept only if its residual is within
+#: SP_EXACT_TOL.
 SP_ROOT_MODULUS = 1e-6

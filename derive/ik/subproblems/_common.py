@@ -153,45 +153,55 @@ def circle_line(a, beta):
 # --- two linear equations in two unit 2-vectors (sp5, sp6) ----------------------------------
 
 def _trig_roots(coef):
-    """Real roots t of A0 + A1 cos t + B1 sin t + A2 cos 2t + B2 sin 2t = 0.
+    """Real roots t of F(t) = A0 + A1 cos t + B1 sin t + A2 cos 2t + B2 sin 2t = 0 (up to 4).
 
-    ``coef`` (n, 5) = (A0, A1, B1, A2, B2). With z = exp(i t), z^2 times the left side is the
-    quartic (A2 - i B2)/2 z^4 + (A1 - i B1)/2 z^3 + A0 z^2 + (A1 + i B1)/2 z + (A2 + i B2)/2; its
-    roots on the unit circle (within SP_ROOT_MODULUS) are the real t, found as eigenvalues of
-    the companion matrix and polished by two Newton steps on the trigonometric form. Returns
+    ``coef`` (n, 5) = (A0, A1, B1, A2, B2). The angle is shifted, t = t0 + s, so that s = pi
+    (where the tangent half-angle u = tan(s/2) is infinite) is where |F| is largest among eight
+    samples; with u, (1 + u^2)^2 F is the real quartic
+
+        (A0 - A1' + A2') u^4 + (2 B1' - 4 B2') u^3 + (2 A0 - 6 A2') u^2 + (2 B1' + 4 B2') u
+        + (A0 + A1' + A2'),
+
+    (A1', B1') and (A2', B2') the coefficients rotated by t0 and 2 t0; its leading coefficient
+    is F(t0 + pi), so no root is near infinity and no angle is lost at pi. Roots are the
+    eigenvalues of the companion matrix; u counts as real when 2 |Im u| / (1 + |u|^2) (the
+    distance of exp(i s) from the unit circle, to first order) is below SP_ROOT_MODULUS. Two
+    Newton steps on F polish them. F vanishing at all eight samples is F = 0 (a trigonometric
+    polynomial of degree 2 has at most 4 roots in a period): no root is reported. Returns
     t (n, 4) and ok (n, 4).
     """
-    a0, a1, b1, a2, b2 = np.moveaxis(coef, -1, 0)
-    poly = np.stack([(a2 - 1j * b2) / 2, (a1 - 1j * b1) / 2, a0 + 0j,
-                     (a1 + 1j * b1) / 2, (a2 + 1j * b2) / 2], axis=-1)
-    n = poly.shape[0]
+    a0, a1, b1, a2, b2 = (coef[:, i] for i in range(5))
+    n = coef.shape[0]
+    samples = np.arange(8) * (np.pi / 4)
+    f_s = (a0[:, None] + a1[:, None] * np.cos(samples) + b1[:, None] * np.sin(samples)
+           + a2[:, None] * np.cos(2 * samples) + b2[:, None] * np.sin(2 * samples))
+    best = np.argmax(np.abs(f_s), axis=-1)
+    lead = f_s[np.arange(n), best]
+    t0 = samples[best] - np.pi
+    c0, s0, c20, s20 = np.cos(t0), np.sin(t0), np.cos(2 * t0), np.sin(2 * t0)
+    a1r, b1r = a1 * c0 + b1 * s0, b1 * c0 - a1 * s0
+    a2r, b2r = a2 * c20 + b2 * s20, b2 * c20 - a2 * s20
+    scale = np.max(np.abs(coef), axis=-1)
     t = np.zeros((n, 4))
     ok = np.zeros((n, 4), dtype=bool)
-    scale = np.max(np.abs(poly), axis=-1)
-    lead_ok = np.abs(poly[:, 0]) > 1e-12 * np.where(scale > 0, scale, 1.0)
-    if np.any(lead_ok):
-        p = poly[lead_ok] / poly[lead_ok, :1]
-        comp = np.zeros((p.shape[0], 4, 4), dtype=complex)
-        comp[:, 0, :] = -p[:, 1:]
+    live = np.abs(lead) > 1e-12 * scale
+    if np.any(live):
+        poly = np.stack([2 * b1r - 4 * b2r, 2 * a0 - 6 * a2r, 2 * b1r + 4 * b2r, a0 + a1r + a2r],
+                        axis=-1)[live] / lead[live, None]
+        comp = np.zeros((poly.shape[0], 4, 4))
+        comp[:, 0, :] = -poly
         comp[:, 1, 0] = comp[:, 2, 1] = comp[:, 3, 2] = 1.0
-        z = np.linalg.eigvals(comp)
-        t[lead_ok] = np.angle(z)
-        ok[lead_ok] = np.abs(np.abs(z) - 1.0) < SP_ROOT_MODULUS
-    # A vanishing leading coefficient (A2 = B2 = 0) leaves a degree-1 trig equation: circle_line.
-    lin = ~lead_ok & (scale > 0)
-    if np.any(lin):
-        th, two, free = circle_line(np.stack([b1[lin], a1[lin]], axis=-1), -a0[lin])
-        t[lin, :2] = th
-        ok[lin, 0] = ~free
-        ok[lin, 1] = two
+        u = np.linalg.eigvals(comp)
+        t[live] = t0[live, None] + 2 * np.arctan(u.real)
+        ok[live] = 2 * np.abs(u.imag) / (1 + np.abs(u) ** 2) < SP_ROOT_MODULUS
     for _ in range(2):
         c, s, c2, s2 = np.cos(t), np.sin(t), np.cos(2 * t), np.sin(2 * t)
         f = a0[:, None] + a1[:, None] * c + b1[:, None] * s + a2[:, None] * c2 + b2[:, None] * s2
         df = -a1[:, None] * s + b1[:, None] * c - 2 * a2[:, None] * s2 + 2 * b2[:, None] * c2
-        step = np.where(np.abs(df) > 1e-8 * np.maximum(scale[:, None], 1e-300), f / np.where(df == 0, 1, df), 0.0)
+        big = np.abs(df) > 1e-8 * np.maximum(scale[:, None], 1e-300)
+        step = np.where(big, f / np.where(big, df, 1.0), 0.0)
         t = np.where(ok & (np.abs(step) < 1e-3), t - step, t)
     return np.arctan2(np.sin(t), np.cos(t)), ok
-
 
 def _solve_b(m, b, ta):
     """x_b of M [x_a; x_b] = b for given t_a (n, s) when M's b-block is invertible."""
@@ -249,11 +259,14 @@ def two_circles(m, b):
     """Solve M [x_a; x_b] = b, x_a = (sin t_a, cos t_a), x_b = (sin t_b, cos t_b): up to 4 (t_a, t_b).
 
     m (n, 2, 4), b (n, 2). Each row is scaled to unit norm first. The better-conditioned 2x2 block
-    (|det| / squared Frobenius norm) is eliminated (``det x = adj (...)``), leaving a quartic in
-    exp(i t) of the other angle (IK-Geo solves the same two conics by a quartic, eq. 14-15 of the
-    2024 paper). Both blocks of rank 1 (below SP_RANK_TOL): two circle_line steps. M of rank <= 1
-    (second singular value below SP_RANK_TOL times the first): a continuum or nothing, reported
-    as degenerate with no solution. Candidates are not yet checked (the caller computes residuals).
+    (|det| / squared Frobenius norm) is eliminated (``det x = adj (...)``): |x|^2 = 1 becomes a
+    trigonometric polynomial of degree 2 in the other angle, whose roots are those of a real
+    quartic (``_trig_roots``; IK-Geo too solves sp5 and sp6 through a quartic, with other
+    unknowns). Both blocks of rank 1 (below SP_RANK_TOL): two circle_line steps. A vanishing block
+    (norm below SP_RANK_TOL): that angle is free (degenerate), returned as 0, with the other unit
+    vector solved from its invertible block. M of rank <= 1 (second singular value below
+    SP_RANK_TOL times the first): a continuum or nothing, reported as degenerate with no
+    solution. Candidates are not yet checked (the caller computes residuals).
     Returns ta (n, 4), tb (n, 4), ok (n, 4), degenerate (n,).
     """
     n = m.shape[0]
@@ -262,8 +275,13 @@ def two_circles(m, b):
     rown = np.where(rown > SP_FREE_ANGLE, rown, 1.0)
     m = m / rown[..., None]
     b = b / rown
-    sv = np.linalg.svd(m, compute_uv=False)
-    degenerate |= sv[:, 1] <= SP_RANK_TOL * sv[:, 0]
+    # singular values of the unit-row M: s1 s2 = |r0 ^ r1| (the wedge, stable for near-parallel
+    # rows), s1^2 + s2^2 = 2, so s2 / s1 = |r0 ^ r1| / s1^2
+    r0, r1 = m[:, 0], m[:, 1]
+    wedge = r0[:, :, None] * r1[:, None, :] - r0[:, None, :] * r1[:, :, None]
+    area = np.sqrt(np.sum(wedge ** 2, axis=(-2, -1)) / 2)
+    ratio = area / (1 + np.sqrt(np.maximum(1 - area ** 2, 0.0)))
+    degenerate |= ratio <= SP_RANK_TOL
 
     def cond(block):
         det = block[:, 0, 0] * block[:, 1, 1] - block[:, 0, 1] * block[:, 1, 0]

@@ -1,4 +1,4 @@
-"""Subproblem 4 (Paden-Kahan 4 in IK-Geo's numbering): a rotated point on a plane."""
+"""Subproblem 4 (IK-Geo): a rotated point on a plane (a circle meeting a plane)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,9 @@ from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, 
 def sp4(h, k, p, d) -> SubproblemSolutions:
     """Solve h^T R(k, theta) p = d for theta: up to 2 solutions, or 1 least-squares.
 
-    IK-Geo (Elias & Wen 2022, arXiv:2211.05737, subproblem 4; in Paden's and Kahan's list the
-    "rotation to a given distance from a plane"): with R(k, theta) p = (k . p) k + A x,
+    IK-Geo (Elias & Wen 2022, arXiv:2211.05737, subproblem 4: a circle meeting a plane; the
+    classic Paden-Kahan list in Murray, Li, Sastry 1994 has 1-3, and IK-Geo solves sp2 and sp3
+    through this one): with R(k, theta) p = (k . p) k + A x,
     A = [k x p, p - (k . p) k], x = (sin theta, cos theta), the equation is the line
     a . x = b with a = A^T h, b = d - (h . k)(k . p), cut with the unit circle:
 

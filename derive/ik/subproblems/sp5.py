@@ -13,7 +13,7 @@ from derive.ik.tolerances import SP_EXACT_TOL
 def sp5(p0, p1, p2, p3, k1, k2, k3) -> SubproblemSolutions:
     """Solve p0 + R(k1, t1) p1 = R(k2, t2) (p2 + R(k3, t3) p3) for (t1, t2, t3): up to 4.
 
-    IK-Geo subproblem 5 (Elias & Wen 2022, arXiv:2211.05737, sec. III-E). The point
+    IK-Geo subproblem 5 (Elias & Wen 2022, arXiv:2211.05737, section on the subproblems). The point
     v1 = p0 + R(k1, t1) p1 (a circle about k1) equals R(k2, t2) v3, v3 = p2 + R(k3, t3) p3 (a
     circle about k3), for some t2 exactly when v1 and v3 have the same height along k2 and the
     same norm (both on one circle about k2):

@@ -17,12 +17,12 @@ def sp6(h, k, p, d) -> SubproblemSolutions:
         h1^T R(k1, t1) p1 + h2^T R(k2, t2) p2 = d1
         h3^T R(k3, t1) p3 + h4^T R(k4, t2) p4 = d2
 
-    IK-Geo subproblem 6 (Elias & Wen 2022, arXiv:2211.05737; eq. numbers as in its sec. III-F):
+    IK-Geo subproblem 6 (Elias & Wen 2022, arXiv:2211.05737, section on the subproblems):
     with R(k, t) p = (k . p) k + A(k, p) x, both equations are linear in x1 = (sin t1, cos t1)
     and x2 = (sin t2, cos t2), M [x1; x2] = b with M 2x4, and |x1| = |x2| = 1. IK-Geo intersects
     the two ellipses of the null-space parametrisation by a quartic; here the better-conditioned
     2x2 block is eliminated (det x2 = adj(M2)(b - M1 x1)) and |x2|^2 = 1 becomes a quartic in
-    z = exp(i t1) (``two_circles``). Every returned solution has a residual within SP_EXACT_TOL:
+    the tangent half-angle of t1, shifted so that no root is near infinity (``two_circles``). Every returned solution has a residual within SP_EXACT_TOL:
     when none exists nothing is returned (no least-squares solution for sp6, as in IK-Geo).
 
     h, k, p (..., 4, 3): rows i = 1..4 of the equations above (k rows unit axes, h need not be
