@@ -493,3 +493,34 @@ def test_c_sp1_sp4_agree_with_numpy(c_subproblems):
     d = np.einsum("ni,ni->n", h, Rp(k, t, p1)) + np.where(np.arange(n) % 3 == 0, 2.0, 0.0)
     angles, res, flags, count = call_c(c_subproblems, "b_sp4", n, 2, h, k, p1, d)
     agree(sp4(h, k, p1, d), angles, res, flags, count)
+
+
+def test_sp5_sp6_robot_like_instances():
+    """Axes along +-x, +-y, +-z and offsets in quarter metres, as in robot descriptions: many
+    instances have parallel or perpendicular axes, zero offsets, rank-one blocks. The generating
+    angles are found in every instance that is not flagged degenerate; every returned solution of
+    every instance (degenerate ones included) solves the equation."""
+    rng = np.random.default_rng(21)
+    n = 3000
+    ax = lambda m: np.eye(3)[rng.integers(0, 3, m)] * rng.choice([-1.0, 1.0], (m, 1))
+    vec = lambda m: rng.integers(-2, 3, (m, 3)) * 0.25
+    p1, p2, p3, k1, k2, k3 = vec(n), vec(n), vec(n), ax(n), ax(n), ax(n)
+    t = rng.uniform(-np.pi, np.pi, (n, 3))
+    p0 = Rp(k2, t[:, 1], p2 + Rp(k3, t[:, 2], p3)) - Rp(k1, t[:, 0], p1)
+    args = (p0, p1, p2, p3, k1, k2, k3)
+    sol = sp5(*args)
+    assert 0 < sol.degenerate.sum() < n
+    assert closest_to(sol, t)[~sol.degenerate].max() < 1e-8
+    assert sp5_res([a[:, None] for a in args], sol.theta)[sol.valid].max() < 1e-11
+
+    h, k, p = ax(4 * n).reshape(n, 4, 3), ax(4 * n).reshape(n, 4, 3), vec(4 * n).reshape(n, 4, 3)
+    t = rng.uniform(-np.pi, np.pi, (n, 2))
+    val = np.einsum("nqi,nqi->nq", h, Rp(k, t[:, [0, 1, 0, 1]], p))
+    d = np.stack([val[:, 0] + val[:, 1], val[:, 2] + val[:, 3]], axis=-1)
+    sol = sp6(h, k, p, d)
+    assert 0 < sol.degenerate.sum() < n
+    assert closest_to(sol, t)[~sol.degenerate].max() < 1e-8
+    tt = np.nan_to_num(sol.theta)[:, :, [0, 1, 0, 1]]                       # (n, 4 slots, 4 rows)
+    v = np.einsum("nqi,nsqi->nsq", h, Rp(k[:, None], tt, p[:, None]))
+    err = np.stack([v[..., 0] + v[..., 1] - d[:, None, 0], v[..., 2] + v[..., 3] - d[:, None, 1]], -1)
+    assert np.abs(err)[sol.valid].max() < 1e-11
