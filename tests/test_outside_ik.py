@@ -38,7 +38,6 @@ stated where it is applied (frankik: its own joint limits, one elbow root; ssik'
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 import pytest
@@ -48,13 +47,9 @@ from derive import reference
 from derive.ik import srs
 from derive.model.geometry import numeric_chain
 
-import frankik  # noqa: E402  (Python >= 3.10, wheels for cp310-cp313)
-
-# ssik needs Python >= 3.11 (the project supports 3.10): on 3.11+ a missing ssik is an error
-if sys.version_info >= (3, 11):
-    import ssik
-else:  # pragma: no cover
-    ssik = pytest.importorskip("ssik", reason="ssik requires Python >= 3.11")
+# both are in the `test` extra (PyPI wheels for cp310 and cp311, manylinux x86_64): no skip
+import frankik
+import ssik
 
 #: Two solutions are the same when every joint agrees within this (rad, compared modulo 2 pi).
 SAME = 1e-9
