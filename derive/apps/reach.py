@@ -27,7 +27,6 @@ flip).
 from __future__ import annotations
 
 import ctypes
-import functools
 import math
 import os
 import shutil
@@ -51,7 +50,7 @@ TWO_PI = 2.0 * math.pi
 #: psi of the super-Fibonacci spiral: the real root of psi^4 = psi + 4 (Alexa 2022, eq. 9)
 SUPER_FIBONACCI_PSI = 1.533751168755204288118041
 #: Poses per call of the IK kernel inside a task (bounds a task's memory: 48 doubles a pose).
-BATCH = 16384
+BATCH = 4096
 #: A quaternion read from a file or the command line is normalised within this of unit norm.
 QUAT_TOL = 1e-4
 #: At most this many voxels in a map (a guard against a mistyped --voxel).
@@ -189,17 +188,24 @@ def _xyz_quat_xyzw(rows: np.ndarray, what: str) -> np.ndarray:
     return dq.from_rt(q / norm[:, None], rows[:, :3])
 
 
-def _robot_source(robot) -> str:
-    """What a worker loads the robot from: its library name, else its file's path."""
+def _robot_source(robot):
+    """What a worker loads the robot from: its library name, else the Robot itself (pickled
+    with the task: a URDF's chosen base and tip, a file the workers do not have)."""
     if Path(robot.path).resolve().parent == LIBRARY_DIR.resolve():
         return robot.name
-    return str(Path(robot.path).resolve())
+    return robot
+
+
+def _source_attr(robot) -> str:
+    """The robot's library name or its file's path, for the attributes."""
+    src = _robot_source(robot)
+    return src if isinstance(src, str) else str(Path(robot.path).resolve())
 
 
 class _Solver:
     """In-limit IK counts of poses of the tool frame, by the C kernels of one robot."""
 
-    def __init__(self, source: str, rid: str, tool, free_samples: int):
+    def __init__(self, source, rid: str, tool, free_samples: int):
         robot = load_robot(source)
         if robot.id != rid:
             raise DeriveError(f"{source}: the robot loaded here has identity {robot.id}, the map's is {rid} "
@@ -260,10 +266,15 @@ class _Solver:
         return self.in_limits(sols).sum(axis=1)
 
 
-@functools.lru_cache(maxsize=8)
-def _solver(source: str, rid: str, tool: tuple | None, free_samples: int) -> _Solver:
-    """The solver of a robot, once per worker process (and per tool)."""
-    return _Solver(source, rid, tool, free_samples)
+_SOLVERS: dict = {}
+
+
+def _solver(source, rid: str, tool: tuple | None, free_samples: int) -> _Solver:
+    """The solver of a robot, once per worker process (and per tool), by its identity."""
+    key = (rid, tool, free_samples)
+    if key not in _SOLVERS:
+        _SOLVERS[key] = _Solver(source, rid, tool, free_samples)
+    return _SOLVERS[key]
 
 
 def _poses(points: np.ndarray, quats: np.ndarray) -> np.ndarray:
@@ -284,7 +295,7 @@ def _poses(points: np.ndarray, quats: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class _ReachJob:
     path: str
-    source: str
+    source: object          # a library name or a Robot
     rid: str
     tool: tuple | None
     n_orientations: int
@@ -336,7 +347,7 @@ def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
 @dataclass(frozen=True)
 class _PlaceJob:
     path: str
-    source: str
+    source: object          # a library name or a Robot
     rid: str
     tool: tuple | None
     targets: tuple          # (T, 8) as nested tuples (pickles small, hashable)
@@ -618,7 +629,7 @@ def reach(robot, voxel: float, orientations: int = 100, out=None, *, tool=None, 
             group.create_array("done", shape=grid, chunks=(1, 1, 1), dtype="uint8", fill_value=0)
             group.attrs.update({
                 "kind": "dq-derive reach map", "params": params, "robot": robot.name, "robot_id": robot.id,
-                "robot_source": _robot_source(robot), "dof": robot.dof, "tool": _tool_attr(tool_pose),
+                "robot_source": _source_attr(robot), "dof": robot.dof, "tool": _tool_attr(tool_pose),
                 "origin": [float(v) for v in origin], "voxel": voxel, "shape": list(shape),
                 "orientations": n_or, "orientation_method": METHOD, "centre": [float(v) for v in centre],
                 "radius": radius, "chunk": chunk, "free_parameter": k.free,
@@ -797,7 +808,7 @@ def place(robot, targets, region, step: float, *, z: float = 0.0, yaw_steps: int
             group.create_array("done", shape=grid, chunks=(1, 1), dtype="uint8", fill_value=0)
             group.attrs.update({
                 "kind": "dq-derive placement map", "params": params, "robot": robot.name, "robot_id": robot.id,
-                "robot_source": _robot_source(robot), "tool": _tool_attr(tool_pose),
+                "robot_source": _source_attr(robot), "tool": _tool_attr(tool_pose),
                 "xs": [float(v) for v in xs], "ys": [float(v) for v in ys], "z": zf,
                 "yaws": [float(v) for v in yaws], "step": step, "targets": len(tp),
                 "placement": "fraction of the targets with an in-limit IK solution from the base "
