@@ -458,10 +458,11 @@ def _run(func, job, todo: list, scheduler, bar: _Bar) -> list:
     except (OSError, TimeoutError, ValueError) as exc:
         raise InputError(f"scheduler: cannot connect to the Dask scheduler at {scheduler!r} ({exc})") from None
     try:
-        futures = client.compute(tasks)
-        for _ in as_completed(futures):
-            bar.update()
-        return client.gather(futures)
+        with client.as_current():
+            futures = client.compute(tasks)
+            for _ in as_completed(futures):
+                bar.update()
+            return client.gather(futures)
     finally:
         client.close()
 
