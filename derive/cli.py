@@ -753,7 +753,7 @@ def _reach_commands(command, robot_argument) -> None:
     s.add_argument("--orientations", type=int, default=100, metavar="N",
                    help="orientations per voxel (super-Fibonacci spiral over SO(3))")
     s.add_argument("--solutions", action="store_true", help="also store the in-limit solutions per voxel")
-    common(s, 16)
+    common(s, 32)
 
     s = command("place", "base placement: the fraction of target poses (CSV x,y,z,qx,qy,qz,qw) reachable "
                          "from every candidate base position and yaw, on Dask, into a Zarr group", cmd_place)

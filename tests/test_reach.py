@@ -17,13 +17,13 @@ from derive.cli import main
 from derive.errors import InputError
 from derive.kinematics.pose import from_position_quaternion
 
-VOXEL, N_OR = 0.1, 24          # coarse: 23^3 voxels, 24 orientations, about 0.1 M IK calls
+VOXEL, N_OR, CHUNK = 0.1, 24, 16   # coarse: 23^3 voxels in 8 chunks, 24 orientations, 0.13 M IK calls
 
 
 @pytest.fixture(scope="module")
 def ur5_map(tmp_path_factory):
     out = tmp_path_factory.mktemp("reach") / "ur5.zarr"
-    return R.reach("ur5", VOXEL, N_OR, out, solutions=True, progress=False)
+    return R.reach("ur5", VOXEL, N_OR, out, solutions=True, chunk=CHUNK, progress=False)
 
 
 def _random_q(robot, rng, n):
@@ -182,7 +182,7 @@ def test_local_scheduler_and_a_two_worker_cluster_give_the_same_maps(ur5_map, tm
     local_place = R.place("ur5", targets, (-0.2, 0.2, -0.2, 0.2), 0.2, yaw_steps=2, progress=False)
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False,
                                   dashboard_address=None) as cluster:
-        m = R.reach("ur5", VOXEL, N_OR, tmp_path / "cluster.zarr", solutions=True,
+        m = R.reach("ur5", VOXEL, N_OR, tmp_path / "cluster.zarr", solutions=True, chunk=CHUNK,
                     scheduler=cluster.scheduler_address, progress=False)
         p = R.place("ur5", targets, (-0.2, 0.2, -0.2, 0.2), 0.2, yaw_steps=2, progress=False,
                     scheduler=cluster.scheduler_address)
@@ -195,22 +195,22 @@ def test_local_scheduler_and_a_two_worker_cluster_give_the_same_maps(ur5_map, tm
 
 def test_resume_computes_only_the_missing_chunks(ur5_map, tmp_path):
     out = tmp_path / "resume.zarr"
-    first = R.reach("ur5", VOXEL, N_OR, out, solutions=True, max_chunks=3, progress=False)
+    first = R.reach("ur5", VOXEL, N_OR, out, solutions=True, chunk=CHUNK, max_chunks=3, progress=False)
     assert not first.complete and first.stats.computed == 3
     assert np.isnan(first.reach).any()                            # the chunks not yet computed
     chunk_files = sorted((out / "reach" / "c").rglob("*"))
     chunk_files = [f for f in chunk_files if f.is_file()]
     assert len(chunk_files) == 3
     stamps = {f: f.stat().st_mtime_ns for f in chunk_files}
-    second = R.reach("ur5", VOXEL, N_OR, out, solutions=True, progress=False)
+    second = R.reach("ur5", VOXEL, N_OR, out, solutions=True, chunk=CHUNK, progress=False)
     assert second.complete and second.stats.computed == 8 - 3
     assert np.array_equal(second.reach, ur5_map.reach)
     assert np.array_equal(second.solutions, ur5_map.solutions)
     assert all(f.stat().st_mtime_ns == t for f, t in stamps.items())   # not rewritten
-    third = R.reach("ur5", VOXEL, N_OR, out, solutions=True, progress=False)
+    third = R.reach("ur5", VOXEL, N_OR, out, solutions=True, chunk=CHUNK, progress=False)
     assert third.stats.computed == 0
     with pytest.raises(InputError, match="other parameters"):
-        R.reach("ur5", VOXEL, N_OR + 1, out, progress=False)
+        R.reach("ur5", VOXEL, N_OR + 1, out, chunk=CHUNK, progress=False)
 
 
 def test_placement_finds_the_base_the_targets_came_from(tmp_path):

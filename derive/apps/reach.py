@@ -277,6 +277,22 @@ def _solver(source, rid: str, tool: tuple | None, free_samples: int) -> _Solver:
     return _SOLVERS[key]
 
 
+_ARRAYS: dict = {}
+
+
+def _arrays(path: str, run: str, names: tuple) -> tuple:
+    """The Zarr arrays of a map, opened once per worker process and run (``run``: the map's
+    ``run_id`` attribute, new whenever a map is created at that path)."""
+    import zarr
+    key = (path, run, names)
+    if key not in _ARRAYS:
+        group = zarr.open_group(path, mode="r+")
+        if group.attrs.get("run_id") != run:
+            raise DeriveError(f"{path}: the map was replaced while its tasks ran")
+        _ARRAYS[key] = tuple(group[n] for n in names)
+    return _ARRAYS[key]
+
+
 def _poses(points: np.ndarray, quats: np.ndarray) -> np.ndarray:
     """(len(points) * len(quats), 8) the poses with every position and every rotation (w, x, y, z),
     position-major: [r, 1/2 (0, p) r] (dual = 1/2 t real)."""
@@ -295,6 +311,7 @@ def _poses(points: np.ndarray, quats: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class _ReachJob:
     path: str
+    run: str
     source: object          # a library name or a Robot
     rid: str
     tool: tuple | None
@@ -312,7 +329,6 @@ class _ReachJob:
 def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
     """Compute and write one chunk of a reachability map; returns (index, task seconds, IK
     seconds, poses)."""
-    import zarr
     t0 = time.perf_counter()
     solver = _solver(job.source, job.rid, job.tool, job.free_samples)
     ik0 = solver.ik_seconds
@@ -336,17 +352,18 @@ def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
         poses_done += c.size
     shape = tuple(h - a for a, h in zip(lo, hi))
     region = tuple(slice(a, h) for a, h in zip(lo, hi))
-    group = zarr.open_group(job.path, mode="r+")
-    group["reach"][region] = (reach_count / job.n_orientations).astype(np.float32).reshape(shape)
+    arrays = _arrays(job.path, job.run, ("reach", "done") + (("solutions",) if job.solutions else ()))
+    arrays[0][region] = (reach_count / job.n_orientations).astype(np.float32).reshape(shape)
     if job.solutions:
-        group["solutions"][region] = sol_count.astype(np.uint32).reshape(shape)
-    group["done"][tuple(slice(i, i + 1) for i in index)] = np.ones((1, 1, 1), dtype=np.uint8)
+        arrays[2][region] = sol_count.astype(np.uint32).reshape(shape)
+    arrays[1][tuple(slice(i, i + 1) for i in index)] = np.ones((1, 1, 1), dtype=np.uint8)
     return index, time.perf_counter() - t0, solver.ik_seconds - ik0, poses_done
 
 
 @dataclass(frozen=True)
 class _PlaceJob:
     path: str
+    run: str
     source: object          # a library name or a Robot
     rid: str
     tool: tuple | None
@@ -368,7 +385,6 @@ def _base_inverse(x: float, y: float, z: float, yaw: float) -> np.ndarray:
 def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
     """Compute and write one chunk of a placement map: for each candidate base B of the chunk,
     the fraction of targets P whose pose in the base frame, B^-1 P, has an in-limit solution."""
-    import zarr
     t0 = time.perf_counter()
     solver = _solver(job.source, job.rid, job.tool, job.free_samples)
     ik0 = solver.ik_seconds
@@ -386,9 +402,9 @@ def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
         c = solver.count(poses).reshape(len(b), len(targets))
         frac[s:s + len(b)] = (c > 0).sum(axis=1) / len(targets)
         poses_done += c.size
-    group = zarr.open_group(job.path, mode="r+")
-    group["placement"][i0:i1, j0:j1, :] = frac.astype(np.float32).reshape(i1 - i0, j1 - j0, len(job.yaws))
-    group["done"][index[0]:index[0] + 1, index[1]:index[1] + 1] = np.ones((1, 1), dtype=np.uint8)
+    placement, done = _arrays(job.path, job.run, ("placement", "done"))
+    placement[i0:i1, j0:j1, :] = frac.astype(np.float32).reshape(i1 - i0, j1 - j0, len(job.yaws))
+    done[index[0]:index[0] + 1, index[1]:index[1] + 1] = np.ones((1, 1), dtype=np.uint8)
     return index, time.perf_counter() - t0, solver.ik_seconds - ik0, poses_done
 
 
@@ -584,7 +600,7 @@ class ReachMap:
 
 
 def reach(robot, voxel: float, orientations: int = 100, out=None, *, tool=None, scheduler=None,
-          chunk: int = 16, solutions: bool = False, free_samples: int = 8, max_chunks: int | None = None,
+          chunk: int = 32, solutions: bool = False, free_samples: int = 8, max_chunks: int | None = None,
           overwrite: bool = False, progress: bool = True) -> ReachMap:
     """The reachability map of ``robot`` (a library name, a file, a Robot with a closed-form IK
     kernel) on voxels of edge ``voxel`` (m) over the ball of :func:`reach_bound`, with
@@ -636,12 +652,12 @@ def reach(robot, voxel: float, orientations: int = 100, out=None, *, tool=None, 
                 "radius": radius, "chunk": chunk, "free_parameter": k.free,
                 "free_samples": free_samples if k.free else None,
                 "reach": "fraction of the orientations with an in-limit IK solution at the voxel centre",
-                "dq_derive": __version__, "complete": False})
+                "dq_derive": __version__, "complete": False, "run_id": uuid.uuid4().hex})
         done = np.asarray(group["done"][...])
         todo = [idx for idx in np.ndindex(grid) if not done[idx]]
         if max_chunks is not None:
             todo = todo[:max_chunks]
-        job = _ReachJob(path=str(path.resolve()), source=_robot_source(robot), rid=robot.id,
+        job = _ReachJob(path=str(path.resolve()), run=group.attrs["run_id"], source=_robot_source(robot), rid=robot.id,
                         tool=_tool_tuple(tool_pose), n_orientations=n_or, origin=tuple(map(float, origin)),
                         voxel=voxel, shape=shape, chunk=chunk, centre=tuple(map(float, centre)),
                         radius=radius, solutions=bool(solutions), free_samples=free_samples)
@@ -813,12 +829,13 @@ def place(robot, targets, region, step: float, *, z: float = 0.0, yaw_steps: int
                 "xs": [float(v) for v in xs], "ys": [float(v) for v in ys], "z": zf,
                 "yaws": [float(v) for v in yaws], "step": step, "targets": len(tp),
                 "placement": "fraction of the targets with an in-limit IK solution from the base "
-                             "Trans(x, y, z) Rz(yaw)", "dq_derive": __version__, "complete": False})
+                             "Trans(x, y, z) Rz(yaw)", "dq_derive": __version__, "complete": False,
+                "run_id": uuid.uuid4().hex})
         done = np.asarray(group["done"][...])
         todo = [idx for idx in np.ndindex(grid) if not done[idx]]
         if max_chunks is not None:
             todo = todo[:max_chunks]
-        job = _PlaceJob(path=str(path.resolve()), source=_robot_source(robot), rid=robot.id,
+        job = _PlaceJob(path=str(path.resolve()), run=group.attrs["run_id"], source=_robot_source(robot), rid=robot.id,
                         tool=_tool_tuple(tool_pose), targets=tuple(map(tuple, tp.tolist())),
                         xs=tuple(map(float, xs)), ys=tuple(map(float, ys)), z=zf, yaws=tuple(map(float, yaws)),
                         chunk=chunk, free_samples=free_samples)
