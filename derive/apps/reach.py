@@ -228,7 +228,6 @@ class _Solver:
         # joints whose limits hold every angle of (-pi, pi] (the kernel's range) need no test
         full = rev & (lo <= -math.pi) & (hi >= math.pi)
         self._check = [(j, lo[j], hi[j], bool(rev[j])) for j in range(self.dof) if not full[j]]
-        self.ik_seconds = 0.0
 
     def in_limits(self, sols: np.ndarray) -> np.ndarray:
         """(m, K) bool: a solution (not NaN padding) with a 2 pi winding of every revolute joint
@@ -244,26 +243,33 @@ class _Solver:
                 ok &= (q >= lo) & (q <= hi)
         return ok
 
-    def count(self, poses: np.ndarray) -> np.ndarray:
+    def count(self, poses: np.ndarray, clock: list | None = None) -> np.ndarray:
         """(m,) the number of IK solutions inside the limits of each pose (m, 8) of the tool frame
         in the base frame (a solution counted once, whatever its windings). Seven joints: the
         largest count over ``free_samples`` values of the free parameter over its feasible range
-        (:meth:`derive.codegen.loader.Kernels.ik_sweep`, windings counted there)."""
+        (:meth:`derive.codegen.loader.Kernels.ik_sweep`, windings counted there). ``clock``: a
+        one-element list, the seconds of the IK call are added to it (per task: the threads of a
+        worker share the solver)."""
         m = len(poses)
         t = time.perf_counter()
         if self.k.free:
             k = self.k if self.tool_inv is None else self.k.with_tool(dq.conj_quaternion(self.tool_inv))
             sw = k.ik_sweep(poses, self.free_samples, within_limits=True)
             out = np.asarray(sw.counts, dtype=np.int64).reshape(m, -1).max(axis=1)
-            self.ik_seconds += time.perf_counter() - t
+            self._clock(t, clock)
             return out
         flange = poses if self.tool_inv is None else dq._mul(poses, self.tool_inv[None])
         flange = np.ascontiguousarray(flange, dtype=np.float64)
         sols = np.empty((m, 8, self.dof))
         counts = np.empty(m, dtype=np.intc)
         self._ik(m, flange.ctypes.data, sols.ctypes.data, counts.ctypes.data)
-        self.ik_seconds += time.perf_counter() - t
+        self._clock(t, clock)
         return self.in_limits(sols).sum(axis=1)
+
+    @staticmethod
+    def _clock(t0: float, clock: list | None) -> None:
+        if clock is not None:
+            clock[0] += time.perf_counter() - t0
 
 
 _SOLVERS: dict = {}
@@ -331,7 +337,7 @@ def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
     seconds, poses)."""
     t0 = time.perf_counter()
     solver = _solver(job.source, job.rid, job.tool, job.free_samples)
-    ik0 = solver.ik_seconds
+    clock = [0.0]
     quats = orientations(job.n_orientations)
     lo = [i * job.chunk for i in index]
     hi = [min(s, a + job.chunk) for s, a in zip(job.shape, lo)]
@@ -346,7 +352,7 @@ def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
     poses_done = 0
     for s in range(0, len(where), step):
         at = where[s:s + step]
-        c = solver.count(_poses(pts[at], quats)).reshape(len(at), job.n_orientations)
+        c = solver.count(_poses(pts[at], quats), clock).reshape(len(at), job.n_orientations)
         reach_count[at] = (c > 0).sum(axis=1)
         sol_count[at] = c.sum(axis=1)
         poses_done += c.size
@@ -357,7 +363,7 @@ def _reach_chunk(job: _ReachJob, index: tuple) -> tuple:
     if job.solutions:
         arrays[2][region] = sol_count.astype(np.uint32).reshape(shape)
     arrays[1][tuple(slice(i, i + 1) for i in index)] = np.ones((1, 1, 1), dtype=np.uint8)
-    return index, time.perf_counter() - t0, solver.ik_seconds - ik0, poses_done
+    return index, time.perf_counter() - t0, clock[0], poses_done
 
 
 @dataclass(frozen=True)
@@ -387,7 +393,7 @@ def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
     the fraction of targets P whose pose in the base frame, B^-1 P, has an in-limit solution."""
     t0 = time.perf_counter()
     solver = _solver(job.source, job.rid, job.tool, job.free_samples)
-    ik0 = solver.ik_seconds
+    clock = [0.0]
     targets = np.asarray(job.targets, dtype=float)
     i0, j0 = index[0] * job.chunk, index[1] * job.chunk
     i1, j1 = min(len(job.xs), i0 + job.chunk), min(len(job.ys), j0 + job.chunk)
@@ -399,13 +405,13 @@ def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
     for s in range(0, len(bases), step):
         b = np.asarray(bases[s:s + step])
         poses = dq._mul(np.repeat(b, len(targets), axis=0), np.tile(targets, (len(b), 1)))
-        c = solver.count(poses).reshape(len(b), len(targets))
+        c = solver.count(poses, clock).reshape(len(b), len(targets))
         frac[s:s + len(b)] = (c > 0).sum(axis=1) / len(targets)
         poses_done += c.size
     placement, done = _arrays(job.path, job.run, ("placement", "done"))
     placement[i0:i1, j0:j1, :] = frac.astype(np.float32).reshape(i1 - i0, j1 - j0, len(job.yaws))
     done[index[0]:index[0] + 1, index[1]:index[1] + 1] = np.ones((1, 1), dtype=np.uint8)
-    return index, time.perf_counter() - t0, solver.ik_seconds - ik0, poses_done
+    return index, time.perf_counter() - t0, clock[0], poses_done
 
 
 # --------------------------------------------------------------------------- #
