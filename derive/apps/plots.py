@@ -26,7 +26,7 @@ def reach_figure(m, out, title: str | None = None) -> None:
     c = np.clip(np.floor((np.asarray(m.centre) - m.origin) / m.voxel).astype(int), 0, np.array(r.shape) - 1)
     lo = m.origin
     hi = m.origin + np.array(r.shape) * m.voxel
-    fig = Figure(figsize=(13.0, 9.5))
+    fig = Figure(figsize=(12.0, 10.5), layout="constrained")
     slices = [("z", r[:, :, c[2]].T, (lo[0], hi[0], lo[1], hi[1]), "x (m)", "y (m)", m.origin[2] + (c[2] + .5) * m.voxel),
               ("y", r[:, c[1], :].T, (lo[0], hi[0], lo[2], hi[2]), "x (m)", "z (m)", m.origin[1] + (c[1] + .5) * m.voxel),
               ("x", r[c[0], :, :].T, (lo[1], hi[1], lo[2], hi[2]), "y (m)", "z (m)", m.origin[0] + (c[0] + .5) * m.voxel)]
@@ -39,7 +39,7 @@ def reach_figure(m, out, title: str | None = None) -> None:
         ax.set_ylabel(yl)
         ax.set_title(f"slice {axis} = {at:.3f} m", fontsize=10)
         ax.set_aspect("equal")
-    fig.colorbar(image, ax=fig.axes, shrink=0.6, label="fraction of orientations reachable")
+    fig.colorbar(image, ax=fig.axes[:3], shrink=0.5, label="fraction of orientations reachable")
     ax = fig.add_subplot(2, 2, 4, projection="3d")
     idx = np.argwhere(np.nan_to_num(r) > 0)
     if len(idx):
@@ -72,7 +72,7 @@ def place_figure(p, out, best: int = 5, title: str | None = None) -> None:
     (numbered, with their yaw as an arrow) and the targets' positions as crosses."""
     val = np.nanmax(np.asarray(p.placement, dtype=float), axis=2) if np.any(np.isfinite(p.placement)) \
         else np.full(p.placement.shape[:2], np.nan)
-    fig = Figure(figsize=(8.0, 7.0))
+    fig = Figure(figsize=(8.0, 7.0), layout="constrained")
     ax = fig.add_subplot(1, 1, 1)
     dx = (p.xs[1] - p.xs[0]) if len(p.xs) > 1 else 1.0
     dy = (p.ys[1] - p.ys[0]) if len(p.ys) > 1 else 1.0

@@ -264,6 +264,8 @@ class _Solver:
         counts = np.empty(m, dtype=np.intc)
         self._ik(m, flange.ctypes.data, sols.ctypes.data, counts.ctypes.data)
         self._clock(t, clock)
+        if not self._check:         # every solution is within the limits (the UR's +-2 pi)
+            return counts.astype(np.int64)
         return self.in_limits(sols).sum(axis=1)
 
     @staticmethod
@@ -302,12 +304,15 @@ def _arrays(path: str, run: str, names: tuple) -> tuple:
 def _poses(points: np.ndarray, quats: np.ndarray) -> np.ndarray:
     """(len(points) * len(quats), 8) the poses with every position and every rotation (w, x, y, z),
     position-major: [r, 1/2 (0, p) r] (dual = 1/2 t real)."""
-    p = points[:, None, :]
-    w, v = quats[None, :, 0], quats[None, :, 1:]
+    px, py, pz = (0.5 * points[:, i:i + 1] for i in range(3))
+    w, x, y, z = (quats[None, :, i] for i in range(4))
     out = np.empty((len(points), len(quats), 8))
     out[..., :4] = quats[None]
-    out[..., 4] = -0.5 * np.einsum("pk,qk->pq", points, quats[:, 1:])
-    out[..., 5:] = 0.5 * (w[..., None] * p + np.cross(p, v))
+    # (0, p) r: scalar -p.v, vector w p + p x v
+    out[..., 4] = -(px * x + py * y + pz * z)
+    out[..., 5] = w * px + py * z - pz * y
+    out[..., 6] = w * py + pz * x - px * z
+    out[..., 7] = w * pz + px * y - py * x
     return out.reshape(-1, 8)
 
 
