@@ -291,3 +291,18 @@ def test_cli_bad_input_one_line_exit_2(argv, word, tmp_path, capsys):
     lines = [ln for ln in err.strip().splitlines() if not ln.startswith("[")]
     assert len(lines) == 1 and lines[0].startswith("dq-derive: error:") and word in lines[0]
     assert "Traceback" not in err and err.strip().splitlines()[-1] == lines[0]
+
+
+def test_best_placements_one_per_position_inside_the_plateau():
+    """A plateau of 1 over positions 1..3 x 1..3 (of 5 x 5) with lower values around it: the
+    centre (2, 2) is first (its neighbourhood is all 1), each position appears once, at its best yaw."""
+    val = np.full((5, 5, 2), 0.25)
+    val[1:4, 1:4, 1] = 1.0
+    val[4, 4, 0] = 0.5
+    p = R.Placement(placement=val, xs=np.arange(5) * 0.1, ys=np.arange(5) * 0.1, z=0.0,
+                    yaws=np.array([0.0, math.pi]), targets=np.zeros((1, 8)), complete=True, path=None,
+                    attrs={}, stats=None)
+    best = p.best(10)
+    assert best[0][:2] == pytest.approx((0.2, 0.2)) and best[0][3] == math.pi and best[0][4] == 1.0
+    assert [b[4] for b in best[:9]] == [1.0] * 9 and best[9][4] == 0.5
+    assert len({(b[0], b[1]) for b in best}) == 10

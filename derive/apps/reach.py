@@ -387,10 +387,12 @@ class _PlaceJob:
     free_samples: int
 
 
-def _base_inverse(x: float, y: float, z: float, yaw: float) -> np.ndarray:
-    """(8,) B^-1 for the base pose B = Trans(x, y, z) Rz(yaw)."""
-    b = dq.from_rt(np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]), np.array([x, y, z]))
-    return dq.conj_quaternion(b)
+def _base_inverse(x, y, z, yaw) -> np.ndarray:
+    """(m, 8) B^-1 for the base poses B = Trans(x, y, z) Rz(yaw) (arrays (m,))."""
+    yaw = np.asarray(yaw, dtype=float)
+    r = np.stack([np.cos(yaw / 2), 0 * yaw, 0 * yaw, np.sin(yaw / 2)], axis=-1)
+    t = np.stack(np.broadcast_arrays(np.asarray(x, float), np.asarray(y, float), np.asarray(z, float)), axis=-1)
+    return dq.conj_quaternion(dq.from_rt(r, t))
 
 
 def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
@@ -402,13 +404,14 @@ def _place_chunk(job: _PlaceJob, index: tuple) -> tuple:
     targets = np.asarray(job.targets, dtype=float)
     i0, j0 = index[0] * job.chunk, index[1] * job.chunk
     i1, j1 = min(len(job.xs), i0 + job.chunk), min(len(job.ys), j0 + job.chunk)
-    bases = [_base_inverse(job.xs[i], job.ys[j], job.z, yaw)
-             for i in range(i0, i1) for j in range(j0, j1) for yaw in job.yaws]
+    I, J, K = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1), np.arange(len(job.yaws)), indexing="ij")
+    bases = _base_inverse(np.asarray(job.xs)[I.ravel()], np.asarray(job.ys)[J.ravel()], job.z,
+                          np.asarray(job.yaws)[K.ravel()])
     frac = np.zeros(len(bases))
     step = max(1, BATCH // len(targets))
     poses_done = 0
     for s in range(0, len(bases), step):
-        b = np.asarray(bases[s:s + step])
+        b = bases[s:s + step]
         poses = dq._mul(np.repeat(b, len(targets), axis=0), np.tile(targets, (len(b), 1)))
         c = solver.count(poses, clock).reshape(len(b), len(targets))
         frac[s:s + len(b)] = (c > 0).sum(axis=1) / len(targets)
@@ -729,16 +732,26 @@ class Placement:
     stats: Stats
 
     def best(self, n: int = 5) -> list:
-        """The ``n`` best placements (x, y, z, yaw, fraction): highest fraction first, ties in grid
-        order (x, then y, then yaw)."""
-        flat = np.nan_to_num(self.placement, nan=-1.0).ravel()
-        order = np.lexsort((np.arange(flat.size), -flat))[:n]
+        """The ``n`` best placements (x, y, z, yaw, fraction), one per position (at its best yaw,
+        the first of equal ones): highest fraction first; among equal fractions the position whose
+        3 x 3 neighbourhood (every yaw) has the highest mean fraction, the one farthest inside a
+        plateau; then grid order (x, then y)."""
+        val = np.nan_to_num(np.asarray(self.placement, dtype=float), nan=-1.0)
+        per_pos = val.max(axis=2)
+        yaw_at = val.argmax(axis=2)
+        filled = np.clip(val, 0.0, None).mean(axis=2)
+        nx, ny = per_pos.shape
+        padded = np.pad(filled, 1, constant_values=np.nan)
+        shifted = np.stack([padded[1 + a:1 + a + nx, 1 + b:1 + b + ny] for a in (-1, 0, 1) for b in (-1, 0, 1)])
+        neigh = np.nanmean(shifted, axis=0)
+        flat = per_pos.ravel()
+        order = np.lexsort((np.arange(flat.size), -neigh.ravel(), -flat))[:n]
         rows = []
         for f in order:
             if flat[f] < 0:
                 break
-            i, j, k = np.unravel_index(f, self.placement.shape)
-            rows.append((float(self.xs[i]), float(self.ys[j]), self.z, float(self.yaws[k]), float(flat[f])))
+            i, j = np.unravel_index(f, per_pos.shape)
+            rows.append((float(self.xs[i]), float(self.ys[j]), self.z, float(self.yaws[yaw_at[i, j]]), float(flat[f])))
         return rows
 
 
