@@ -670,14 +670,23 @@ def _reach_tool(args):
     return None if args.tool is None else list(args.tool)
 
 
+def _reach_interrupted() -> int:
+    print("\ndq-derive: interrupted; the chunks written are kept: the same command again resumes",
+          file=sys.stderr)
+    return 130
+
+
 def cmd_reach(args) -> int:
     """A reachability map (docs/reach.md) into a Zarr group; the summary on stdout."""
     from derive.apps.plots import reach_figure
     from derive.apps.reach import reach
-    m = reach(_robot(args), args.voxel, args.orientations, args.out, tool=_reach_tool(args),
-              scheduler=args.scheduler, chunk=args.chunk, solutions=args.solutions,
-              free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
-              progress=not args.quiet)
+    try:
+        m = reach(_robot(args), args.voxel, args.orientations, args.out, tool=_reach_tool(args),
+                  scheduler=args.scheduler, chunk=args.chunk, solutions=args.solutions,
+                  free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
+                  progress=not args.quiet)
+    except KeyboardInterrupt:
+        return _reach_interrupted()
     st = m.stats
     r = np.nan_to_num(m.reach)
     if args.plot:
@@ -704,10 +713,13 @@ def cmd_place(args) -> int:
     """A base-placement map (docs/reach.md) into a Zarr group; the best placements on stdout."""
     from derive.apps.plots import place_figure
     from derive.apps.reach import place
-    p = place(_robot(args), args.targets, args.region, args.step, z=args.z, yaw_steps=args.yaw_steps,
-              out=args.out, tool=_reach_tool(args), scheduler=args.scheduler, chunk=args.chunk,
-              free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
-              progress=not args.quiet)
+    try:
+        p = place(_robot(args), args.targets, args.region, args.step, z=args.z, yaw_steps=args.yaw_steps,
+                  out=args.out, tool=_reach_tool(args), scheduler=args.scheduler, chunk=args.chunk,
+                  free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
+                  progress=not args.quiet)
+    except KeyboardInterrupt:
+        return _reach_interrupted()
     if args.plot:
         place_figure(p, args.plot, best=args.best)
     best = p.best(args.best)

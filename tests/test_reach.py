@@ -329,3 +329,15 @@ def test_seven_joint_maps_from_free_samples_pass_the_monte_carlo_check(name):
     hit = r[idx[:, 0], idx[:, 1], idx[:, 2]]
     assert neigh.sum() > 1000
     assert hit[neigh].mean() >= 0.99
+
+
+@pytest.mark.parametrize("kwargs, word", [
+    (dict(tool="a tool"), "tool"),
+    (dict(tool=[0, 0, 0, 0, 0, 0, float("nan")]), "NaN"),
+    (dict(chunk=0), "chunk"),
+    (dict(max_chunks=-1), "max_chunks"),
+    (dict(scheduler=""), "scheduler"),
+])
+def test_reach_refuses_bad_arguments(kwargs, word):
+    with pytest.raises(InputError, match=word):
+        R.reach("ur5", 0.2, 4, progress=False, **kwargs)

@@ -163,7 +163,12 @@ def _tool_pose(tool):
     """A tool as a unit dual quaternion (8,), from (x, y, z, qx, qy, qz, qw) or any pose form."""
     if tool is None:
         return None
-    arr = np.asarray(tool, dtype=float) if not isinstance(tool, tuple) or len(tool) != 2 else None
+    arr = None
+    if not (isinstance(tool, tuple) and len(tool) == 2):
+        try:
+            arr = np.asarray(tool, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"tool: expected x, y, z, qx, qy, qz, qw or a pose, got {tool!r}") from None
     if arr is not None and arr.shape == (7,):
         return _xyz_quat_xyzw(arr[None], "tool")[0]
     from derive.kinematics.pose import as_pose
