@@ -260,3 +260,34 @@ def test_joint_limits_and_sorting(tmp_path):
     assert np.all(np.diff(d) >= 0)
     none = reference.ik(robot, reference.fk(robot, [2.5, -1.0, 1.3, -0.5, 0.7, 0.1]), within_limits=True)
     assert len(none) == 0 and "joint limits" in none.reason
+
+
+def test_sort_by_wraps_each_joint_and_slices_keep_their_rows():
+    """A seed near pi ranks the generating solution first, although its values sit near -pi
+    (the closed form's (-pi, pi]): without windings the distance wraps each joint. With
+    ``within_limits`` every winding is a move the arm makes, so the plain move ranks. Indexing
+    the result keeps ``singular`` (and ``branch``) with their rows."""
+    q = np.array([-3.1, -1.0, 1.3, -0.5, 0.7, -3.05])
+    pose = reference.fk("ur5", q)
+    seed = np.array([3.1, -1.0, 1.3, -0.5, 0.7, 3.1])            # 0.083 and 0.133 rad from q, wrapped
+    ranked = reference.ik("ur5", pose, sort_by=seed)
+    assert len(ranked) == 8
+    assert np.allclose(ranked[0], q, atol=1e-9)
+    d = np.linalg.norm(wrap_angle(np.asarray(ranked) - seed), axis=1)
+    assert np.all(np.diff(d) >= 0)
+    # with windings: q + 2 pi on joints 1 and 6 is the configuration next to the seed
+    inside = reference.ik("ur5", pose, within_limits=True, sort_by=seed)
+    near = q + np.array([2 * math.pi, 0, 0, 0, 0, 2 * math.pi])
+    assert np.allclose(inside[0], near, atol=1e-9)
+    # slicing keeps the per-row attributes aligned (theta5 = 0: the rows with theta5 = 0 are singular)
+    wrist = reference.ik("ur5", reference.fk("ur5", [0.3, -1.0, 1.3, -0.5, 0.0, 0.2]), q_ref=np.zeros(6))
+    mixed = reference.ik("ur5", pose)
+    for sols in (wrist, mixed):
+        assert np.array_equal(sols[2:5].singular, np.asarray(sols.singular)[2:5])
+        mask = np.asarray(sols)[:, 0] > 0
+        assert np.array_equal(sols[mask].singular, np.asarray(sols.singular)[mask])
+        assert len(sols[::-1].singular) == len(sols)
+    assert wrist.singular.any() and not wrist.singular.all() and not mixed.singular.any()
+    assert type(mixed[:, 0]) is np.ndarray and type(mixed[0]) is np.ndarray
+    r = reference.ik("panda", reference.fk("panda", [0.3, 0.5, 0.2, -1.0, 0.1, 1.2, 0.4]), free=0.4)
+    assert np.array_equal(r[1:].branch, np.asarray(r.branch)[1:]) and r[1:].free == 0.4

@@ -12,7 +12,7 @@ ROOT = Path(derive.__file__).resolve().parent
 LAYERS = {
     "derive._version": 0, "derive.errors": 0, "derive.cache": 0,
     "derive.algebra": 1, "derive.model": 2, "derive.kinematics": 3, "derive.symbolic": 4,
-    "derive.ik": 5, "derive.reference": 5, "derive.codegen": 6, "derive.refinement": 7,
+    "derive.ik": 5, "derive.ik.subproblems": 5, "derive.reference": 5, "derive.codegen": 6, "derive.refinement": 7,
     "derive.reports": 8, "derive.apps": 8, "derive.bench": 9, "derive.cli": 10, "derive.__main__": 11,
     "derive": 11,
 }

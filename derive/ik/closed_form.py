@@ -281,10 +281,32 @@ class IKSolutions(np.ndarray):
         obj.reason = reason
         return obj
 
+    #: per-row attributes, indexed with the rows when the array is indexed
+    _ROW_ATTRS = ("singular",)
+
     def __array_finalize__(self, obj):
         if obj is not None:
             self.singular = getattr(obj, "singular", None)
             self.reason = getattr(obj, "reason", "")
+
+    def __getitem__(self, key):
+        """Indexing keeps the per-row attributes (``singular``, ``branch``) with their rows:
+        ``sols[1:3].singular`` is ``sols.singular[1:3]``, ``sols[mask]`` keeps the masked rows'.
+        A result that is no longer rows of whole solutions (a column, one row, one number) is a
+        plain ndarray."""
+        out = super().__getitem__(key)
+        if not isinstance(out, IKSolutions):
+            return out
+        rows, cols = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
+        whole = all(c is Ellipsis or c == slice(None) for c in cols if not isinstance(c, np.ndarray))
+        if rows is None or rows is Ellipsis or not whole or any(isinstance(c, np.ndarray) for c in cols) \
+                or out.ndim != 2 or out.shape[1] != self.shape[1]:
+            return out if rows is Ellipsis and whole and out.shape == self.shape else out.view(np.ndarray)
+        for name in self._ROW_ATTRS:
+            value = getattr(self, name, None)
+            if value is not None and np.ndim(value) == 1 and len(value) == len(self):
+                setattr(out, name, np.asarray(value)[rows])
+        return out
 
 
 def closed_form_relation(robot) -> Relation | None:
@@ -452,7 +474,9 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
     elbow nearest to a right angle).
     within_limits: keep only solutions inside the robot's joint limits, adding the
     +-2 pi alternatives of joints whose range allows them.
-    sort_by: a configuration; solutions are sorted by their distance to it.
+    sort_by: a configuration; solutions are sorted by their distance to it (each revolute
+    joint's difference wrapped to (-pi, pi], or, with ``within_limits``, the plain joint move of
+    each winding: :func:`derive.ik.select.sort_order`).
     An unreachable pose gives an empty (0, 6) result whose ``.reason`` says why.
     """
     robot = load_robot(robot)
@@ -474,6 +498,6 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
             reason = f"no solution inside the joint limits ({k} outside)"
     if sort_by is not None and len(sols):
         ref = as_finite_array(sort_by, "sort_by", last_dim=robot.dof)
-        order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
+        order = select.sort_order(sols, ref, robot.revolute, windings=within_limits)
         sols, sing = sols[order], sing[order]
     return IKSolutions(sols.reshape(-1, robot.dof), sing, reason)

@@ -146,6 +146,8 @@ class RedundantIKSolutions(IKSolutions):
     """:class:`derive.ik.closed_form.IKSolutions` (k, 7) of one pose with ``branch`` (k,) and the
     value ``free`` of the free parameter (its name: :func:`free_parameter`)."""
 
+    _ROW_ATTRS = ("singular", "branch")
+
     def __new__(cls, q, singular, reason="", branch=None, free=float("nan")):
         obj = IKSolutions.__new__(cls, q, singular, reason)
         obj.branch = np.full(len(obj), -1) if branch is None else np.asarray(branch, dtype=np.int64)
@@ -312,7 +314,7 @@ def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None)
             reason = f"no solution inside the joint limits ({k} outside)"
     if sort_by is not None and len(sols):
         ref = as_finite_array(sort_by, "sort_by", last_dim=7)
-        order = np.argsort(np.linalg.norm(sols - ref, axis=1), kind="stable")
+        order = select.sort_order(sols, ref, [True] * 7, windings=within_limits)
         sols, sing, br = sols[order], sing[order], br[order]
     return RedundantIKSolutions(sols.reshape(-1, 7), sing, reason, br, f[0])
 

@@ -8,6 +8,7 @@ return them (:mod:`derive.codegen.loader`), and are plain numpy:
   each solution that lies inside the joint limits (closed intervals, 1e-12 rad of slack). A
   joint with limits +-2 pi has two values for almost every angle (three at exactly 0), so a UR
   pose has up to 8 x 2^6 solutions within its limits;
+* :func:`sort_order`: the order of one pose's solutions by their distance to a configuration;
 * :func:`nearest`: per pose, the solution inside the limits (windings included) whose largest
   single-joint move from the seed is smallest (then the smallest summed move; both compared in
   steps of 1e-9 (``MOVE_SCALE``), since a joint shared by several branches, often the one that
@@ -86,6 +87,19 @@ def within_limits(sols, counts, limits, revolute, branch=None, singular=None, ch
             sg[i, at:at + len(grid)] = si
             at += len(grid)
     return q, cnt, b, sg
+
+
+def sort_order(sols, ref, revolute, windings: bool) -> np.ndarray:
+    """The order (stable) of one pose's solutions ``sols`` (k, dof) by their Euclidean distance
+    to the configuration ``ref`` (dof,). Without ``windings`` every revolute joint's value stands
+    for all its 2 pi windings (the closed form wraps to (-pi, pi]), so its difference to ``ref`` is
+    wrapped first: a solution at -pi + e is next to a seed at pi - e. With ``windings`` (the rows
+    of :func:`within_limits`, each a configuration the arm can take) the plain difference is the
+    joint's move."""
+    diff = np.asarray(sols, dtype=float) - np.asarray(ref, dtype=float)
+    if not windings:
+        diff = np.where(np.asarray(revolute, dtype=bool), wrap_angle(diff), diff)
+    return np.argsort(np.linalg.norm(diff, axis=1), kind="stable")
 
 
 @dataclass(frozen=True)
