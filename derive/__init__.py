@@ -12,12 +12,13 @@ Quick start::
     P = derive.pose.from_position_quaternion([0.4, 0.1, 0.3], [1, 0, 0, 0], order="xyzw")
 
 The package is in layers whose imports point one way (see docs/architecture.md):
-algebra -> model -> kinematics -> symbolic -> ik -> codegen -> refinement -> reports ->
+algebra -> model -> kinematics -> symbolic -> ik -> codegen -> refinement -> reports / apps ->
 bench -> cli.
 """
 
 from derive import reference
 from derive._version import __version__
+from derive.apps.reach import place, reach
 from derive.algebra import dualquat, quaternion
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
@@ -29,5 +30,5 @@ from derive.refinement.solver import refine
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
     "Robot", "list_robots", "load_robot", "kernels", "refine", "classify",
-    "dualquat", "quaternion", "reference", "pose", "__version__",
+    "dualquat", "quaternion", "reference", "pose", "reach", "place", "__version__",
 ]

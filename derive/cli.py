@@ -664,6 +664,125 @@ def cmd_bench(args) -> int:
 
 
 # --------------------------------------------------------------------------- #
+# reach and place: reachability maps and base placement on Dask (derive.apps.reach)
+# --------------------------------------------------------------------------- #
+def _reach_tool(args):
+    return None if args.tool is None else list(args.tool)
+
+
+def _reach_interrupted() -> int:
+    print("\ndq-derive: interrupted; the chunks written are kept: the same command again resumes",
+          file=sys.stderr)
+    return 130
+
+
+def cmd_reach(args) -> int:
+    """A reachability map (docs/reach.md) into a Zarr group; the summary on stdout."""
+    from derive.apps.plots import reach_figure
+    from derive.apps.reach import reach
+    try:
+        m = reach(_robot(args), args.voxel, args.orientations, args.out, tool=_reach_tool(args),
+                  scheduler=args.scheduler, chunk=args.chunk, solutions=args.solutions,
+                  free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
+                  progress=not args.quiet)
+    except KeyboardInterrupt:
+        return _reach_interrupted()
+    st = m.stats
+    r = np.nan_to_num(m.reach)
+    if args.plot:
+        reach_figure(m, args.plot)
+    summary = {"out": str(m.path), "shape": list(m.reach.shape), "origin": m.origin.tolist(), "voxel": m.voxel,
+               "orientations": m.orientations, "complete": m.complete, "chunks": st.chunks,
+               "computed": st.computed, "ik_calls": st.poses, "seconds": round(st.wall, 3),
+               "reachable_voxels": int(np.count_nonzero(r > 0)), "plot": args.plot}
+    if args.json:
+        print(json.dumps(summary))
+        return EXIT_OK
+    print(f"{m.attrs['robot']}: {'x'.join(map(str, m.reach.shape))} voxels of {m.voxel:g} m from origin "
+          f"{_fmt(m.origin, 4)} m, {m.orientations} orientations each -> {m.path}")
+    print(f"chunks: {st.computed} computed now, {st.chunks} in all"
+          f"{'' if m.complete else ' (incomplete: run again to resume)'}; {st.poses} IK calls in {st.wall:.2f} s")
+    print(f"reachable voxels (fraction > 0): {summary['reachable_voxels']}, fully dexterous (fraction 1): "
+          f"{int(np.count_nonzero(r >= 1.0))}")
+    if args.plot:
+        print(f"figure: {args.plot}")
+    return EXIT_OK
+
+
+def cmd_place(args) -> int:
+    """A base-placement map (docs/reach.md) into a Zarr group; the best placements on stdout."""
+    from derive.apps.plots import place_figure
+    from derive.apps.reach import place
+    try:
+        p = place(_robot(args), args.targets, args.region, args.step, z=args.z, yaw_steps=args.yaw_steps,
+                  out=args.out, tool=_reach_tool(args), scheduler=args.scheduler, chunk=args.chunk,
+                  free_samples=args.free_samples, max_chunks=args.max_chunks, overwrite=args.overwrite,
+                  progress=not args.quiet)
+    except KeyboardInterrupt:
+        return _reach_interrupted()
+    if args.plot:
+        place_figure(p, args.plot, best=args.best)
+    best = p.best(args.best)
+    if args.json:
+        print(json.dumps({"out": str(p.path), "shape": list(p.placement.shape), "complete": p.complete,
+                          "targets": len(p.targets), "seconds": round(p.stats.wall, 3), "plot": args.plot,
+                          "best": [dict(zip(("x", "y", "z", "yaw", "fraction"), b)) for b in best]}))
+        return EXIT_OK
+    print(f"{p.attrs['robot']}: {len(p.xs)} x {len(p.ys)} positions x {len(p.yaws)} yaws, {len(p.targets)} "
+          f"targets -> {p.path}{'' if p.complete else ' (incomplete: run again to resume)'}")
+    print("best placements (base x, y, z in m, yaw in deg, fraction of targets reachable):")
+    for n, (x, y, z, yaw, f) in enumerate(best):
+        print(f"  {n + 1}. x={x:+.4f} y={y:+.4f} z={z:+.4f} yaw={math.degrees(yaw):7.2f}  {f:.4f}")
+    if args.plot:
+        print(f"figure: {args.plot}")
+    return EXIT_OK
+
+
+def _reach_commands(command, robot_argument) -> None:
+    """The parsers of ``reach`` and ``place``."""
+    def common(s, chunk):
+        s.add_argument("--out", required=True, metavar="MAP.zarr", help="the Zarr group to write (a stopped run "
+                                                                         "resumes from its finished chunks)")
+        s.add_argument("--tool", nargs=7, type=float, default=None, metavar=("X", "Y", "Z", "QX", "QY", "QZ", "QW"),
+                       help="a tool transform after the end frame: position (m) and unit quaternion (xyzw)")
+        s.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="a dask.distributed scheduler (tcp://host:8786), or threads / processes / "
+                            "synchronous (default: the local threaded scheduler on every core)")
+        s.add_argument("--plot", default=None, metavar="FILE", help="also write the figure (PNG)")
+        s.add_argument("--chunk", type=int, default=chunk, help="the edge of a task's block, in grid cells")
+        s.add_argument("--free-samples", type=int, default=8, dest="free_samples",
+                       help="seven-joint arms: values of the free parameter tried per pose")
+        s.add_argument("--max-chunks", type=int, default=None, dest="max_chunks",
+                       help="compute at most this many chunks now (run again to resume)")
+        s.add_argument("--overwrite", action="store_true", help="replace a map of other parameters at --out")
+        s.add_argument("--quiet", action="store_true", help="no progress bar")
+        s.add_argument("--json", action="store_true", help="print the summary as JSON")
+
+    s = command("reach", "reachability map: the fraction of N orientations with an IK solution within the "
+                         "joint limits at every voxel of the reach, on Dask, into a Zarr group", cmd_reach)
+    robot_argument(s)
+    s.add_argument("--voxel", type=float, required=True, metavar="S", help="the voxel edge (m)")
+    s.add_argument("--orientations", type=int, default=100, metavar="N",
+                   help="orientations per voxel (super-Fibonacci spiral over SO(3))")
+    s.add_argument("--solutions", action="store_true", help="also store the in-limit solutions per voxel")
+    common(s, 32)
+
+    s = command("place", "base placement: the fraction of target poses (CSV x,y,z,qx,qy,qz,qw) reachable "
+                         "from every candidate base position and yaw, on Dask, into a Zarr group", cmd_place)
+    robot_argument(s)
+    s.add_argument("--targets", required=True, metavar="FILE", help="CSV of target poses x,y,z,qx,qy,qz,qw "
+                                                                     "(m, unit quaternion) in the world frame")
+    s.add_argument("--region", nargs=4, type=float, required=True, metavar=("XMIN", "XMAX", "YMIN", "YMAX"),
+                   help="the candidate base positions (m)")
+    s.add_argument("--step", type=float, required=True, metavar="S", help="the grid step of the positions (m)")
+    s.add_argument("--z", type=float, default=0.0, help="the base's height (m)")
+    s.add_argument("--yaw-steps", type=int, default=1, dest="yaw_steps", metavar="K",
+                   help="yaws 2 pi k / K about z per position")
+    s.add_argument("--best", type=int, default=5, help="how many best placements to print and mark")
+    common(s, 8)
+
+
+# --------------------------------------------------------------------------- #
 # The parser
 # --------------------------------------------------------------------------- #
 class _Formatter(argparse.RawDescriptionHelpFormatter):
@@ -813,6 +932,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, metavar="FILE", help="the PNG file to write")
     deg_option(s, "revolute joint values (--q, --ik-of) and in the figure's labels")
     json_option(s, "the drawn frame origins or solutions")
+
+    _reach_commands(command, robot_argument)
 
     s = command("generate", "regenerate the outputs of the default robots", cmd_generate)
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)}, then the "
