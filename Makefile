@@ -1,5 +1,5 @@
 # The two commands of the README. Both bootstrap .venv themselves on a machine
-# that has only Python 3 (>= 3.10), gcc and make.
+# that has only Python 3 (>= 3.11), gcc and make.
 PYTHON ?= python3
 VENV   := .venv
 VPY    := $(VENV)/bin/python
