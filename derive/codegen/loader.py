@@ -539,6 +539,9 @@ class Kernels:
             if single:
                 sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
             seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
+            if seeds.ndim > 2 or (seeds.ndim == 2 and seeds.shape[0] not in (1, len(sols))):
+                raise InputError(f"q_seed: expected shape ({self.dof},) or ({len(sols)}, {self.dof}) "
+                                 f"(one seed, or one per pose), got {seeds.shape}")
             seeds = np.broadcast_to(seeds, (len(sols), self.dof))
             res = select.nearest(sols, counts, seeds, self.robot.limits, self.robot.revolute, branch, sing, tol)
         if np.any(res.singular):
