@@ -112,6 +112,9 @@ TWO_PI = 2.0 * math.pi
 #: after them by ~100 times more, too far apart to merge).
 DOUBLE_ROOT = 1e-13
 
+#: The most (pose, q7) pairs :func:`ik_sweep` solves in one call (as derive.ik.redundant.MAX_SWEEP).
+MAX_SWEEP = 10 ** 6
+
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
 _PAIR_I, _PAIR_J = np.triu_indices(BRANCHES, 1)
@@ -533,6 +536,9 @@ def ik_sweep(robot, poses, n: int, *, q_ref=None):
         values = np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)])
     poses, _ = as_pose_batch(poses)
     p = poses.shape[0]
+    if p * n > MAX_SWEEP:
+        raise InputError(f"sweep: {p} pose(s) x {n} values = {p * n} is more than the limit of "
+                         f"{MAX_SWEEP} (pose, value) pairs per call; use fewer values or poses")
     if q_ref is not None:
         qr = as_finite_array(q_ref, "q_ref", last_dim=7)
         q_ref = np.repeat(np.broadcast_to(qr.reshape(-1, 7), (p, 7)), n, axis=0)
