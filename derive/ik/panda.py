@@ -65,7 +65,7 @@ Branch id b = 4 i4 + 2 i6 + i2, with i = 0 for the + root and 1 for the - root o
 * ``S on axis 6`` (vx = vy = 0, needs Z(q4) = 0; impossible on the Panda, |Z| >= d5 - hypot(a3, d3)
   > 0): q6 free, taken from ``q_ref`` (else 0), marked singular;
 * ``q6 double root``: |Z| = hypot(vx, vy), i.e. c5 = 0 (q5 = +-pi/2): the two q6 roots merge
-  (below c5^2 = DOUBLE_ROOT they are made equal; not where X is small, which is the set above);
+  (below (X c5)^2 = DOUBLE_ROOT X^2 + W4_NOISE |X| they are made equal);
 * ``axes 1 and 3 aligned`` (sin q2 = 0): only q1 + q3 (q2 = 0) or q1 - q3 (q2 = pi) is
   determined; q1 is taken from ``q_ref`` (else 0), marked singular.
 
@@ -117,6 +117,12 @@ DOUBLE_ROOT = 1e-13
 
 #: The most (pose, q7) pairs :func:`ik_sweep` solves in one call (as derive.ik.redundant.MAX_SWEEP).
 MAX_SWEEP = 10 ** 6
+
+#: Rounding of X^2 - vz^2 per metre of |X| (m): about 2 |X| |dvz|, and vz of a pose made by FK
+#: is off by up to ~5e-15 m (measured: 3e-15 on the Panda at q5 = pi/2); below DOUBLE_ROOT X^2 +
+#: W4_NOISE |X| the two q6 roots are one (eq. W4, :func:`wrist6`), which moves the pose by at
+#: most (DOUBLE_ROOT |X| + W4_NOISE) / 2, about 5e-14 m.
+W4_NOISE = 1e-13
 
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
@@ -342,15 +348,16 @@ def wrist6(v, x, z, q6_free):
     shoulder near axis 5, q4 near 0 on the Panda), so a = atan2(sqrt(X^2 - vz^2), Z) keeps its
     relative accuracy there (acos(Z / rho) of a cosine within 1e-13 of 1 lost it, and the
     snap of such a cosine to 1 moved q6 by up to 5e-7 rad: solutions reproduced the pose only to
-    1e-7). The two roots merge where c5^2 = (X^2 - vz^2) / X^2 < DOUBLE_ROOT (q5 = +-pi/2): the
-    pose changes only to second order there."""
+    1e-7). The two roots merge where X^2 - vz^2 = (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
+    (q5 = +-pi/2, the second term the rounding of vz): the pose changes only to second order
+    there, by |X| c5^2 / 2 < (DOUBLE_ROOT |X| + W4_NOISE) / 2."""
     rho = np.hypot(v[:, 0], v[:, 1])
     free = rho < SINGULAR_TOL
     c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
     bad = np.where(free, np.abs(z) > SINGULAR_TOL, np.abs(c) > 1.0 + REACH_TOL)
     x2 = x * x
     e = x2 - v[:, 2] * v[:, 2]
-    e = np.where(e <= DOUBLE_ROOT * x2, 0.0, e)
+    e = np.where(e <= DOUBLE_ROOT * x2 + W4_NOISE * np.abs(x), 0.0, e)
     ang = np.arctan2(np.sqrt(e), z)
     psi = np.arctan2(v[:, 0], v[:, 1])
     roots = np.stack([psi + ang, psi - ang], -1)

@@ -17,7 +17,7 @@ the robot's numbers substituted, written so that it is total and needs few trans
   Ry(b)^T Rz(a)^T m (:func:`derive.ik.srs._zyz`), so the product stays exact;
 * **double roots snapped**: an acos argument within STRETCH_TOL (SRS elbow) or DOUBLE_ROOT
   (Panda elbow) of +-1 is +-1, so the two roots coincide exactly and merge; the Panda's q6 roots
-  merge where c5^2 < DOUBLE_ROOT (eq. W4 of :func:`derive.ik.panda.wrist6`);
+  merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (eq. W4 of :func:`derive.ik.panda.wrist6`);
 * reach: an acos argument beyond +-1 by more than :data:`~derive.ik.tolerances.REACH_TOL` drops
   the branch (the pose is out of reach for this value of the free parameter).
 
@@ -404,10 +404,10 @@ def panda_program(robot) -> IKProgram:
     bld.require(sp.And(sp.Abs(c6a) <= 1 + REACH_TOL,
                        sp.Or(sp.Not(free6), sp.Abs(zz) <= panda.SINGULAR_TOL)))
     # the root's sine from eq. W4, (X c5)^2 = X^2 - vz^2 (derive.ik.panda.wrist6): accurate where
-    # X is small; the roots merge where c5^2 < DOUBLE_ROOT
+    # X is small; the roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
     x2 = bld.let("x2e", xx * xx)
     e6 = bld.let("e6", x2 - vv[2] * vv[2])
-    e6s = bld.select("e6s", e6 <= panda.DOUBLE_ROOT * x2, 0, e6)
+    e6s = bld.select("e6s", e6 <= panda.DOUBLE_ROOT * x2 + panda.W4_NOISE * sp.Abs(xx), 0, e6)
     r6s = bld.let("r6s", sp.sqrt(e6s))
     n6 = bld.let("n6", sp.sqrt(e6s + zz * zz))
     n6d = bld.select("n6d", n6 <= 0, 1, n6)

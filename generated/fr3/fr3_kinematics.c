@@ -575,7 +575,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][7],
         ok_0 = ok_0 & ((fabs(ce6_0) <= 1.0000000001) & ((!(singular_q6)) | (fabs(ze_0) <= 1e-11)));
         const double x2e_0 = xe_0*xe_0;
         const double e6_0 = -v2*v2 + x2e_0;
-        const double e6s_0 = dq_sel(e6_0 <= 1e-13*x2e_0, 0, e6_0);
+        const double e6s_0 = dq_sel(e6_0 <= 1e-13*x2e_0 + 1e-13*fabs(xe_0), 0, e6_0);
         const double r6s_0 = sqrt(e6s_0);
         const double n6_0 = sqrt(e6s_0 + ze_0*ze_0);
         const double n6d_0 = dq_sel(n6_0 <= 0, 1.0, n6_0);
@@ -751,7 +751,7 @@ static void dq_ik_full(const double *restrict pose, double cand[8][7],
         ok_1 = ok_1 & ((fabs(ce6_1) <= 1.0000000001) & ((!(singular_q6)) | (fabs(ze_1) <= 1e-11)));
         const double x2e_1 = xe_1*xe_1;
         const double e6_1 = -v2*v2 + x2e_1;
-        const double e6s_1 = dq_sel(e6_1 <= 1e-13*x2e_1, 0, e6_1);
+        const double e6s_1 = dq_sel(e6_1 <= 1e-13*x2e_1 + 1e-13*fabs(xe_1), 0, e6_1);
         const double r6s_1 = sqrt(e6s_1);
         const double n6_1 = sqrt(e6s_1 + ze_1*ze_1);
         const double n6d_1 = dq_sel(n6_1 <= 0, 1.0, n6_1);
@@ -1049,7 +1049,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[9][DQ_BLOCK], double cb[][7
         ok_0 = ok_0 & ((fabs(ce6_0) <= 1.0000000001) & ((!(singular_q6)) | (fabs(ze_0) <= 1e-11)));
         const double x2e_0 = xe_0*xe_0;
         const double e6_0 = -v2*v2 + x2e_0;
-        const double e6s_0 = dq_sel(e6_0 <= 1e-13*x2e_0, 0, e6_0);
+        const double e6s_0 = dq_sel(e6_0 <= 1e-13*x2e_0 + 1e-13*fabs(xe_0), 0, e6_0);
         const double r6s_0 = sqrt(e6s_0);
         const double n6_0 = sqrt(e6s_0 + ze_0*ze_0);
         const double n6d_0 = dq_sel(n6_0 <= 0, 1.0, n6_0);
@@ -1209,7 +1209,7 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[9][DQ_BLOCK], double cb[][7
         ok_1 = ok_1 & ((fabs(ce6_1) <= 1.0000000001) & ((!(singular_q6)) | (fabs(ze_1) <= 1e-11)));
         const double x2e_1 = xe_1*xe_1;
         const double e6_1 = -v2*v2 + x2e_1;
-        const double e6s_1 = dq_sel(e6_1 <= 1e-13*x2e_1, 0, e6_1);
+        const double e6s_1 = dq_sel(e6_1 <= 1e-13*x2e_1 + 1e-13*fabs(xe_1), 0, e6_1);
         const double r6s_1 = sqrt(e6s_1);
         const double n6_1 = sqrt(e6s_1 + ze_1*ze_1);
         const double n6d_1 = dq_sel(n6_1 <= 0, 1.0, n6_1);

@@ -267,7 +267,7 @@ def ik(pose, fv):
             continue
         x2e = xe*xe
         e6 = -v2*v2 + x2e
-        e6s = 0 if (e6 <= 1e-13*x2e) else e6
+        e6s = 0 if (e6 <= 1e-13*x2e + 1e-13*abs(xe)) else e6
         r6s = sqrt(e6s)
         n6 = sqrt(e6s + ze*ze)
         n6d = 1.0 if (n6 <= 0) else n6

@@ -295,7 +295,7 @@ def ik(P, fv):
         ok1 = ok1 & (np.logical_and.reduce((np.less_equal(abs(ce6), 1.0000000001),np.logical_or.reduce((np.logical_not(singular_q6),np.less_equal(abs(ze), 1e-11))))))
         x2e = xe*xe
         e6 = -v2*v2 + x2e
-        e6s = np.where(np.less_equal(e6, 1e-13*x2e), 0, e6)
+        e6s = np.where(np.less_equal(e6, 1e-13*x2e + 1e-13*abs(xe)), 0, e6)
         r6s = np.sqrt(e6s)
         n6 = np.sqrt(e6s + ze*ze)
         n6d = np.where(np.less_equal(n6, 0), 1.0, n6)
