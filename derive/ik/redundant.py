@@ -529,6 +529,11 @@ def _refine(prob, kind, rows, a, b, br, f_best, k_best, t_best, flo, fhi, key):
     return f_best, k_best, t_best
 
 
+#: Poses per chunk of :func:`nearest` (the search holds about 270 KB per pose: 49 values x 8
+#: branches of 7 joints and their moves, several times over).
+NEAREST_CHUNK = 512
+
+
 def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
     branch chosen by the 1D search of the module docstring: on the branch of the least largest
@@ -555,6 +560,13 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     single = single and seeds_in.ndim == 1
     n = len(P)
     seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
+    if n > NEAREST_CHUNK:
+        # each pose's search is its own: in chunks, so the scan's temporaries (about 270 KB per
+        # pose) stay bounded
+        parts = [nearest(robot, P[s:s + NEAREST_CHUNK], seeds[s:s + NEAREST_CHUNK], tol, solver)
+                 for s in range(0, n, NEAREST_CHUNK)]
+        return select.Nearest(*(np.concatenate([getattr(part, f) for part in parts])
+                                for f in ("q", "found", "max_move", "total_move", "branch", "singular")))
     prob = _Problem(robot, kind, P, seeds, solver)
     _, (flo, fhi) = free_parameter(robot)
     if kind == "panda" and not (math.isfinite(flo) and math.isfinite(fhi)):
