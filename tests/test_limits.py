@@ -349,3 +349,27 @@ def test_a_chunked_nearest_equals_one_batch(robot_name, monkeypatch, rng):
         assert np.allclose(a, b, rtol=0, atol=1e-7, equal_nan=True), (f, np.nanmax(np.abs(a - b)))
     assert whole.found.all()
     assert np.all(whole.max_move <= 0.05 * 1.5 + 1e-9)          # the seeds are within 0.05 of q
+
+
+def test_chunked_6r_batches_equal_one_batch(monkeypatch, rng):
+    """reference.ik_batch and select.nearest in chunks of 5 poses give what one batch gives."""
+    from derive.ik import closed_form
+    robot = load_robot("ur5")
+    q = rng.uniform(-3, 3, size=(12, 6))
+    P = fk(robot, q)
+    sols, counts = reference.ik_batch(robot, P, q_ref=q)
+    near = select.nearest(sols, counts, q, robot.limits, robot.revolute)
+    monkeypatch.setattr(closed_form, "BATCH_CHUNK", 5)
+    monkeypatch.setattr(select, "CHUNK", 5)
+    s2, c2 = reference.ik_batch(robot, P, q_ref=q)
+    assert np.array_equal(sols, s2, equal_nan=True) and np.array_equal(counts, c2)
+    n2 = select.nearest(s2, c2, q, robot.limits, robot.revolute)
+    for f in ("q", "found", "max_move", "total_move", "branch", "singular"):
+        assert np.array_equal(getattr(near, f), getattr(n2, f), equal_nan=True), f
+    assert near.found.all() and np.abs(near.q - q).max() < 1e-8     # the generating configuration
+
+
+def test_ik_batch_with_a_reference_count_that_does_not_match():
+    P = np.broadcast_to(fk(load_robot("ur5"), np.full(6, 0.3)), (3, 8))
+    with pytest.raises(InputError, match=r"q_ref: expected shape \(6,\) or \(3, 6\)"):
+        reference.ik_batch("ur5", P, q_ref=np.zeros((2, 6)))

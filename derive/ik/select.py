@@ -168,9 +168,18 @@ class Nearest:
 
 
 def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, tol=None) -> Nearest:
-    """The solution nearest to each seed (module docstring); ``seeds`` (n, dof) or (dof,)."""
+    """The solution nearest to each seed (module docstring); ``seeds`` (n, dof) or (dof,). In
+    chunks of CHUNK poses (the temporaries are about 4 KB per pose)."""
     sols = np.asarray(sols, dtype=float)
     n, m, dof = sols.shape
+    if n > CHUNK:
+        seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
+        cut = [slice(s, min(n, s + CHUNK)) for s in range(0, n, CHUNK)]
+        parts = [nearest(sols[c], np.asarray(counts)[c], seeds[c], limits, revolute,
+                         None if branch is None else np.asarray(branch)[c],
+                         None if singular is None else np.asarray(singular)[c], tol) for c in cut]
+        return Nearest(*(np.concatenate([getattr(p, f) for p in parts])
+                         for f in ("q", "found", "max_move", "total_move", "branch", "singular")))
     lo, hi = _limits(limits, dof)
     revolute = np.asarray(revolute, dtype=bool)
     seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
