@@ -296,7 +296,8 @@ def _disarm_alarm(alarm) -> None:
         return
     old_handler, (delay, interval), t_armed = alarm
     signal.setitimer(signal.ITIMER_REAL, 0)
-    signal.signal(signal.SIGALRM, old_handler)
+    # None: the handler was not set from Python; the default is the closest we can restore
+    signal.signal(signal.SIGALRM, signal.SIG_DFL if old_handler is None else old_handler)
     if delay > 0:        # someone else's timer was running: give it back what is left of it
         signal.setitimer(signal.ITIMER_REAL, max(1e-3, delay - (time.monotonic() - t_armed)), interval)
 
