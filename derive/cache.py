@@ -253,6 +253,10 @@ def task(label: str, progress: bool = True):
     alarm = _arm_alarm(entry)
     try:
         yield entry
+        if entry.get("stopped"):
+            # the timer's BudgetError was caught on the way (an ``except DeriveError`` that chose
+            # another path): what was made after it is not trusted, so the task fails
+            check()
     finally:
         _disarm_alarm(alarm)
         _TASKS.pop()
@@ -270,6 +274,8 @@ def _on_alarm(signum, frame):
     try:
         check()
     except BudgetError:
+        for t in _TASKS:
+            t["stopped"] = True
         # fire again if a caller swallows the error and goes on deriving
         signal.setitimer(signal.ITIMER_REAL, 10 * _ALARM_GRACE)
         raise

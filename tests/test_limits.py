@@ -373,3 +373,28 @@ def test_ik_batch_with_a_reference_count_that_does_not_match():
     P = np.broadcast_to(fk(load_robot("ur5"), np.full(6, 0.3)), (3, 8))
     with pytest.raises(InputError, match=r"q_ref: expected shape \(6,\) or \(3, 6\)"):
         reference.ik_batch("ur5", P, q_ref=np.zeros((2, 6)))
+
+
+def test_a_swallowed_budget_error_still_fails_the_task():
+    """An ``except DeriveError`` that catches the timer's BudgetError and goes on (choosing another
+    path) cannot make the task succeed: the task raises when it ends."""
+    code = textwrap.dedent("""
+        import time
+        from derive.cache import task
+        from derive.errors import BudgetError, DeriveError
+        caught = []
+        try:
+            with task("t", progress=False):
+                try:
+                    t = time.perf_counter()
+                    while time.perf_counter() - t < 0.5:
+                        pass
+                except DeriveError:
+                    caught.append(1)
+            print("SUCCEEDED", caught)
+        except BudgetError:
+            print("FAILED", caught)
+    """)
+    res = subprocess.run([PY, "-c", code], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "DQ_DERIVE_BUDGET": "0.2"})
+    assert res.stdout.split() == ["FAILED", "[1]"], res.stdout + res.stderr
