@@ -22,14 +22,16 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import signal
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from importlib import resources
 from pathlib import Path
 
 from derive._version import __version__
-from derive.errors import DeriveError
+from derive.errors import BudgetError, DeriveError
 
 MANIFEST = "manifest.json"
 
@@ -248,10 +250,62 @@ def task(label: str, progress: bool = True):
     :func:`check` raises DeriveError once the budget (:func:`budget_seconds`) is spent."""
     entry = {"label": label, "t0": time.perf_counter(), "budget": budget_seconds(), "progress": progress}
     _TASKS.append(entry)
+    alarm = _arm_alarm(entry)
     try:
         yield entry
+        if entry.get("stopped"):
+            # the timer's BudgetError was caught on the way (an ``except DeriveError`` that chose
+            # another path): what was made after it is not trusted, so the task fails
+            check()
     finally:
+        _disarm_alarm(alarm)
         _TASKS.pop()
+
+
+# The budget also holds inside one long sympy call (expand, factor, simplify of a long chain),
+# where no step() or check() runs: the outermost task arms an interval timer (SIGALRM) for its
+# budget, and the handler runs check(), which raises DeriveError in the interrupted frame. sympy
+# is pure Python, so the signal is handled between two bytecodes of the call. Only the main
+# thread receives signals; in another thread (or without SIGALRM) the checks in the loops remain.
+_ALARM_GRACE = 0.05
+
+
+def _on_alarm(signum, frame):
+    try:
+        check()
+    except BudgetError:
+        for t in _TASKS:
+            t["stopped"] = True
+        # fire again if a caller swallows the error and goes on deriving
+        signal.setitimer(signal.ITIMER_REAL, 10 * _ALARM_GRACE)
+        raise
+    # not yet over budget by the perf_counter clock (timer granularity): look again shortly
+    signal.setitimer(signal.ITIMER_REAL, _ALARM_GRACE)
+
+
+def _arm_alarm(entry):
+    """Arm the budget timer for the outermost task in the main thread; returns what
+    :func:`_disarm_alarm` restores (None when no timer was armed)."""
+    if len(_TASKS) != 1 or not hasattr(signal, "setitimer") \
+            or threading.current_thread() is not threading.main_thread():
+        return None
+    try:
+        old_handler = signal.signal(signal.SIGALRM, _on_alarm)
+    except (ValueError, OSError):
+        return None
+    old_timer = signal.setitimer(signal.ITIMER_REAL, entry["budget"] + _ALARM_GRACE)
+    return old_handler, old_timer, time.monotonic()
+
+
+def _disarm_alarm(alarm) -> None:
+    if alarm is None:
+        return
+    old_handler, (delay, interval), t_armed = alarm
+    signal.setitimer(signal.ITIMER_REAL, 0)
+    # None: the handler was not set from Python; the default is the closest we can restore
+    signal.signal(signal.SIGALRM, signal.SIG_DFL if old_handler is None else old_handler)
+    if delay > 0:        # someone else's timer was running: give it back what is left of it
+        signal.setitimer(signal.ITIMER_REAL, max(1e-3, delay - (time.monotonic() - t_armed)), interval)
 
 
 def step(message: str) -> None:
@@ -268,7 +322,7 @@ def check() -> None:
     for t in _TASKS:
         elapsed = time.perf_counter() - t["t0"]
         if elapsed > t["budget"]:
-            raise DeriveError(
+            raise BudgetError(
                 f"{t['label']}: the derivation took more than its time budget of {t['budget']:g} s "
                 f"({elapsed:.0f} s so far) and was stopped; raise DQ_DERIVE_BUDGET to give it "
                 "longer, or use derive.refine, which needs no derivation")

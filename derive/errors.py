@@ -26,6 +26,11 @@ class RobotFileError(DeriveError):
     """A robot description file is malformed or inconsistent."""
 
 
+class BudgetError(DeriveError):
+    """A derivation spent its time budget (``DQ_DERIVE_BUDGET``) and was stopped
+    (:func:`derive.cache.check`)."""
+
+
 #: numpy dtype kinds read as real numbers: float, signed and unsigned integer.
 _REAL_KINDS = "fiu"
 

@@ -33,7 +33,7 @@ import sympy as sp
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo, step
-from derive.errors import DeriveError
+from derive.errors import BudgetError, DeriveError
 from derive.ik.closed_form import spherical_class
 from derive.ik.extract import _rot
 from derive.model.geometry import path_to_end
@@ -173,6 +173,8 @@ def _fk_kernel(robot) -> Kernel:
     if robot.exact:
         try:
             symbolic = _fk_symbolic(robot)
+        except BudgetError:
+            raise
         except DeriveError as exc:      # e.g. a chain whose axis 1 misses the base origin
             step(f"FK from the numeric product of the joint dual quaternions ({exc})")
     if symbolic is not None:

@@ -367,11 +367,14 @@ class Kernels:
     def _windings(self, q, counts, branch, singular):
         """Every in-limit 2 pi winding of each solution, by the extension (in C, with the limits
         compiled into the kernel) or by :func:`derive.ik.select.within_limits`."""
+        expand = None
         if self._ext is not None:
-            return self._ext.within_limits(np.ascontiguousarray(q), np.asarray(counts, dtype=np.int64),
-                                           np.asarray(branch, dtype=np.int64),
-                                           np.asarray(singular, dtype=np.int64))
-        return select.within_limits(q, counts, self.robot.limits, self.robot.revolute, branch, singular)
+            def expand(cq, cc, cb, cg):
+                return self._ext.within_limits(cq, np.asarray(cc, dtype=np.int64), np.asarray(cb, dtype=np.int64),
+                                               np.asarray(cg, dtype=np.int64))
+        # counted first, refused past select.MAX_RESULT_BYTES, expanded in chunks into the result
+        return select.within_limits(q, counts, self.robot.limits, self.robot.revolute, branch, singular,
+                                    expand=expand)
 
     def _require_main_free(self, what: str):
         """InputError for the searches over the free parameter on kernels that take joint 3."""
@@ -539,6 +542,9 @@ class Kernels:
             if single:
                 sols, counts, branch, sing = sols[None], np.atleast_1d(counts), branch[None], sing[None]
             seeds = as_finite_array(q_seed, "q_seed", last_dim=self.dof)
+            if seeds.ndim > 2 or (seeds.ndim == 2 and seeds.shape[0] not in (1, len(sols))):
+                raise InputError(f"q_seed: expected shape ({self.dof},) or ({len(sols)}, {self.dof}) "
+                                 f"(one seed, or one per pose), got {seeds.shape}")
             seeds = np.broadcast_to(seeds, (len(sols), self.dof))
             res = select.nearest(sols, counts, seeds, self.robot.limits, self.robot.revolute, branch, sing, tol)
         if np.any(res.singular):

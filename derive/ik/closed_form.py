@@ -456,12 +456,28 @@ def ik_batch(robot, poses, q_ref=None):
     """
     robot = load_robot(robot)
     poses, _ = as_pose_batch(poses)
+    n = poses.shape[0]
     qr = None
     if q_ref is not None:
         qr = as_finite_array(q_ref, "q_ref", last_dim=robot.dof)
-        qr = np.broadcast_to(qr, (poses.shape[0], robot.dof)).astype(float)
-    q, counts, _, _ = _solve_related(robot, poses, qr)
+        if qr.ndim > 2 or (qr.ndim == 2 and qr.shape[0] not in (1, n)):
+            raise InputError(f"q_ref: expected shape ({robot.dof},) or ({n}, {robot.dof}), got {qr.shape}")
+        qr = np.broadcast_to(qr.reshape(-1, robot.dof), (n, robot.dof)).astype(float)
+    if n <= BATCH_CHUNK:
+        q, counts, _, _ = _solve_related(robot, poses, qr)
+        return q, counts
+    # in chunks: the solver's temporaries are about 3.6 KB per pose
+    q = np.full((n, 8, robot.dof), np.nan)
+    counts = np.zeros(n, dtype=np.int64)
+    for s in range(0, n, BATCH_CHUNK):
+        e = min(n, s + BATCH_CHUNK)
+        cq, cc, _, _ = _solve_related(robot, poses[s:e], None if qr is None else qr[s:e])
+        q[s:e, :cq.shape[1]], counts[s:e] = cq, cc
     return q, counts
+
+
+#: Poses per chunk of :func:`ik_batch`.
+BATCH_CHUNK = 32768
 
 
 def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IKSolutions:

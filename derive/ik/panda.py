@@ -43,7 +43,9 @@ pose (R7, p):
    |K| > hypot(A, B): O6 is outside the elbow's range (unreachable).
 4. ``wrist6`` (q6): the same point from the wrist side is Rx(pi/2) Rz(q6) v =
    (vx c6 - vy s6, -vz, vx s6 + vy c6) (eq. W1); its third row, vx s6 + vy c6 = Z(q4)
-   (eq. W2), gives q6 = atan2(vx, vy) +- acos(Z / hypot(vx, vy)).
+   (eq. W2), gives q6 = atan2(vx, vy) +- a, cos a = Z / hypot(vx, vy), taken as
+   a = atan2(sqrt(X^2 - vz^2), Z) (eq. W4: hypot(vx, vy) sin a = |X c5|, accurate also where
+   X is small).
 5. ``wrist5`` (q5): rows 1 and 2 of E1 = W1: X c5 = vx c6 - vy s6, X s5 = vz (eq. W3),
    q5 = atan2(sgn(X) vz, sgn(X) (vx c6 - vy s6)).
 6. ``shoulder`` (q1, q2, q3): R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
@@ -62,7 +64,8 @@ Branch id b = 4 i4 + 2 i6 + i2, with i = 0 for the + root and 1 for the - root o
   solution is marked singular;
 * ``S on axis 6`` (vx = vy = 0, needs Z(q4) = 0; impossible on the Panda, |Z| >= d5 - hypot(a3, d3)
   > 0): q6 free, taken from ``q_ref`` (else 0), marked singular;
-* ``q6 double root``: |Z| = hypot(vx, vy), i.e. c5 = 0 (q5 = +-pi/2): the two q6 roots merge;
+* ``q6 double root``: |Z| = hypot(vx, vy), i.e. c5 = 0 (q5 = +-pi/2): the two q6 roots merge
+  (below (X c5)^2 = DOUBLE_ROOT X^2 + W4_NOISE |X| they are made equal);
 * ``axes 1 and 3 aligned`` (sin q2 = 0): only q1 + q3 (q2 = 0) or q1 - q3 (q2 = pi) is
   determined; q1 is taken from ``q_ref`` (else 0), marked singular.
 
@@ -111,6 +114,15 @@ TWO_PI = 2.0 * math.pi
 #: roots are made equal (acos of rounding noise would split them by up to ~1e-7, and the joints
 #: after them by ~100 times more, too far apart to merge).
 DOUBLE_ROOT = 1e-13
+
+#: The most (pose, q7) pairs :func:`ik_sweep` solves in one call (as derive.ik.redundant.MAX_SWEEP).
+MAX_SWEEP = 10 ** 6
+
+#: Rounding of X^2 - vz^2 per metre of |X| (m): about 2 |X| |dvz|, and vz of a pose made by FK
+#: is off by up to ~5e-15 m (measured: 3e-15 on the Panda at q5 = pi/2); below DOUBLE_ROOT X^2 +
+#: W4_NOISE |X| the two q6 roots are one (eq. W4, :func:`wrist6`), which moves the pose by at
+#: most (DOUBLE_ROOT |X| + W4_NOISE) / 2, about 5e-14 m.
+W4_NOISE = 1e-13
 
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
@@ -326,14 +338,27 @@ def xz(geo: PandaGeometry, q4):
     return -(geo.a3 * c4 + geo.d3 * s4 + geo.a4), geo.a3 * s4 - geo.d3 * c4 - geo.d5
 
 
-def wrist6(v, z, q6_free):
+def wrist6(v, x, z, q6_free):
     """Step 4 (eq. W2): the two roots q6 (n, 2) of vx s6 + vy c6 = Z, the unreachable flag (n,)
-    and the singular flag (n,) (S on axis 6: q6 free, ``q6_free`` where |Z| allows it)."""
+    and the singular flag (n,) (S on axis 6: q6 free, ``q6_free`` where |Z| allows it).
+
+    The root is q6 = atan2(vx, vy) +- a with cos a = Z / rho, rho = hypot(vx, vy); its sine is
+    not taken from 1 - cos^2 (acos): rho sin a = |vx c6 - vy s6| = |X c5|, and by eq. W3
+    (X c5)^2 = X^2 - vz^2 (eq. W4), a difference of two small numbers where |X| is small (the
+    shoulder near axis 5, q4 near 0 on the Panda), so a = atan2(sqrt(X^2 - vz^2), Z) keeps its
+    relative accuracy there (acos(Z / rho) of a cosine within 1e-13 of 1 lost it, and the
+    snap of such a cosine to 1 moved q6 by up to 5e-7 rad: solutions reproduced the pose only to
+    1e-7). The two roots merge where X^2 - vz^2 = (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
+    (q5 = +-pi/2, the second term the rounding of vz): the pose changes only to second order
+    there, by |X| c5^2 / 2 < (DOUBLE_ROOT |X| + W4_NOISE) / 2."""
     rho = np.hypot(v[:, 0], v[:, 1])
     free = rho < SINGULAR_TOL
     c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
     bad = np.where(free, np.abs(z) > SINGULAR_TOL, np.abs(c) > 1.0 + REACH_TOL)
-    ang = np.where(np.abs(c) > 1.0 - DOUBLE_ROOT, np.where(c > 0, 0.0, np.pi), np.arccos(np.clip(c, -1.0, 1.0)))
+    x2 = x * x
+    e = x2 - v[:, 2] * v[:, 2]
+    e = np.where(e <= DOUBLE_ROOT * x2 + W4_NOISE * np.abs(x), 0.0, e)
+    ang = np.arctan2(np.sqrt(e), z)
     psi = np.arctan2(v[:, 0], v[:, 1])
     roots = np.stack([psi + ang, psi - ang], -1)
     roots = np.where(free[:, None], q6_free[:, None], roots)
@@ -393,7 +418,7 @@ def canonical_candidates(geo: PandaGeometry, r7: np.ndarray, p: np.ndarray, q7: 
     for i4 in range(2):
         q4 = q4s[:, i4]
         x, z = xz(geo, q4)
-        q6s, bad6, free6 = wrist6(v, z, q_free[:, 5])
+        q6s, bad6, free6 = wrist6(v, x, z, q_free[:, 5])
         for i6 in range(2):
             q6 = q6s[:, i6]
             q5, free5 = wrist5(v, x, q6, q_free[:, 4])
@@ -533,6 +558,9 @@ def ik_sweep(robot, poses, n: int, *, q_ref=None):
         values = np.linspace(lo, hi, n) if n > 1 else np.array([0.5 * (lo + hi)])
     poses, _ = as_pose_batch(poses)
     p = poses.shape[0]
+    if p * n > MAX_SWEEP:
+        raise InputError(f"sweep: {p} pose(s) x {n} values = {p * n} is more than the limit of "
+                         f"{MAX_SWEEP} (pose, value) pairs per call; use fewer values or poses")
     if q_ref is not None:
         qr = as_finite_array(q_ref, "q_ref", last_dim=7)
         q_ref = np.repeat(np.broadcast_to(qr.reshape(-1, 7), (p, 7)), n, axis=0)

@@ -16,7 +16,8 @@ the robot's numbers substituted, written so that it is total and needs few trans
   is computed from the rounded first two, c = atan2(row_y . m e_x, row_x . m e_x) of
   Ry(b)^T Rz(a)^T m (:func:`derive.ik.srs._zyz`), so the product stays exact;
 * **double roots snapped**: an acos argument within STRETCH_TOL (SRS elbow) or DOUBLE_ROOT
-  (Panda elbow and q6) of +-1 is +-1, so the two roots coincide exactly and merge;
+  (Panda elbow) of +-1 is +-1, so the two roots coincide exactly and merge; the Panda's q6 roots
+  merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (eq. W4 of :func:`derive.ik.panda.wrist6`);
 * reach: an acos argument beyond +-1 by more than :data:`~derive.ik.tolerances.REACH_TOL` drops
   the branch (the pose is out of reach for this value of the free parameter).
 
@@ -348,7 +349,8 @@ def panda_program(robot) -> IKProgram:
     1. frame 6 (eq. F7): R6 = R7 Rz(-q7) Rx(-pi/2), O6 = p - d7 z7 - a6 x6;
     2. v = R6^T (S - O6), the shoulder S = (0, 0, d1) in frame 6;
     3. branch on the elbow root (eq. E2): q4 = atan2(B, A) +- acos(K / hypot(A, B)); X, Z (eq. E1);
-    4. branch on the q6 root (eq. W2): q6 = atan2(vx, vy) +- acos(Z / hypot(vx, vy)); q5 (eq. W3);
+    4. branch on the q6 root (eq. W2): q6 = atan2(vx, vy) +- atan2(sqrt(X^2 - vz^2), Z) (eq. W4,
+       the sine of acos(Z / hypot(vx, vy)) without cancellation); q5 (eq. W3);
     5. R3 = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (eq. S1); branch on the sign of sin q2: q1, q2,
        q3 by ZYZ (eq. S2).
 
@@ -401,9 +403,17 @@ def panda_program(robot) -> IKProgram:
     c6a = bld.let("ce6", zz / rho6d)
     bld.require(sp.And(sp.Abs(c6a) <= 1 + REACH_TOL,
                        sp.Or(sp.Not(free6), sp.Abs(zz) <= panda.SINGULAR_TOL)))
-    cang6 = _snap_select(bld, "ca6", c6a, panda.DOUBLE_ROOT)
-    sang6 = bld.let("sa6", sp.sqrt(pos(1 - cang6 * cang6)))
-    ang6 = bld.let("an6", sp.atan2(sang6, cang6))
+    # the root's sine from eq. W4, (X c5)^2 = X^2 - vz^2 (derive.ik.panda.wrist6): accurate where
+    # X is small; the roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
+    x2 = bld.let("x2e", xx * xx)
+    e6 = bld.let("e6", x2 - vv[2] * vv[2])
+    e6s = bld.select("e6s", e6 <= panda.DOUBLE_ROOT * x2 + panda.W4_NOISE * sp.Abs(xx), 0, e6)
+    r6s = bld.let("r6s", sp.sqrt(e6s))
+    n6 = bld.let("n6", sp.sqrt(e6s + zz * zz))
+    n6d = bld.select("n6d", n6 <= 0, 1, n6)
+    cang6 = bld.let("ca6", zz / n6d)
+    sang6 = bld.let("sa6", r6s / n6d)
+    ang6 = bld.let("an6", sp.atan2(r6s, zz))
     g6 = bld.branch("sg2", "wrist q6 root (eq. W2, + / -)")
     q6 = bld.select("q6", free6, 0, psi6 + g6 * ang6)
     c6 = bld.select("cq6", free6, 1, cps * cang6 - g6 * sps * sang6)

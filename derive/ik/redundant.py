@@ -322,6 +322,21 @@ def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None)
 # --------------------------------------------------------------------------- #
 # Sweep
 # --------------------------------------------------------------------------- #
+#: The most (pose, value) pairs one sweep solves: 10^6, a result of 448 MB (8 solutions of 7
+#: joints per pair, 448 bytes, plus the within-limits windings); a larger sweep raises InputError.
+MAX_SWEEP = 10 ** 6
+#: (pose, value) pairs solved at a time in :func:`ik_sweep`.
+SWEEP_CHUNK = 16384
+
+
+def check_sweep_size(poses: int, n: int) -> None:
+    """InputError when ``poses`` x ``n`` exceeds :data:`MAX_SWEEP`."""
+    if poses * n > MAX_SWEEP:
+        raise InputError(f"sweep: {poses} pose(s) x {n} values = {poses * n} is more than the limit of "
+                         f"{MAX_SWEEP} (pose, value) pairs per call (448 bytes of solutions each); "
+                         "use fewer values, or call it on fewer poses at a time")
+
+
 def sweep_values(robot, poses, n: int, feasible=None) -> np.ndarray:
     """(P, n) values of the free parameter: the midpoints of n equal parts of the feasible range
     (q7: joint 7's limits, the same for every pose; psi: the union of the pose's feasible
@@ -333,6 +348,7 @@ def sweep_values(robot, poses, n: int, feasible=None) -> np.ndarray:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n: the number of values of the free parameter, a positive integer; got {n!r}")
     P, _ = as_pose_batch(poses)
+    check_sweep_size(len(P), int(n))
     if kind == "srs":
         return srs.sweep_psi(robot, P, int(n), feasible)
     lo, hi = panda.q7_interval(robot)
@@ -368,23 +384,28 @@ def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, solve
     branch = np.full((m, n, BRANCHES), -1, dtype=np.int64)
     singular = np.zeros((m, n, BRANCHES), dtype=bool)
     have = np.isfinite(values)
-    if np.any(have):
-        rows = np.nonzero(have)[0]
+    at = np.argwhere(have)                       # (r, 2): (pose, value) of each row
+    # in chunks of SWEEP_CHUNK rows, written into the result: the peak is the result plus one
+    # chunk's temporaries (the within-limits result is bounded by select.MAX_RESULT_BYTES)
+    for s in range(0, len(at), SWEEP_CHUNK):
+        e = min(len(at), s + SWEEP_CHUNK)
+        ii, jj = at[s:e, 0], at[s:e, 1]
+        fv = values[ii, jj]
         if solver is None:
-            r = solve(robot, P[rows], values[have], None if qr is None else qr[rows])
+            r = solve(robot, P[ii], fv, None if qr is None else qr[ii])
             sq, sc, sb, sg = r.q, r.counts, r.branch, r.singular
         else:
-            sq, sc, sb, sg = solver(P[rows], values[have])
+            sq, sc, sb, sg = solver(P[ii], fv)
         if within_limits:
             sq, sc, sb, sg = limiter(sq, sc, sb, sg)
             sg = np.asarray(sg, dtype=bool)
-            width = max(BRANCHES, sq.shape[1])
-            if width > BRANCHES:
-                q = np.full((m, n, width, 7), np.nan)
-                branch = np.full((m, n, width), -1, dtype=np.int64)
-                singular = np.zeros((m, n, width), dtype=bool)
         k = sq.shape[1]
-        q[have, :k], counts[have], branch[have, :k], singular[have, :k] = sq, sc, sb, sg
+        if k > q.shape[2]:
+            grow = k - q.shape[2]
+            q = np.concatenate([q, np.full((m, n, grow, 7), np.nan)], axis=2)
+            branch = np.concatenate([branch, np.full((m, n, grow), -1, dtype=np.int64)], axis=2)
+            singular = np.concatenate([singular, np.zeros((m, n, grow), dtype=bool)], axis=2)
+        q[ii, jj, :k], counts[ii, jj], branch[ii, jj, :k], singular[ii, jj, :k] = sq, sc, sb, sg
     out = Sweep(values, q, counts, branch, singular)
     return Sweep(*(x[0] for x in out)) if single else out
 
@@ -510,6 +531,11 @@ def _refine(prob, kind, rows, a, b, br, f_best, k_best, t_best, flo, fhi, key):
     return f_best, k_best, t_best
 
 
+#: Poses per chunk of :func:`nearest` (the search holds about 270 KB per pose: 49 values x 8
+#: branches of 7 joints and their moves, several times over).
+NEAREST_CHUNK = 512
+
+
 def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
     branch chosen by the 1D search of the module docstring: on the branch of the least largest
@@ -536,6 +562,13 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     single = single and seeds_in.ndim == 1
     n = len(P)
     seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
+    if n > NEAREST_CHUNK:
+        # each pose's search is its own: in chunks, so the scan's temporaries (about 270 KB per
+        # pose) stay bounded
+        parts = [nearest(robot, P[s:s + NEAREST_CHUNK], seeds[s:s + NEAREST_CHUNK], tol, solver)
+                 for s in range(0, n, NEAREST_CHUNK)]
+        return select.Nearest(*(np.concatenate([getattr(part, f) for part in parts])
+                                for f in ("q", "found", "max_move", "total_move", "branch", "singular")))
     prob = _Problem(robot, kind, P, seeds, solver)
     _, (flo, fhi) = free_parameter(robot)
     if kind == "panda" and not (math.isfinite(flo) and math.isfinite(fhi)):

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from derive.algebra.angles import wrap_angle
+from derive.errors import InputError
 
 TWO_PI = 2.0 * np.pi
 LIMIT_SLACK = 1e-12
@@ -48,44 +49,107 @@ def _winding_values(q, lo, hi, revolute):
     return np.where(ok, vals, np.nan)
 
 
-def within_limits(sols, counts, limits, revolute, branch=None, singular=None, chunk: int = 128):
-    """(solutions (n, M, dof) NaN-padded, counts (n,), branch (n, M), singular (n, M)): every
-    in-limit representation of every solution, in the order of the solutions and, per solution,
-    of the windings (smallest values first). M is the largest count of the call. ``branch`` and
-    ``singular`` (n, m) are carried along (-1 / False where not given)."""
+#: The largest result :func:`within_limits` builds (solutions, branch ids and flags together,
+#: bytes): 1 GiB, about 36 000 poses of a UR arm (8 solutions x 2^6 windings of joints limited to
+#: +-2 pi: 512 rows of 6 joints, 29 184 bytes per pose). A larger call raises InputError.
+MAX_RESULT_BYTES = 2 ** 30
+#: Poses per chunk when counting and expanding windings (bounds the temporaries).
+CHUNK = 4096
+
+
+def row_bytes(dof: int) -> int:
+    """Bytes of one solution row of a :func:`within_limits` result: the joints (float64), the
+    branch id (int64) and the singular flag (bool)."""
+    return 8 * dof + 8 + 1
+
+
+def winding_counts(sols, counts, limits, revolute, chunk: int = CHUNK) -> np.ndarray:
+    """(n,) the number of in-limit windings of the first ``counts[i]`` solutions of each pose (the
+    counts :func:`within_limits` returns), computed in chunks without building them."""
     sols = np.asarray(sols, dtype=float)
     n, m, dof = sols.shape
     lo, hi = _limits(limits, dof)
     revolute = np.asarray(revolute, dtype=bool)
+    out = np.zeros(n, dtype=np.int64)
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        per_joint = np.sum(~np.isnan(_winding_values(sols[s:e], lo, hi, revolute)), axis=-1)
+        per_sol = np.prod(per_joint, axis=-1, dtype=np.int64)                # (c, m)
+        valid = np.arange(m)[None, :] < np.asarray(counts[s:e])[:, None]
+        out[s:e] = np.sum(np.where(valid, per_sol, 0), axis=-1)
+    return out
+
+
+def check_result_size(winding_count, dof: int, what: str = "within_limits") -> int:
+    """The width (largest count) of a :func:`within_limits` result, or InputError when the
+    result would be larger than :data:`MAX_RESULT_BYTES`."""
+    cnt = np.asarray(winding_count)
+    width = int(cnt.max()) if cnt.size else 0
+    need = cnt.size * width * row_bytes(dof)
+    if need > MAX_RESULT_BYTES:
+        per_pose = width * row_bytes(dof)
+        fits = max(1, MAX_RESULT_BYTES // max(per_pose, 1))
+        raise InputError(
+            f"{what}: {cnt.size} poses with up to {width} in-limit solutions each would need "
+            f"{need / 2 ** 30:.1f} GiB ({per_pose} bytes per pose), more than the limit of "
+            f"{MAX_RESULT_BYTES / 2 ** 30:g} GiB; call it on chunks of at most {fits} poses, or "
+            "use nearest (one solution per pose)")
+    return width
+
+
+def within_limits(sols, counts, limits, revolute, branch=None, singular=None, chunk: int = 128,
+                  expand=None):
+    """(solutions (n, M, dof) NaN-padded, counts (n,), branch (n, M), singular (n, M)): every
+    in-limit representation of every solution, in the order of the solutions and, per solution,
+    of the windings (smallest values first). M is the largest count of the call. ``branch`` and
+    ``singular`` (n, m) are carried along (-1 / False where not given).
+
+    Memory: the counts come first (:func:`winding_counts`); a result larger than
+    :data:`MAX_RESULT_BYTES` raises InputError before anything is built, and the result is
+    written in place chunk by chunk, so the peak is the result plus one chunk. ``expand(q,
+    counts, branch, singular)`` (the same four for one chunk, every in-limit winding) replaces the
+    numpy expansion (the kernels' extension does it in C)."""
+    sols = np.asarray(sols, dtype=float)
+    n, m, dof = sols.shape
+    lo, hi = _limits(limits, dof)
+    revolute = np.asarray(revolute, dtype=bool)
+    counts = np.asarray(counts)
     if branch is None:
         branch = np.full((n, m), -1)
     if singular is None:
         singular = np.zeros((n, m), dtype=bool)
-    rows: list = []
+    big = check_result_size(winding_counts(sols, counts, limits, revolute), dof)
+    q = np.full((n, big, dof), np.nan)
+    b = np.full((n, big), -1, dtype=np.int64)
+    sg = np.zeros((n, big), dtype=bool)
+    cnt = np.zeros(n, dtype=np.int64)
+    if expand is not None:
+        step = max(chunk, 1024)
+        for s in range(0, n, step):
+            e = min(n, s + step)
+            cq, cc, cb, cg = expand(np.ascontiguousarray(sols[s:e]), counts[s:e], branch[s:e], singular[s:e])
+            w = cq.shape[1]
+            if w > q.shape[1]:              # not expected: the counts above agree with the expansion
+                q = np.concatenate([q, np.full((n, w - q.shape[1], dof), np.nan)], axis=1)
+                b = np.concatenate([b, np.full((n, w - b.shape[1]), -1, dtype=np.int64)], axis=1)
+                sg = np.concatenate([sg, np.zeros((n, w - sg.shape[1]), dtype=bool)], axis=1)
+            q[s:e, :w], b[s:e, :w], sg[s:e, :w], cnt[s:e] = cq, cb, np.asarray(cg, dtype=bool), cc
+        return q, cnt, b, sg
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
         vals = _winding_values(sols[s:e], lo, hi, revolute)          # (c, m, dof, K)
         for i in range(e - s):
-            out = []
+            at = 0
             for k in range(int(counts[s + i])):
                 opts = [v[~np.isnan(v)] for v in vals[i, k]]
                 if any(len(o) == 0 for o in opts):
                     continue
                 grid = np.stack([g.ravel() for g in np.meshgrid(*opts, indexing="ij")], axis=-1)
-                out.append((grid, branch[s + i, k], singular[s + i, k]))
-            rows.append(out)
-    cnt = np.array([sum(len(g) for g, _, _ in r) for r in rows], dtype=np.int64)
-    big = int(cnt.max()) if n else 0
-    q = np.full((n, big, dof), np.nan)
-    b = np.full((n, big), -1)
-    sg = np.zeros((n, big), dtype=bool)
-    for i, r in enumerate(rows):
-        at = 0
-        for grid, br, si in r:
-            q[i, at:at + len(grid)] = grid
-            b[i, at:at + len(grid)] = br
-            sg[i, at:at + len(grid)] = si
-            at += len(grid)
+                q[s + i, at:at + len(grid)] = grid
+                b[s + i, at:at + len(grid)] = branch[s + i, k]
+                sg[s + i, at:at + len(grid)] = singular[s + i, k]
+                at += len(grid)
+            cnt[s + i] = at
     return q, cnt, b, sg
 
 
@@ -118,9 +182,18 @@ class Nearest:
 
 
 def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, tol=None) -> Nearest:
-    """The solution nearest to each seed (module docstring); ``seeds`` (n, dof) or (dof,)."""
+    """The solution nearest to each seed (module docstring); ``seeds`` (n, dof) or (dof,). In
+    chunks of CHUNK poses (the temporaries are about 4 KB per pose)."""
     sols = np.asarray(sols, dtype=float)
     n, m, dof = sols.shape
+    if n > CHUNK:
+        seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
+        cut = [slice(s, min(n, s + CHUNK)) for s in range(0, n, CHUNK)]
+        parts = [nearest(sols[c], np.asarray(counts)[c], seeds[c], limits, revolute,
+                         None if branch is None else np.asarray(branch)[c],
+                         None if singular is None else np.asarray(singular)[c], tol) for c in cut]
+        return Nearest(*(np.concatenate([getattr(p, f) for p in parts])
+                         for f in ("q", "found", "max_move", "total_move", "branch", "singular")))
     lo, hi = _limits(limits, dof)
     revolute = np.asarray(revolute, dtype=bool)
     seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))

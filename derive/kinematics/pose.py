@@ -95,6 +95,9 @@ def as_pose_batch(pose) -> tuple:
     """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4) or (n, 4, 4) input; single flag."""
     arr = as_finite_array(pose, "pose", ndim_min=1)
     if arr.shape[-2:] == (4, 4):
+        if arr.ndim > 3:
+            raise InputError(f"pose: expected a dual quaternion (8,) / (n, 8) or a matrix (4, 4) / "
+                             f"(n, 4, 4), got shape {arr.shape}")
         single = arr.ndim == 2
         m = arr[None] if single else arr
         r = m[:, :3, :3]

@@ -213,6 +213,10 @@ class Robot:
 _BINOPS = {ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
            ast.Div: operator.truediv, ast.Pow: operator.pow}
 _UNOPS = {ast.USub: operator.neg, ast.UAdd: operator.pos}
+#: Longest expression a numeric field may hold (characters).
+MAX_EXPRESSION_CHARS = 200
+#: Largest exponent (in size) of ** in a numeric field.
+MAX_EXPONENT = 64
 
 
 class _Expr:
@@ -228,30 +232,58 @@ class _Expr:
         if isinstance(value, bool) or value is None:
             raise RobotFileError(f"{self.where}: {what} must be a number, got {value!r}")
         if isinstance(value, (int, float)):
-            if not math.isfinite(value):
-                raise RobotFileError(f"{self.where}: {what} = {value!r} is not finite")
-            return float(value)
+            try:
+                result = float(value)
+            except OverflowError:
+                result = math.inf
+            if not math.isfinite(result):
+                raise RobotFileError(f"{self.where}: {what} = {_short(value)} is not finite")
+            return result
         if not isinstance(value, str):
             raise RobotFileError(f"{self.where}: {what} must be a number or expression, got {value!r}")
+        if len(value) > MAX_EXPRESSION_CHARS:
+            raise RobotFileError(f"{self.where}: {what} = {_short(value)} is longer than "
+                                 f"{MAX_EXPRESSION_CHARS} characters; write the number")
         try:
             tree = ast.parse(value.strip(), mode="eval")
-        except SyntaxError:
+        except (SyntaxError, ValueError, MemoryError, RecursionError):
             raise RobotFileError(f"{self.where}: {what} = {value!r} is not a valid expression") from None
-        result = float(self._eval(tree.body, value, what))
+        result = self._eval(tree.body, value, what)
         if not math.isfinite(result):
             raise RobotFileError(f"{self.where}: {what} = {value!r} is not finite")
         return result
 
     def _eval(self, node, text, what):
+        """The value of ``node`` as a float: every constant and every intermediate result is a
+        finite float (an exact integer is never formed, so ``10**10**10`` cannot hang), and an
+        exponent is at most MAX_EXPONENT in size; anything else is a RobotFileError naming the
+        file, the joint and the field."""
         if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) \
                 and not isinstance(node.value, bool):
-            return node.value
-        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
             try:
-                return _BINOPS[type(node.op)](self._eval(node.left, text, what),
-                                              self._eval(node.right, text, what))
+                value = float(node.value)
+            except OverflowError:
+                value = math.inf
+            return self._finite(value, text, what)
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            left = self._eval(node.left, text, what)
+            right = self._eval(node.right, text, what)
+            if isinstance(node.op, ast.Pow):
+                if abs(right) > MAX_EXPONENT:
+                    raise RobotFileError(f"{self.where}: {what} = {_short(text)}: the exponent {right:g} "
+                                         f"is larger than {MAX_EXPONENT} in size")
+                if left < 0 and right != int(right):
+                    raise RobotFileError(f"{self.where}: {what} = {_short(text)}: a negative number to a "
+                                         "non-integer power is not a real number")
+            try:
+                value = _BINOPS[type(node.op)](left, right)
             except ZeroDivisionError:
-                raise RobotFileError(f"{self.where}: {what} = {text!r} divides by zero") from None
+                raise RobotFileError(f"{self.where}: {what} = {_short(text)} divides by zero") from None
+            except OverflowError:
+                value = math.inf
+            if isinstance(value, complex):        # not reachable after the checks above; kept total
+                raise RobotFileError(f"{self.where}: {what} = {_short(text)} is not a real number")
+            return self._finite(value, text, what)
         if isinstance(node, ast.UnaryOp) and type(node.op) in _UNOPS:
             return _UNOPS[type(node.op)](self._eval(node.operand, text, what))
         if isinstance(node, ast.Name):
@@ -266,8 +298,22 @@ class _Expr:
                 return self.parameters[node.id]
             raise RobotFileError(f"{self.where}: {what} = {text!r} uses unknown name {node.id!r} "
                                  f"(known: pi, {', '.join(sorted(self.parameters)) or 'no parameters'})")
-        raise RobotFileError(f"{self.where}: {what} = {text!r}: only numbers, pi, parameters "
+        raise RobotFileError(f"{self.where}: {what} = {_short(text)}: only numbers, pi, parameters "
                              "and + - * / ** are allowed")
+
+    def _finite(self, value: float, text, what) -> float:
+        if not math.isfinite(value):
+            raise RobotFileError(f"{self.where}: {what} = {_short(text)} is not finite (beyond the "
+                                 "range of a float)")
+        return value
+
+
+def _short(text) -> str:
+    """repr of a field for a message, cut to 60 characters."""
+    if isinstance(text, int) and not isinstance(text, bool) and text.bit_length() > 180:
+        return f"an integer of about {int(text.bit_length() * 0.30103) + 1} digits"
+    r = repr(text)
+    return r if len(r) <= 60 else r[:57] + "..."
 
 
 # --------------------------------------------------------------------------- #
@@ -333,6 +379,8 @@ def _parse(path: str, text: str, base, tip, urdf: bool) -> Robot:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         raise RobotFileError(f"{path}: not valid YAML ({exc})") from None
+    except (ValueError, OverflowError, RecursionError) as exc:     # e.g. an integer of > 4300 digits
+        raise RobotFileError(f"{path}: a value cannot be read ({str(exc)[:120]})") from None
     return robot_from_dict(data, path)
 
 

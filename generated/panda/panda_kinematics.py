@@ -265,10 +265,15 @@ def ik(pose, fv):
         ce6 = ze/rho6_d
         if not ((abs(ce6) <= 1.0000000001) and ((abs(ze) <= 1e-11) or not singular_q6)):
             continue
-        ca6_lo = -1.0 if (ce6 <= -0.9999999999999) else ce6
-        ca6 = 1.0 if (ce6 >= 0.9999999999999) else ca6_lo
-        sa6 = sqrt(max(1 - ca6*ca6, 0.0))
-        an6 = atan2(sa6, ca6)
+        x2e = xe*xe
+        e6 = -v2*v2 + x2e
+        e6s = 0 if (e6 <= 1e-13*x2e + 1e-13*abs(xe)) else e6
+        r6s = sqrt(e6s)
+        n6 = sqrt(e6s + ze*ze)
+        n6d = 1.0 if (n6 <= 0) else n6
+        ca6 = ze/n6d
+        sa6 = r6s/n6d
+        an6 = atan2(r6s, ze)
         for b2, sg2 in ((0, 1.0), (1, -1.0)):
             q6 = 0 if singular_q6 else an6*sg2 + ps6
             cq6 = 1.0 if singular_q6 else ca6*cps6 - sa6*sg2*sps6

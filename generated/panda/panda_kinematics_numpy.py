@@ -293,10 +293,15 @@ def ik(P, fv):
         ze = -0.316*cq4 + 0.0825*sq4 - 0.384
         ce6 = ze/rho6_d
         ok1 = ok1 & (np.logical_and.reduce((np.less_equal(abs(ce6), 1.0000000001),np.logical_or.reduce((np.logical_not(singular_q6),np.less_equal(abs(ze), 1e-11))))))
-        ca6_lo = np.where(np.less_equal(ce6, -0.9999999999999), -1.0, ce6)
-        ca6 = np.where(np.greater_equal(ce6, 0.9999999999999), 1.0, ca6_lo)
-        sa6 = np.sqrt(np.maximum(1 - ca6*ca6, 0.0))
-        an6 = np.arctan2(sa6, ca6)
+        x2e = xe*xe
+        e6 = -v2*v2 + x2e
+        e6s = np.where(np.less_equal(e6, 1e-13*x2e + 1e-13*abs(xe)), 0, e6)
+        r6s = np.sqrt(e6s)
+        n6 = np.sqrt(e6s + ze*ze)
+        n6d = np.where(np.less_equal(n6, 0), 1.0, n6)
+        ca6 = ze/n6d
+        sa6 = r6s/n6d
+        an6 = np.arctan2(r6s, ze)
         for b2, sg2 in ((0, 1.0), (1, -1.0)):
             ok2 = ok1
             q6 = np.where(singular_q6, 0, an6*sg2 + ps6)
