@@ -208,8 +208,10 @@ def _find_kernels(key: str, free, shipped, report: bool):
 
 
 def _derive_kernels(robot, key: str, free, rebuild: str | None) -> dict:
+    if rebuild:
+        notice(f"{rebuild}: deriving the kernels of {key} again")
     with task(robot.name):
-        step(f"{rebuild}: deriving the kernels of {key} again" if rebuild else
+        step(f"deriving the kernels of {key} again" if rebuild else
              f"no kernels of identity {key} in generated/ or the user cache: deriving them")
         files = render_kernels(robot, free=free)
         step("kernel sources rendered")
@@ -425,7 +427,8 @@ class Kernels:
             try:
                 text = self._c_source.read_text(encoding="utf-8")
             except (OSError, UnicodeDecodeError) as exc:
-                raise KernelLoadError(f"{self._c_source} cannot be read ({exc})") from None
+                raise KernelLoadError(f"{self._c_source} did not load (not readable as text: "
+                                      f"{_first_line(exc)})") from None
             self._has_ik_c = "_ik_batch(" in text
             # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
             if not self._has_ik_c or "_ik_batch_ex(" in text:
