@@ -139,7 +139,7 @@ def _code_digest() -> str:
     for f in files:
         try:
             name = f.resolve().relative_to(pkg).as_posix()
-        except ValueError:
+        except ValueError:                  # a template outside the package folder
             name = "templates/" + f.name
         h.update(name.encode() + b"\0")
         h.update(f.read_bytes())
@@ -158,6 +158,12 @@ def package_version(dist: str) -> str:
 
 
 def _template_files():
+    """The templates the emitters render: the project's ``templates/`` folder in a source tree
+    (as :func:`derive.codegen.templates.template_environment` finds it), else the packaged
+    ``derive.templates``."""
+    source = Path(__file__).resolve().parents[1] / "templates"
+    if source.is_dir():
+        return sorted(source.glob("*.j2"))
     try:
         root = resources.files("derive.templates")
         return [Path(str(p)) for p in root.iterdir() if p.name.endswith(".j2")]
@@ -376,8 +382,8 @@ def _store(folder: Path, robot_id: str, files: dict, meta: dict) -> Path:
 def build_lock(folder, what: str):
     """Hold the lock of ``folder`` (a file ``<folder>.lock`` beside it, so that the folder's own
     lock stays free for :func:`write_manifest`) while this process makes ``what``; a process
-    that finds it held says so on stderr once and waits, polling, up to the time budget (plus a
-    minute), then raises DeriveError. After the ``with``, a waiter looks for the finished
+    that finds it held says so on stderr once and waits, polling, up to the time budget plus
+    a grace of as long again (at most a minute), then raises DeriveError. After the ``with``, a waiter looks for the finished
     entry before it makes one itself."""
     folder = Path(folder)
     folder.parent.mkdir(parents=True, exist_ok=True)
@@ -392,7 +398,8 @@ def build_lock(folder, what: str):
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             notice(f"waiting for another process that is making {what}")
-            limit = time.monotonic() + budget_seconds() + 60.0
+            wait = budget_seconds() + min(60.0, budget_seconds())
+            limit = time.monotonic() + wait
             while True:
                 time.sleep(0.1)
                 try:
@@ -400,7 +407,7 @@ def build_lock(folder, what: str):
                     break
                 except BlockingIOError:
                     if time.monotonic() > limit:
-                        raise DeriveError(f"waited more than {budget_seconds() + 60:g} s for another "
+                        raise DeriveError(f"waited more than {wait:g} s for another "
                                           f"process making {what} (lock on {folder}); "
                                           "is one stuck?") from None
         except OSError:

@@ -300,3 +300,67 @@ def test_read_only_cache(robot, primed, tmp_path, populated, request):
     finally:
         undo()
     assert {str(p): p.stat().st_mtime_ns for p in cache.rglob("*")} == before
+
+
+def test_wait_is_bounded(tmp_path, monkeypatch, capsys):
+    """A process that waits for a lock held by a stuck one gives up after the budget plus its
+    grace (here 0.5 + 0.5 s) with a DeriveError, and says once that it waits."""
+    import fcntl
+    import time
+
+    from derive.cache import build_lock
+    from derive.errors import DeriveError
+    monkeypatch.setenv("DQ_DERIVE_BUDGET", "0.5")
+    folder = tmp_path / "robot"
+    (tmp_path / "robot.lock").touch()
+    with open(tmp_path / "robot.lock") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        t0 = time.monotonic()
+        with pytest.raises(DeriveError, match="waited more than 1 s"):
+            with build_lock(folder, "the kernels of a test"):
+                pytest.fail("the lock was taken twice")
+        assert 0.9 < time.monotonic() - t0 < 30
+    assert capsys.readouterr().err.count("waiting for another process") == 1
+    with build_lock(folder, "the kernels of a test"):      # released: taken at once
+        pass
+
+
+def test_keys_cover_versions_and_compiler(tmp_path, monkeypatch):
+    """The kernel folders' code digest changes with sympy's and numpy's versions; the C
+    library's name with the compiler (path and version), besides the source and the flags."""
+    from derive import cache
+    from derive.codegen import loader
+
+    def digest_with(versions):
+        monkeypatch.setattr(cache, "package_version", lambda dist: versions.get(dist, ""))
+        cache.clear_memory(["code-digest"])
+        return cache.code_digest()
+
+    try:
+        base = digest_with({"sympy": "1.13", "numpy": "2.1"})
+        assert digest_with({"sympy": "1.13", "numpy": "2.1"}) == base
+        assert digest_with({"sympy": "1.14", "numpy": "2.1"}) != base
+        assert digest_with({"sympy": "1.13", "numpy": "2.2"}) != base
+        # a template's contents, under the same file name
+        edited = tmp_path / "templates" / "kinematics.c.j2"
+        edited.parent.mkdir()
+        edited.write_text("// another template\n")
+        real = cache._template_files()
+        assert real and "kinematics.c.j2" in [p.name for p in real]
+        monkeypatch.setattr(cache, "_template_files", lambda: [p for p in real if p.name != edited.name] + [edited])
+        assert digest_with({"sympy": "1.13", "numpy": "2.1"}) != base
+    finally:
+        monkeypatch.undo()
+        cache.clear_memory(["code-digest"])
+
+    monkeypatch.setenv("DQ_DERIVE_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("DQ_DERIVE_CFLAGS", "-std=c99 -O0")
+    src = tmp_path / "tiny.c"
+    src.write_text("int tiny_answer(void) { return 42; }\n")
+    lib1 = loader._compile(src, "tiny")
+    monkeypatch.setattr(loader, "_compiler_key", lambda: "another compiler 99.1")
+    lib2 = loader._compile(src, "tiny")
+    assert lib1 != lib2 and lib1.is_file() and lib2.is_file()
+    sums = json.loads((lib1.parent / "manifest.json").read_text())["sha256"]
+    import hashlib
+    assert sums == {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in (lib1, lib2)}
