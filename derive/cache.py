@@ -28,7 +28,6 @@ one, with a warning (:func:`writable_root`); a finished derivation is stored the
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import json
 import os
@@ -119,8 +118,9 @@ def writable_root() -> Path:
         return _FALLBACK[root]
     try:
         root.mkdir(parents=True, exist_ok=True)
-        if not os.access(root, os.W_OK | os.X_OK):
-            raise PermissionError(errno.EACCES, "permission denied", str(root))
+        fd, probe = tempfile.mkstemp(dir=root, prefix=".probe-")    # the real errno, if any
+        os.close(fd)
+        os.unlink(probe)
         return root
     except OSError as exc:
         return fallback_root(exc)

@@ -52,7 +52,8 @@ try:
     else:
         out = k.fk(q)
     print(json.dumps({"fk": list(map(float, out)), "folder": str(k.folder),
-                      "ext": backend == "c" and k._ext is not None}))
+                      "ext": backend == "c" and k._ext is not None,
+                      "ext_file": getattr(k._ext, "__file__", None) if backend == "c" else None}))
 except DeriveError as exc:
     print(f"error: {exc}", file=sys.stderr)
     sys.exit(2)
@@ -267,10 +268,16 @@ def _read_only_runner(cache: Path):
     return wrap, lambda: None
 
 
-@pytest.mark.parametrize("populated", [False, True])
+@pytest.mark.parametrize("populated", [False, True, "ur5"])
 def test_read_only_cache(robot, primed, tmp_path, populated, request):
     """A write-protected cache: populated, it is read, and nothing is written and nothing said;
-    empty, the derivation goes to a temporary cache with one warning, never an OSError."""
+    empty, the derivation goes to a temporary cache with one warning, never an OSError; "ur5":
+    the library UR5's C backend (shipped sources, its extension compiled into the temporary
+    cache; the case of issue 33, an OSError before)."""
+    q = Q
+    if populated == "ur5":
+        robot, q = "ur5", [0.3, -1.1, 1.4, -0.2, 0.9, 2.0]
+        populated = False
     if populated:
         cache = request.getfixturevalue("cache")
     else:
@@ -284,19 +291,22 @@ def test_read_only_cache(robot, primed, tmp_path, populated, request):
         pytest.skip("no way to write-protect a folder for root here (no unshare with mount rights)")
     wrap, undo = runner
     try:
-        for backend in ("numpy", "c"):
+        for backend in ("numpy", "c") if robot != "ur5" else ("c",):
             env = _env(cache, TMPDIR=str(tmp))
-            proc = subprocess.Popen([*wrap, sys.executable, "-c", CHILD, str(robot), backend, json.dumps(Q)],
+            proc = subprocess.Popen([*wrap, sys.executable, "-c", CHILD, str(robot), backend, json.dumps(q)],
                                     env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
             rc, out, err = _finish(proc)
             assert rc == 0, err
-            res = _right(out, robot)
+            res = _right(out, robot, q)
             if populated:
                 assert not err.strip(), err
                 assert Path(res["folder"]).is_relative_to(cache)
             else:
                 assert err.count("cannot be written") == 1, err
-                assert Path(res["folder"]).is_relative_to(tmp), err
+                made = res["ext_file"] if robot == "ur5" else res["folder"]
+                assert Path(made).is_relative_to(tmp), err
+                if backend == "c":
+                    assert res["ext"], err
     finally:
         undo()
     assert {str(p): p.stat().st_mtime_ns for p in cache.rglob("*")} == before
