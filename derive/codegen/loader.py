@@ -234,10 +234,9 @@ def _verified_build(name: str) -> Path | None:
 
 def _build(name: str, what: str, lock_on: Path, make) -> Path | None:
     """The compiled file ``name`` of a build folder, verified (:func:`_verified_build`), else
-    made by ``make(tmp)`` (a compiler writing ``tmp``; False when it failed) into the writable
-    build folder, renamed into place and recorded with its checksum. ``force``-free: a
-    verified file is reused. Compilers of the same file wait for each other (a lock on
-    ``lock_on``)."""
+    made by ``make(tmp)`` (a compiler writing ``tmp``; False when it failed, and then None)
+    into the writable build folder, renamed into place and recorded with its checksum.
+    Compilers of the same file wait for each other (a lock on ``lock_on``)."""
     lib = _verified_build(name)
     if lib is not None:
         return lib
@@ -327,10 +326,10 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     text = text.replace("MODULE", module)
     name = f"{module}{ext_suffix}"
     compiler = c_compiler()
-    if compiler is None:
-        return None
 
     def make(tmp):
+        if compiler is None:
+            return False
         # this process's own source and output names, renamed into place when built: another
         # process never sees a partial file
         src = tmp.parent / f"{module}.c"
