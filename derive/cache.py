@@ -15,6 +15,15 @@ User cache: ``$DQ_DERIVE_CACHE``, else ``$XDG_CACHE_HOME/dq-derive``, else
 version and a digest of the package's code and templates, so an artifact made by other code
 is never loaded; compiled libraries are named by a digest of their source, the compiler
 flags and the CPU.
+
+Integrity (docs/reliability.md, "Cache"): every file this module or the loader writes into the
+user cache is written to a temporary file of the writing process and renamed into place
+(``os.replace``), and recorded with its SHA-256 in the folder's manifest (``"sha256"``); it is
+verified before it is loaded, imported or ``dlopen``ed, and an entry that fails the check, or
+fails to load, is made again with one line on stderr saying why (:func:`notice`). One process
+makes an entry while the others wait for it (:func:`build_lock`). A user cache that cannot be
+written (read-only, or its path unusable) is replaced for the rest of the process by a temporary
+one, with a warning (:func:`writable_root`); a finished derivation is stored there, never lost.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ import json
 import os
 import signal
 import sys
+import tempfile
 import threading
 import time
 from contextlib import contextmanager
@@ -63,6 +73,8 @@ def clear_memory(kinds=None) -> None:
 # Folders
 # --------------------------------------------------------------------------- #
 def user_root() -> Path:
+    """The configured user cache: ``$DQ_DERIVE_CACHE``, else ``$XDG_CACHE_HOME/dq-derive``, else
+    ``~/.cache/dq-derive`` (whether or not it can be written: see :func:`writable_root`)."""
     base = os.environ.get("DQ_DERIVE_CACHE")
     if base:
         return Path(base)
@@ -70,8 +82,55 @@ def user_root() -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "dq-derive"
 
 
+#: {configured root: temporary root} of the caches found unwritable in this process
+_FALLBACK: dict = {}
+
+
+def notice(message: str) -> None:
+    """One line on stderr (a cache entry made again, a fallback, a wait), prefixed "dq-derive:"."""
+    print(f"dq-derive: {' '.join(str(message).split())}", file=sys.stderr, flush=True)
+
+
+def fallback_root(reason=None) -> Path:
+    """The temporary cache of this process that stands in for the configured one
+    (:func:`user_root`) once that cannot be written; made, with a warning naming ``reason``, on
+    the first call. It is not deleted at exit (its path is in the warning)."""
+    root = user_root()
+    if root not in _FALLBACK:
+        tmp = Path(tempfile.mkdtemp(prefix="dq-derive-cache-"))
+        _FALLBACK[root] = tmp
+        why = reason.strerror if isinstance(reason, OSError) and reason.strerror else reason
+        notice(f"warning: the cache {root} cannot be written ({why}); this process uses the "
+               f"temporary cache {tmp} instead")
+    return _FALLBACK[root]
+
+
+def roots() -> list:
+    """The cache roots looked in, in order: the configured one, then this process's temporary
+    one if it has one."""
+    root = user_root()
+    return [root] + ([_FALLBACK[root]] if root in _FALLBACK else [])
+
+
+def writable_root() -> Path:
+    """The root that writes go to: the configured one if its folder can be made and written,
+    else (with a warning, once) a temporary one (:func:`fallback_root`)."""
+    root = user_root()
+    if root in _FALLBACK:
+        return _FALLBACK[root]
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=root, prefix=".probe-")    # the real errno, if any
+        os.close(fd)
+        os.unlink(probe)
+        return root
+    except OSError as exc:
+        return fallback_root(exc)
+
+
 def code_digest() -> str:
-    """A digest of the package's Python files and templates (what made an artifact)."""
+    """A digest of what made an artifact: the package's Python files and templates (their
+    paths inside the package and their contents) and the versions of sympy and numpy."""
     return memo("code-digest", None, _code_digest)
 
 
@@ -80,12 +139,33 @@ def _code_digest() -> str:
     pkg = Path(__file__).resolve().parent
     files = sorted(pkg.rglob("*.py")) + sorted(p for p in _template_files())
     for f in files:
-        h.update(f.name.encode())
+        try:
+            name = f.resolve().relative_to(pkg).as_posix()
+        except ValueError:                  # a template outside the package folder
+            name = "templates/" + f.name
+        h.update(name.encode() + b"\0")
         h.update(f.read_bytes())
+    for dist in ("sympy", "numpy"):
+        h.update(f"{dist}={package_version(dist)}\0".encode())
     return h.hexdigest()[:12]
 
 
+def package_version(dist: str) -> str:
+    """The installed version of a distribution ("" when it is not installed)."""
+    from importlib import metadata
+    try:
+        return metadata.version(dist)
+    except metadata.PackageNotFoundError:
+        return ""
+
+
 def _template_files():
+    """The templates the emitters render: the project's ``templates/`` folder in a source tree
+    (as :func:`derive.codegen.templates.template_environment` finds it), else the packaged
+    ``derive.templates``."""
+    source = Path(__file__).resolve().parents[1] / "templates"
+    if source.is_dir():
+        return sorted(source.glob("*.j2"))
     try:
         root = resources.files("derive.templates")
         return [Path(str(p)) for p in root.iterdir() if p.name.endswith(".j2")]
@@ -93,14 +173,26 @@ def _template_files():
         return []
 
 
-def user_folder(robot_id: str) -> Path:
-    """The user-cache folder of one robot's artifacts (not created)."""
-    return user_root() / f"v{__version__}-{code_digest()}" / robot_id
+def user_folder(robot_id: str, root: Path | None = None) -> Path:
+    """The folder of one robot's artifacts (not created) in the configured user cache, or in
+    ``root``."""
+    return (user_root() if root is None else root) / f"v{__version__}-{code_digest()}" / robot_id
 
 
-def build_folder() -> Path:
-    """Where compiled libraries go (named by the digest of what they are built from)."""
-    return user_root() / "build"
+def user_folders(robot_id: str) -> list:
+    """The folders of one robot's artifacts in every root looked in (:func:`roots`)."""
+    return [user_folder(robot_id, r) for r in roots()]
+
+
+def build_folder(root: Path | None = None) -> Path:
+    """Where compiled libraries go (named by the digest of what they are built from), in the
+    configured user cache or in ``root``."""
+    return (user_root() if root is None else root) / "build"
+
+
+def build_folders() -> list:
+    """The build folders of every root looked in (:func:`roots`)."""
+    return [build_folder(r) for r in roots()]
 
 
 def generated_root() -> Path | None:
@@ -147,7 +239,7 @@ def write_manifest(folder: Path, data: dict) -> Path:
         if old.get("id") not in (None, data.get("id")):
             old = {}
         merged = {**old, **data}
-        for k in ("files",):
+        for k in ("files", "sha256"):
             if k in old and k in data:
                 merged[k] = {**old[k], **data[k]}
         text = json.dumps(merged, indent=2, sort_keys=True) + "\n"
@@ -191,35 +283,140 @@ def claim_folder(folder, robot_id: str, name: str, force: bool = False) -> None:
             f"{robot_id}. Choose another --out, or give the robot another name")
 
 
+def sha256_file(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def verify(folder, names) -> str | None:
+    """None when every file of ``names`` in ``folder`` is there with the SHA-256 its manifest
+    records, else why not (one phrase)."""
+    sums = read_manifest(Path(folder)).get("sha256", {})
+    for name in names:
+        path = Path(folder) / name
+        if not path.is_file():
+            return f"{path} is missing"
+        if name not in sums:
+            return f"{path} has no checksum in its manifest"
+        try:
+            actual = sha256_file(path)
+        except OSError as exc:
+            return f"{path} cannot be read ({exc.strerror})"
+        if actual != sums[name]:
+            return f"{path} does not match its checksum (changed, truncated or corrupt)"
+    return None
+
+
+def write_atomic(path, content) -> str:
+    """Write ``content`` (text or bytes) to ``path`` through a temporary file of this process
+    renamed into place, so no reader sees a partial file; returns its SHA-256."""
+    path = Path(path)
+    data = content if isinstance(content, bytes) else content.encode("utf-8")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+    try:
+        with open(tmp, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    return hashlib.sha256(data).hexdigest()
+
+
+def record(folder, names) -> None:
+    """Record the SHA-256 of files already in ``folder`` (written there atomically, for example
+    a compiler's output renamed into place) in its manifest."""
+    write_manifest(folder, {"sha256": {n: sha256_file(Path(folder) / n) for n in names}})
+
+
 def find_artifact(robot_id: str, role: str) -> Path | None:
     """The file of ``role`` (for example "c_source", "casadi/fk") for a robot identity: first
-    a shipped folder, then the user cache; None when neither has it."""
-    for folder in (shipped_index().get(robot_id), user_folder(robot_id)):
+    a shipped folder, then the user cache (verified against its manifest's checksum: an entry
+    that fails is reported and skipped, :func:`verify`); None when none has it."""
+    shipped_folder = shipped_index().get(robot_id)
+    for folder in [shipped_folder, *user_folders(robot_id)]:
         if folder is None:
             continue
         name = read_manifest(folder).get("files", {}).get(role)
-        if name and (folder / name).is_file():
-            return folder / name
+        if not name or not (folder / name).is_file():
+            continue
+        if folder != shipped_folder:
+            why = verify(folder, [name])
+            if why:
+                notice(f"{why}: making it again")
+                continue
+        return folder / name
     return None
 
 
 def store_artifacts(robot_id: str, files: dict, meta: dict) -> Path:
-    """Write {role: (file name, text or bytes)} into the user cache and record them in its
-    manifest; returns the folder."""
-    folder = user_folder(robot_id)
+    """Write {role: (file name, text or bytes)} into the user cache, each atomically, and record
+    them and their checksums in its manifest; returns the folder. Where the user cache cannot be
+    written, they go to the temporary cache of this process (:func:`fallback_root`), never lost."""
+    try:
+        return _store(user_folder(robot_id, writable_root()), robot_id, files, meta)
+    except OSError as exc:
+        if user_root() in _FALLBACK:
+            raise DeriveError(f"the artifacts of {robot_id} cannot be stored even in the temporary "
+                              f"cache {_FALLBACK[user_root()]} ({exc})") from None
+        return _store(user_folder(robot_id, fallback_root(exc)), robot_id, files, meta)
+
+
+def _store(folder: Path, robot_id: str, files: dict, meta: dict) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
-    names = {}
+    names, sums = {}, {}
     for role, (name, content) in files.items():
-        path = folder / name
-        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-        if isinstance(content, bytes):
-            tmp.write_bytes(content)
-        else:
-            tmp.write_text(content, encoding="utf-8")
-        os.replace(tmp, path)
+        sums[name] = write_atomic(folder / name, content)
         names[role] = name
-    write_manifest(folder, {**meta, "id": robot_id, "files": names})
+    write_manifest(folder, {**meta, "id": robot_id, "files": names, "sha256": sums})
     return folder
+
+
+@contextmanager
+def build_lock(folder, what: str):
+    """Hold the lock of ``folder`` (a file ``<folder>.lock`` beside it, so that the folder's own
+    lock stays free for :func:`write_manifest`) while this process makes ``what``; a process
+    that finds it held says so on stderr once and waits, polling, up to the time budget plus
+    a grace of as long again (at most a minute), then raises DeriveError. After the ``with``, a waiter looks for the finished
+    entry before it makes one itself."""
+    folder = Path(folder)
+    folder.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+        fd = os.open(folder.with_name(folder.name + ".lock"), os.O_RDWR | os.O_CREAT, 0o666)
+    except (ImportError, OSError):
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            notice(f"waiting for another process that is making {what}")
+            wait = budget_seconds() + min(60.0, budget_seconds())
+            limit = time.monotonic() + wait
+            while True:
+                time.sleep(0.1)
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    if time.monotonic() > limit:
+                        raise DeriveError(f"waited more than {wait:g} s for another "
+                                          f"process making {what} (lock on {folder}); "
+                                          "is one stuck?") from None
+        except OSError:
+            pass                  # no locks on this file system: proceed unlocked
+        yield
+    finally:
+        os.close(fd)              # closing the descriptor releases the lock
 
 
 # --------------------------------------------------------------------------- #

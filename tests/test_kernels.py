@@ -1,6 +1,7 @@
 """Generated FK and IK kernels (pure Python, numpy, C99) against the numpy reference."""
 
 import ctypes
+import json
 import math
 import os
 import platform
@@ -241,7 +242,7 @@ def test_c_rebuilds_when_the_source_changes(tmp_path, monkeypatch):
 
     lib1 = _compile(src, prefix)
     assert lib1.parent == build and re.fullmatch(rf"lib{prefix}-[0-9a-f]{{16}}\.so", lib1.name)
-    assert sorted(p.name for p in build.iterdir()) == [lib1.name]          # no temporary left
+    assert sorted(p.name for p in build.iterdir()) == sorted([lib1.name, "manifest.json"])  # no temporary left
     # the library is this source compiled: its single-pose FK is the reference FK
     fk = symbol(lib1, f"{prefix}_fk", None, [ctypes.c_void_p, ctypes.c_void_p])
     q = np.array([0.3, -1.1, 1.4, -0.2, 0.9, 2.0])
@@ -282,7 +283,8 @@ def test_c_rebuilds_when_the_source_changes(tmp_path, monkeypatch):
     monkeypatch.setenv("DQ_DERIVE_CFLAGS", "-std=c99 -O1")
     lib4 = _compile(src, prefix)
     assert lib4 not in (lib1, lib2, lib3)
-    assert sorted(build.iterdir()) == sorted([lib1, lib2, lib3, lib4])
+    assert sorted(build.glob("*.so")) == sorted([lib1, lib2, lib3, lib4])
+    assert sorted(json.loads((build / "manifest.json").read_text())["sha256"]) == sorted(p.name for p in (lib1, lib2, lib3, lib4))
 
 
 @pytest.mark.parametrize("backend", ["python", "numpy", "c"])

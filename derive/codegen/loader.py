@@ -11,7 +11,14 @@ Where the sources come from: the artifacts of the robot's identity (``Robot.id``
 ``generated/<robot>/`` folder shipped with the package, then the user cache
 (:mod:`derive.cache`); only when neither has them are they derived (progress on stderr) and
 stored in the user cache. Compiled libraries go to the user cache's ``build/`` folder, named
-by a digest of the source, the compiler flags and the CPU.
+by a digest of the source, the compiler (path and version), its flags and the CPU (and, for the
+CPython extension, the template's rendered text, Python's and numpy's versions).
+
+Integrity (docs/reliability.md, "Cache"): each file of the user cache is verified against the
+SHA-256 its manifest records before it is imported or ``dlopen``ed; one that fails the check, or
+fails to load, is made again (derived, or compiled) with one line on stderr saying why, and a
+second failure is a DeriveError. One process derives or compiles an entry while the others wait
+(:func:`derive.cache.build_lock`).
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ import os
 import platform
 import shutil
 import subprocess
+import sys
 import sysconfig
 from pathlib import Path
 
@@ -37,14 +45,23 @@ from derive.algebra import dualquat as dq
 from derive.algebra.dualquat import UNIT_TOL
 from derive.cache import (
     build_folder,
+    build_folders,
+    build_lock,
+    fallback_root,
     locked,
     memo,
+    notice,
+    package_version,
     read_manifest,
+    record,
     shipped_index,
     step,
     store_artifacts,
     task,
     user_folder,
+    user_folders,
+    verify,
+    writable_root,
 )
 from derive.codegen.emit import FILES, KERNEL_FORMAT, kernel_manifest, render_kernels
 from derive.codegen.templates import template_environment
@@ -89,6 +106,21 @@ def _is_gcc(compiler: str) -> bool:
     return "Free Software Foundation" in out and "clang" not in out.lower()
 
 
+@functools.lru_cache(maxsize=None)
+def _compiler_version(compiler: str) -> str:
+    try:
+        return subprocess.run([compiler, "--version"], capture_output=True, text=True,
+                              timeout=60).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def _compiler_key() -> str:
+    """What a build depends on besides its source and flags: the compiler's path and version."""
+    cc = c_compiler()
+    return "" if cc is None else f"{cc}\0{_compiler_version(cc)}"
+
+
 def c_flags() -> list:
     """The compiler flags of the C backend: DQ_DERIVE_CFLAGS when set, else :data:`C_FLAGS`,
     with :data:`X86_FLAGS` on x86 and :data:`GCC_FLAGS` when :func:`c_compiler` is gcc."""
@@ -115,55 +147,152 @@ def _machine_key() -> str:
 KERNEL_ROLES = tuple(FILES)
 
 
-def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
+def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) -> tuple[Path, dict]:
     """(folder, manifest) of the kernel sources of a robot: the shipped ``generated/<robot>/``
-    folder of its identity, else the user cache's, else they are derived now (progress on
-    stderr) and stored in the user cache. Never derives when an artifact of
-    the current calling convention (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
+    folder of its identity, else the user cache's (its files verified against the manifest's
+    checksums; one that fails is reported on stderr and derived again), else they are derived
+    now (progress on stderr) and stored in the user cache; while one process derives them, the
+    others wait for it (:func:`derive.cache.build_lock`) and load its result. Never derives
+    when an artifact of the current calling convention
+    (:data:`~derive.codegen.emit.KERNEL_FORMAT`) exists.
     ``free``: the kernels of a 7-joint arm's alternative free parameter ("q3" for the SRS
     class, :func:`derive.ik.redundant.free_choice`), kept in the user cache beside the default ones, in a folder and
-    under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*."""
+    under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*.
+    ``rebuild``: why the kernels found before did not load; they are derived again whatever the
+    folders hold."""
     robot = load_robot(robot)
     free = free_choice(robot, free)
     key = robot.id if free is None else f"{robot.id}-{free}"
-    places = (shipped_index().get(robot.id), user_folder(robot.id)) if free is None else (user_folder(key),)
-    for folder in places:
+    if rebuild is None:
+        shipped = shipped_index().get(robot.id) if free is None else None
+        found = _find_kernels(key, free, shipped, report=True)
+        if found is not None:
+            return found
+    folder = user_folder(key, writable_root())
+    try:
+        with build_lock(folder, f"the kernels of {robot.name} ({key})"):
+            if rebuild is None:
+                found = _find_kernels(key, free, None, report=False)
+                if found is not None:      # another process derived them while this one waited
+                    return found
+            files = _derive_kernels(robot, key, free, rebuild)
+            folder = store_artifacts(key, files, kernel_manifest(robot, free))
+    except OSError as exc:                 # the lock's folder could not be made: derive unlocked
+        fallback_root(exc)
+        files = _derive_kernels(robot, key, free, rebuild)
+        folder = store_artifacts(key, files, kernel_manifest(robot, free))
+    return folder, read_manifest(folder)
+
+
+def _find_kernels(key: str, free, shipped, report: bool):
+    """(folder, manifest) of complete kernels of ``key``: the shipped folder, then the user
+    cache's folders with their checksums verified (a failure said on stderr when ``report``)."""
+    for folder in [shipped, *user_folders(key)]:
         if folder is None:
             continue
         manifest = read_manifest(folder)
         files = manifest.get("files", {})
-        if manifest.get("id") == key and manifest.get("format") == KERNEL_FORMAT and all(r in files and (folder / files[r]).is_file()
-                                                 for r in KERNEL_ROLES) and (free is None or manifest.get("free") == free):
-            return folder, manifest
+        if not (manifest.get("id") == key and manifest.get("format") == KERNEL_FORMAT
+                and all(r in files for r in KERNEL_ROLES) and (free is None or manifest.get("free") == free)):
+            continue
+        if folder != shipped:
+            why = verify(folder, [files[r] for r in KERNEL_ROLES])
+            if why:
+                if report:
+                    notice(f"{why}: deriving the kernels of {key} again")
+                continue
+        elif not all((folder / files[r]).is_file() for r in KERNEL_ROLES):
+            continue
+        return folder, manifest
+    return None
+
+
+def _derive_kernels(robot, key: str, free, rebuild: str | None) -> dict:
+    if rebuild:
+        notice(f"{rebuild}: deriving the kernels of {key} again")
     with task(robot.name):
-        step(f"no kernels of identity {key} in generated/ or the user cache: deriving them")
+        step(f"deriving the kernels of {key} again" if rebuild else
+             f"no kernels of identity {key} in generated/ or the user cache: deriving them")
         files = render_kernels(robot, free=free)
         step("kernel sources rendered")
-    folder = store_artifacts(key, files, kernel_manifest(robot, free))
-    return folder, read_manifest(folder)
+    return files
 
 
-def _compile(source: Path, prefix: str) -> Path:
-    """The shared library of a C kernel source, compiled once per (source, flags, CPU)."""
-    text = source.read_text(encoding="utf-8")
-    digest = hashlib.sha256((text + " ".join(c_flags()) + _machine_key()).encode()).hexdigest()[:16]
-    lib = build_folder() / f"lib{prefix}-{digest}.so"
-    if lib.exists():
-        return lib
-    compiler = c_compiler()
-    if compiler is None:
-        raise DeriveError("backend 'c' needs a C compiler (cc or gcc) on PATH")
-    lib.parent.mkdir(parents=True, exist_ok=True)
-    with locked(source):          # a process that needs the same library meanwhile waits for it
-        if lib.exists():
+def _verified_build(name: str) -> Path | None:
+    """The compiled file ``name`` from a build folder where it matches its recorded checksum;
+    None when there is none (a file that fails the check is said on stderr)."""
+    for folder in build_folders():
+        lib = folder / name
+        if not lib.exists():
+            continue
+        why = verify(folder, [name])
+        if why is None:
             return lib
-        tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
+        notice(f"{why}: compiling it again")
+    return None
+
+
+def _build(name: str, what: str, lock_on: Path, make) -> Path | None:
+    """The compiled file ``name`` of a build folder, verified (:func:`_verified_build`), else
+    made by ``make(tmp)`` (a compiler writing ``tmp``; False when it failed, and then None)
+    into the writable build folder, renamed into place and recorded with its checksum.
+    Compilers of the same file wait for each other (a lock on ``lock_on``)."""
+    lib = _verified_build(name)
+    if lib is not None:
+        return lib
+    for attempt in range(2):
+        folder = build_folder(writable_root())
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            with locked(lock_on):          # a process that needs the same file meanwhile waits
+                lib = _verified_build(name)
+                if lib is not None:
+                    return lib
+                lib = folder / name
+                tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
+                if not make(tmp):
+                    return None
+                os.replace(tmp, lib)
+                record(folder, [name])
+                return lib
+        except OSError as exc:
+            if attempt:
+                raise DeriveError(f"{what}: cannot be written even to the temporary cache ({exc})") from None
+            fallback_root(exc)
+    return None
+
+
+def _compile(source: Path, prefix: str, again: str | None = None) -> Path:
+    """The shared library of a C kernel source, compiled once per (source, compiler, flags,
+    CPU), verified against its checksum before use. ``again``: why the library found before
+    did not load; it is compiled anew (removed first)."""
+    text = source.read_text(encoding="utf-8")
+    digest = hashlib.sha256((text + " ".join(c_flags()) + _machine_key() + _compiler_key())
+                            .encode()).hexdigest()[:16]
+    name = f"lib{prefix}-{digest}.so"
+    if again:
+        _discard(name, again)
+    compiler = c_compiler()
+
+    def make(tmp):
+        if compiler is None:
+            raise DeriveError("backend 'c' needs a C compiler (cc or gcc) on PATH")
         res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", "-o", str(tmp), str(source), "-lm"],
                              capture_output=True, text=True)
         if res.returncode != 0:
             raise DeriveError(f"compiling the C kernels {source} failed:\n{res.stderr}")
-        os.replace(tmp, lib)
-    return lib
+        return True
+    return _build(name, f"the C library of {source}", source, make)
+
+
+def _discard(name: str, why: str) -> None:
+    """Say why a compiled file is made again, and remove it from the build folders it is in."""
+    notice(f"{why}: compiling {name} again")
+    for folder in build_folders():
+        try:
+            (folder / name).unlink()
+        except OSError:
+            pass
 
 
 #: |q| beyond this is refused by the C backend: dq_sincos reduces its argument accurately up to
@@ -175,8 +304,11 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     # prefix: the kernels' identifier stem from the manifest (emit.identifier, not called here:
     # the load path does no code generation)
     """The CPython extension module of a C kernel source (templates/pyext.c.j2: input checks in
-    C, single calls as batches of one), compiled once per (source, flags, CPU, Python); None
-    when it cannot be built (no Python headers), and the loader uses ctypes instead."""
+    C, single calls as batches of one), compiled once per (source, template, compiler, flags,
+    CPU, Python, numpy) and verified against its checksum before it is imported; one that does
+    not import is compiled again once (said on stderr). None when it cannot be built (no
+    Python headers, no compiler, a compiler error, said on stderr), and the loader uses ctypes
+    instead."""
     include = sysconfig.get_paths().get("include")
     if not include or not (Path(include) / "Python.h").exists():
         return None
@@ -185,49 +317,74 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
         prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
         revolute=robot.revolute.tolist(),
         unit_tol=repr(UNIT_TOL), module="MODULE")
+    ext_suffix = sysconfig.get_config_var("EXT_SUFFIX")
     digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
-                             + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
+                             + _machine_key() + _compiler_key() + ext_suffix + sys.version
+                             + package_version("numpy") + np.__version__ + np.get_include())
+                            .encode()).hexdigest()[:16]
     module = f"_dqk_{prefix}_{digest}"
     text = text.replace("MODULE", module)
-    lib = build_folder() / f"{module}{sysconfig.get_config_var('EXT_SUFFIX')}"
-    if not lib.exists():
-        compiler = c_compiler()
+    name = f"{module}{ext_suffix}"
+    compiler = c_compiler()
+
+    def make(tmp):
         if compiler is None:
+            return False
+        # this process's own source and output names, renamed into place when built: another
+        # process never sees a partial file
+        src = tmp.parent / f"{module}.c"
+        src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
+        src_tmp.write_text(text, encoding="utf-8")
+        res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
+                              f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],
+                             capture_output=True, text=True)
+        os.replace(src_tmp, src)
+        if res.returncode != 0:
+            notice("the CPython extension of the C kernels did not build (ctypes instead): "
+                   + (res.stderr.strip().splitlines() or ["(no message)"])[-1])
+            return False
+        return True
+
+    for attempt in range(2):
+        lib = _build(name, f"the CPython extension of {source}", source, make)
+        if lib is None:
             return None
-        lib.parent.mkdir(parents=True, exist_ok=True)
-        with locked(source):      # a process that needs the same module meanwhile waits for it
-            if not lib.exists():
-                # this process's own source and output names, renamed into place when built:
-                # another process never sees a partial file
-                src = lib.with_suffix(".c")
-                src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
-                src_tmp.write_text(text, encoding="utf-8")
-                tmp = lib.with_name(lib.name + f".{os.getpid()}.tmp")
-                res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
-                                      f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],
-                                     capture_output=True, text=True)
-                os.replace(src_tmp, src)
-                if res.returncode != 0:
-                    step("the CPython extension of the C kernels did not build (ctypes instead):\n"
-                         f"{res.stderr[-800:]}")
-                    return None
-                os.replace(tmp, lib)
-    loader = importlib.machinery.ExtensionFileLoader(module, str(lib))
-    spec = importlib.util.spec_from_file_location(module, lib, loader=loader)
-    try:
-        ext = importlib.util.module_from_spec(spec)
-        loader.exec_module(ext)
-    except ImportError as exc:
-        step(f"the CPython extension of the C kernels did not load (ctypes instead): {exc}")
-        return None
-    ext.set_error(InputError)
-    return ext
+        loader = importlib.machinery.ExtensionFileLoader(module, str(lib))
+        spec = importlib.util.spec_from_file_location(module, lib, loader=loader)
+        try:
+            ext = importlib.util.module_from_spec(spec)
+            loader.exec_module(ext)
+            ext.set_error(InputError)
+            return ext
+        except Exception as exc:           # ImportError, or a module without set_error
+            why = f"the CPython extension {lib} did not load ({type(exc).__name__}: {_first_line(exc)})"
+            if attempt:
+                notice(f"{why}: ctypes instead")
+                return None
+            _discard(name, why)
+    return None
+
+
+class KernelLoadError(DeriveError):
+    """A kernel file of the cache or of generated/ that does not load (the loader derives the
+    kernels again once, then raises it)."""
+
+
+def _first_line(exc) -> str:
+    return (str(exc).strip().splitlines() or [""])[0][:300]
 
 
 def _import(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    """Import a kernel module from its file; DeriveError (naming the file and the cause) when it
+    does not import or lacks ``fk``."""
+    try:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    except Exception as exc:               # SyntaxError, TypeError, ... of a damaged file
+        raise KernelLoadError(f"{path} did not import ({type(exc).__name__}: {_first_line(exc)})") from None
+    if not callable(getattr(module, "fk", None)):
+        raise KernelLoadError(f"{path} did not import (it defines no fk)")
     return module
 
 
@@ -243,7 +400,18 @@ class Kernels:
         self.robot = load_robot(robot)
         self.backend = backend
         self.dof = self.robot.dof
+        if backend not in BACKENDS:
+            raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
         folder, manifest = kernel_folder(self.robot, free)
+        try:
+            self._load(folder, manifest)
+        except KernelLoadError as exc:     # a kernel file that does not load: derived again, once
+            folder, manifest = kernel_folder(self.robot, free, rebuild=str(exc))
+            self._load(folder, manifest)
+
+    def _load(self, folder, manifest):
+        """Load the backend's kernels from ``folder``; DeriveError when a file does not load."""
+        backend = self.backend
         self._manifest = manifest
         files = manifest["files"]
         ident = manifest["prefix"]
@@ -253,9 +421,13 @@ class Kernels:
             self._mod = _import(folder / files["python"], f"{ident}_kinematics_{self.robot.id}")
         elif backend == "numpy":
             self._mod = _import(folder / files["numpy"], f"{ident}_kinematics_numpy_{self.robot.id}")
-        elif backend == "c":
+        else:
             self._c_source, self._ident = folder / files["c_source"], ident
-            text = self._c_source.read_text(encoding="utf-8")
+            try:
+                text = self._c_source.read_text(encoding="utf-8")
+            except (OSError, UnicodeDecodeError) as exc:
+                raise KernelLoadError(f"{self._c_source} did not load (not readable as text: "
+                                      f"{_first_line(exc)})") from None
             self._has_ik_c = "_ik_batch(" in text
             # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
             if not self._has_ik_c or "_ik_batch_ex(" in text:
@@ -264,8 +436,6 @@ class Kernels:
                 self._load_ctypes()
             else:
                 self._bind()
-        else:
-            raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
 
     def _q(self, Q):
         q = as_finite_array(Q, "Q", ndim_min=1)
@@ -284,8 +454,17 @@ class Kernels:
         if "_lib" in self.__dict__:
             return
         lib = _compile(self._c_source, self._ident)
+        try:
+            handle = ctypes.CDLL(str(lib))
+        except OSError as exc:             # compiled again once, then DeriveError
+            lib = _compile(self._c_source, self._ident,
+                           again=f"the C library {lib} did not load ({_first_line(exc)})")
+            try:
+                handle = ctypes.CDLL(str(lib))
+            except OSError as exc2:
+                raise DeriveError(f"the C library {lib} did not load ({_first_line(exc2)})") from None
         self.__dict__["library"] = lib
-        self._lib = ctypes.CDLL(str(lib))
+        self._lib = handle
         f = getattr(self._lib, f"{self._ident}_fk_batch")
         f.argtypes = [ctypes.c_size_t, ctypes.c_void_p, ctypes.c_void_p]
         f.restype = None

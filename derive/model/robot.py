@@ -32,6 +32,7 @@ from __future__ import annotations
 import ast
 import math
 import operator
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -328,7 +329,14 @@ def load_robot(name_or_path, base: str | None = None, tip: str | None = None) ->
     """Load a robot by library name (``"ur5"``) or from a description file path: our YAML
     (``.yaml``/``.yml``, docs/robot-format.md) or a URDF (``.urdf``; ``base`` and ``tip`` name
     the links of the chain, by default the root link and the single leaf, see
-    :mod:`derive.model.urdf`)."""
+    :mod:`derive.model.urdf`).
+
+    Which one (docs/robot-format.md, "Library names and file paths"): a bare name (no path
+    separator, no extension) is a library robot, even where the current folder holds a file of
+    that name; a file needs a path with a separator or an extension (``./ur5``, ``arm.yaml``) or
+    a :class:`pathlib.Path`. A text that reads both ways and finds both, a library robot and an
+    existing file (a ``Path("ur5")`` beside a file ``ur5``), is refused with
+    :class:`~derive.errors.UnknownRobotError` naming both (:func:`resolve_name`)."""
     if isinstance(name_or_path, Robot):
         return name_or_path
     if not isinstance(name_or_path, (str, Path)):
@@ -338,9 +346,8 @@ def load_robot(name_or_path, base: str | None = None, tip: str | None = None) ->
     if text.endswith(".xacro"):
         raise RobotFileError(f"{text}: xacro files are not read; expand it first: "
                              f"xacro {path.name} > {path.name.removesuffix('.xacro').removesuffix('.urdf')}.urdf")
-    if path.suffix in (".yaml", ".yml", ".urdf") or path.is_file() or "/" in text:
-        if not path.is_file():
-            raise UnknownRobotError(f"robot file {text!r} does not exist")
+    kind = resolve_name(name_or_path)
+    if kind == "file":
         if path.suffix == ".urdf" or (path.suffix not in (".yaml", ".yml") and _looks_like_xml(path)):
             return _load_file(str(path.resolve()), base, tip, urdf=True)
         if base is not None or tip is not None:
@@ -348,9 +355,58 @@ def load_robot(name_or_path, base: str | None = None, tip: str | None = None) ->
         return _load_file(str(path.resolve()), urdf=False)
     if base is not None or tip is not None:
         raise RobotFileError(f"{text}: base and tip select the chain of a URDF file, not of a library robot")
-    if text in list_robots():
-        return _load_file(str(LIBRARY_DIR / f"{text}.yaml"), urdf=False)
-    raise UnknownRobotError(f"unknown robot {text!r}; the library has: {', '.join(list_robots())}")
+    return _load_file(str(LIBRARY_DIR / f"{text}.yaml"), urdf=False)
+
+
+def _is_path_form(name_or_path) -> bool:
+    """True for a :class:`pathlib.Path` and for a text with a path separator or an extension."""
+    if isinstance(name_or_path, Path):
+        return True
+    text = str(name_or_path)
+    seps = {"/", os.sep, os.altsep} - {None}
+    return any(s in text for s in seps) or Path(text).suffix != ""
+
+
+def resolve_name(name_or_path) -> str:
+    """"library" or "file": how :func:`load_robot` reads a name or path (docs/robot-format.md,
+    "Library names and file paths"), or UnknownRobotError.
+
+    * a bare name (a text without a path separator or an extension) is a library robot; when
+      the library has no robot of that name the error says so, and names the file of that name
+      in the current folder if there is one (``./NAME`` loads it);
+    * a text with a separator or an extension, and a :class:`pathlib.Path`, is a file path; a
+      missing file is an error (which names the library robot of the same stem, if any);
+    * ambiguous, an error naming both: a path form that is also a library name, where the file
+      exists too (``Path("ur5")`` in a folder with a file ``ur5``; a library name with a dot
+      beside a file of that name)."""
+    text = str(name_or_path)
+    path = Path(text)
+    library = list_robots()
+    in_library = text in library
+    if not _is_path_form(name_or_path):
+        if in_library:
+            return "library"
+        hint = ""
+        if path.is_file():
+            hint = (f"; a file {text!r} is in the current folder: a file needs a path with a separator "
+                    f"or an extension, so load it as './{text}'")
+        raise UnknownRobotError(f"unknown robot {text!r} (a bare name names a library robot){hint}; "
+                                f"the library has: {', '.join(library)}")
+    if path.is_file():
+        if in_library:
+            raise UnknownRobotError(
+                f"{text!r} is ambiguous: it names the library robot {text!r} "
+                f"({LIBRARY_DIR / (text + '.yaml')}) and the file {path.resolve()}; pass the string "
+                f"{text!r} for the library robot, or the file's path with a separator "
+                f"({str(path.resolve())!r}) for the file")
+        return "file"
+    if in_library:
+        return "library"
+    hint = ""
+    stem = path.name.removesuffix(path.suffix) if path.suffix in (".yaml", ".yml", ".urdf") else ""
+    if stem in library and path.parent == Path("."):
+        hint = f" (the library robot of that name loads as {stem!r}, without the extension)"
+    raise UnknownRobotError(f"robot file {text!r} does not exist{hint}")
 
 
 def _looks_like_xml(path: Path) -> bool:
