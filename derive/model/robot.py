@@ -562,7 +562,7 @@ class _Context:
         if jtype not in JOINT_TYPES:
             raise RobotFileError(f"{where}: type {jtype!r} is not one of {JOINT_TYPES}")
 
-        geom = set(_DH_KEYS.get(self.conv, ("origin", "axis") if self.conv == "urdf" else ("axis", "link")))
+        geom = set(_DH_KEYS.get(self.conv, ("origin", "axis", "after") if self.conv == "urdf" else ("axis", "link")))
         unknown = set(jr) - geom - _COMMON_JOINT_KEYS
         if unknown:
             raise RobotFileError(f"{where}: unknown key(s) {sorted(unknown)} for convention "
@@ -589,7 +589,8 @@ class _Context:
         elif self.conv == "urdf":
             if "axis" not in jr:
                 raise RobotFileError(f"{where}: missing key 'axis' (convention urdf)")
-            pre, post = self.fixed(jr.get("origin", []), f"joint {jname!r} origin"), ()
+            pre = self.fixed(jr.get("origin", []), f"joint {jname!r} origin")
+            post = self.fixed(jr.get("after", []), f"joint {jname!r} after")
             axis = Op.rot(self.axis(where, jr["axis"]), 0.0)
             offset_raw = jr.get("offset", 0)
         else:
