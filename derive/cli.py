@@ -12,7 +12,8 @@ Arguments have the same names in every subcommand:
                        or wxyz (scalar first, as dq-derive); --quat-order is required
   --dq W X Y Z W X Y Z a unit dual quaternion [real w x y z | dual w x y z], dual = 1/2 t real
   --deg                every angle in and out in degrees: revolute joint values (prismatic
-                       joints stay in metres) and rpy
+                       joints stay in metres) and rpy; without it, an angle beyond 2 pi in
+                       magnitude gets a warning on stderr
   --json               the results as one JSON object on stdout: numbers, joint names, units
 
 Exit codes:
@@ -321,9 +322,10 @@ def cmd_robots(args) -> int:
 
 def cmd_fk(args) -> int:
     robot = _robot(args)
-    if args.q is not None and args.q_positional:
+    positional = getattr(args, "q_positional", None)     # absent when none are given (SUPPRESS)
+    if args.q is not None and positional:
         raise InputError("fk: give the joint values once, as --q (or, deprecated, positionally)")
-    values = args.q if args.q is not None else args.q_positional
+    values = args.q if args.q is not None else positional
     if not values:
         raise InputError("fk: give the joint values with --q")
     q = _joints_in(robot, values, "--q" if args.q is not None else "joint values", args.deg)
@@ -766,7 +768,7 @@ def build_parser() -> argparse.ArgumentParser:
                       "quaternion (and 4x4 matrix) of the end frame", cmd_fk)
     robot_argument(s)
     q_option(s)
-    s.add_argument("q_positional", nargs="*", type=float, metavar="Q",
+    s.add_argument("q_positional", nargs="*", type=float, metavar="Q", default=argparse.SUPPRESS,
                    help="deprecated: the joint values as positional arguments (before or after the "
                         "options); use --q")
     deg_option(s)
