@@ -13,8 +13,9 @@ Each command line is one of
 * a synopsis: ``dq-derive`` with usage syntax (``[``, ``|``, ``...`` or an upper-case
   placeholder such as ``ROBOT`` or ``FILE``): not run, but its subcommand and every option it
   names must exist in the parser;
-* a ``dq-derive`` / ``python -m derive`` command: run in one temporary folder shared by all
-  pages, in page order (files one command writes are there for the next); ``path/to/...``
+* a ``dq-derive`` / ``python -m derive`` command: run in one temporary folder per test process
+  (shared by the pages it runs), a page's commands in page order, so the files one command
+  writes are there for the next; ``path/to/...``
   placeholders are replaced by real files (:data:`PLACEHOLDERS`, the one place that maps them).
   A plain command runs in this process through ``derive.cli.main`` (the function the console
   script calls: no 2 s start-up per command); one with shell syntax (``; echo $?``, a pipe, a

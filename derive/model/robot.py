@@ -23,8 +23,11 @@ Conventions (theta_i, d_i, a_i, alpha_i the joint's DH numbers):
 * ``urdf``:         the URDF joint form (ROS REP 103 / the URDF specification): each joint's
   ``origin``, one or a list of fixed transforms {translation, rotation} applied in order (a
   URDF joint's origin, with the fixed joints before it folded in), then the motion along
-  ``axis`` in the joint frame: T = Origin_1 ... Origin_k Motion(axis, q). URDF files are read
-  into this form by :mod:`derive.model.urdf`.
+  ``axis`` in the joint frame, then the optional ``after`` list (fixed transforms past the
+  motion, in the joint's own frame; a URDF has none, the export of another convention needs
+  them): T = Origin_1 ... Origin_k Motion(axis, q) After_1 ... After_m. URDF files are read
+  into this form by :mod:`derive.model.urdf`, and :mod:`derive.model.export` writes any robot
+  in it.
 """
 
 from __future__ import annotations
