@@ -12,7 +12,8 @@ Arguments have the same names in every subcommand:
                        or wxyz (scalar first, as dq-derive); --quat-order is required
   --dq W X Y Z W X Y Z a unit dual quaternion [real w x y z | dual w x y z], dual = 1/2 t real
   --deg                every angle in and out in degrees: revolute joint values (prismatic
-                       joints stay in metres) and rpy
+                       joints stay in metres) and rpy; without it, an angle beyond 2 pi in
+                       magnitude gets a warning on stderr
   --json               the results as one JSON object on stdout: numbers, joint names, units
 
 Exit codes:
@@ -40,7 +41,7 @@ from derive._version import __version__
 from derive.algebra import dualquat as dq
 from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
-from derive.cache import find_artifact
+from derive.cache import find_artifact, shipped_index
 from derive.codegen.emit import write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
@@ -117,12 +118,33 @@ def _angle_unit(deg: bool) -> str:
     return "deg" if deg else "rad"
 
 
+#: An angle typed without --deg whose magnitude exceeds this (2 pi) was most likely meant in
+#: degrees: it gets a warning on stderr (the value is still taken in radians).
+ANGLE_WARN = 2 * math.pi
+
+
+def _warn_angles(name: str, values, deg: bool, revolute=None) -> None:
+    """Warn on stderr when an angle option given in radians (no --deg) has a value beyond 2 pi
+    in magnitude, naming the option and suggesting --deg; ``revolute`` masks joint values (the
+    prismatic ones are metres)."""
+    if deg or values is None:
+        return
+    v = np.atleast_1d(np.asarray(values, dtype=float))
+    mask = np.ones(v.shape, bool) if revolute is None else np.asarray(revolute, bool)
+    big = v[mask & (np.abs(v) > ANGLE_WARN)]
+    if big.size:
+        print(f"dq-derive: warning: {name}: {', '.join(f'{x:g}' for x in big)} "
+              f"{'is' if big.size == 1 else 'are'} beyond 2 pi in magnitude, taken as radians; "
+              "for degrees add --deg", file=sys.stderr)
+
+
 def _joints_in(robot, values, name: str, deg: bool) -> np.ndarray:
     """Joint values from the command line (revolute joints in degrees with --deg) in rad and m."""
     q = np.asarray(values, dtype=float)
     if q.size != robot.dof:
         raise InputError(f"{name}: robot {robot.name!r} has {robot.dof} joint variables "
                          f"({', '.join(robot.variable_names)}), got {q.size} value(s)")
+    _warn_angles(name, q, deg, robot.revolute)
     if deg:
         q = np.where(robot.revolute, np.radians(q), q)
     return q
@@ -194,6 +216,7 @@ def _target(robot, args, what: str):
     if (args.rpy is None) == (args.quat is None):
         raise InputError(f"{what}: --xyz needs its orientation: exactly one of --rpy R P Y or --quat A B C D")
     if args.rpy is not None:
+        _warn_angles("--rpy", args.rpy, args.deg)
         rpy = np.radians(args.rpy) if args.deg else np.array(args.rpy, dtype=float)
         pose = from_position_rpy(np.array(args.xyz, dtype=float), rpy)
         return pose, None, {"xyz": _jlist(args.xyz), "rpy": _jlist(args.rpy)}
@@ -251,17 +274,25 @@ def _robot_row(name: str) -> dict:
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
                     f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
-    shipped_k = find_artifact(r.id, "c_source") is not None
-    shipped_c = find_artifact(r.id, "casadi/fk") is not None
+    has_ik = bool(closed or kind)          # the seven-joint arms' kernels solve IK with the free parameter
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
             "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else None),
             "free_parameter": FREE_NAMES[kind] if kind else None,
             "ik": ik,
-            "kernels": ("FK+IK" if closed else "FK") + (", shipped" if shipped_k else ", on demand"),
-            "casadi": ("fk, residual, ik" if closed else "fk, residual")
-                      + (", shipped" if shipped_c else ", on demand"),
+            "kernels": ("FK+IK" if has_ik else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else "")
+                       + ", " + _where(r.id, "c_source"),
+            "casadi": ("fk, residual, ik" if has_ik else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
+
+
+def _where(robot_id: str, role: str) -> str:
+    """Where an artifact of a robot comes from: "shipped" (in the package's generated/ folder),
+    "cached" (derived earlier, in the user cache) or "on demand" (derived on first use)."""
+    path = find_artifact(robot_id, role)
+    if path is None:
+        return "on demand"
+    return "shipped" if path.parent == shipped_index().get(robot_id) else "cached"
 
 
 def _robots_table(rows) -> list[str]:
@@ -285,18 +316,19 @@ def cmd_robots(args) -> int:
     print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
           "--seed Q; SRS also with joint 3 given: --free V --free-joint 3); kernels and CasADi "
-          "functions: shipped in the package, or derived on first use and cached")
+          "functions: shipped in the package, cached (derived earlier), or derived on first use and cached")
     return EXIT_OK
 
 
 def cmd_fk(args) -> int:
     robot = _robot(args)
-    if args.q is not None and args.q_positional:
+    positional = getattr(args, "q_positional", None)     # absent when none are given (SUPPRESS)
+    if args.q is not None and positional:
         raise InputError("fk: give the joint values once, as --q (or, deprecated, positionally)")
-    values = args.q if args.q is not None else args.q_positional
+    values = args.q if args.q is not None else positional
     if not values:
         raise InputError("fk: give the joint values with --q")
-    q = _joints_in(robot, values, "--q", args.deg)
+    q = _joints_in(robot, values, "--q" if args.q is not None else "joint values", args.deg)
     end = args.end or robot.default_end
     pose = reference.fk(robot, q, args.end)
     if args.json:
@@ -433,6 +465,7 @@ def _ik_redundant(robot, args, pose, q, head) -> int:
                          f"pose: give exactly one of --free V ({what}; {unit}), --sweep N (N values "
                          "over its feasible range) or --seed Q (the solution nearest to Q)"
                          + (f" (got {' and '.join(given)})" if given else ""))
+    _warn_angles("--free", args.free, deg)
     free_meta = {"name": name, "unit": unit, "range": [_jnum(conv(lo)), _jnum(conv(hi))]}
     head = {**head, "free_parameter": free_meta}
     if args.seed is not None:
@@ -854,8 +887,9 @@ def build_parser() -> argparse.ArgumentParser:
                       "quaternion (and 4x4 matrix) of the end frame", cmd_fk)
     robot_argument(s)
     q_option(s)
-    s.add_argument("q_positional", nargs="*", type=float, metavar="Q",
-                   help="deprecated: the joint values as positional arguments; use --q")
+    s.add_argument("q_positional", nargs="*", type=float, metavar="Q", default=argparse.SUPPRESS,
+                   help="deprecated: the joint values as positional arguments (before or after the "
+                        "options); use --q")
     deg_option(s)
     s.add_argument("--end", default=None, help="end frame (default: the robot's default end)")
     s.add_argument("--matrix", action="store_true", help="also print the 4x4 matrix (independent matrix product)")
@@ -951,9 +985,22 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _parse(parser, argv):
+    """The parsed arguments; ``fk``'s deprecated positional joint values may also come after the
+    options (``fk ROBOT --base B --tip T 0 0 0 0 0 0``): its subparser parses intermixed
+    arguments (argparse cannot do that for a parser with subcommands)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] == "fk":
+        [action] = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        fk = action.choices["fk"]
+        args = fk.parse_intermixed_args(argv[1:], argparse.Namespace(command="fk"))
+        return args
+    return parser.parse_args(argv)
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)         # a usage error exits with 2 (argparse)
+    args = _parse(parser, argv)            # a usage error exits with 2 (argparse)
     try:
         return args.func(args)
     except DeriveError as exc:

@@ -58,7 +58,9 @@ def test_readme_opens_with_title_paragraph_and_the_two_commands():
     parts = text.split("\n\n")
     assert parts[0] == "# dq-derive"
     assert "robot" in parts[1] and not parts[1].startswith(("#", " "))       # one paragraph: what, for whom
-    assert [line.split("#")[0].strip() for line in parts[2].splitlines()] == ["make generate", "make test"]
+    marker, *commands = parts[2].splitlines()            # the shell examples' norun marker, then the block
+    assert marker.startswith("<!-- norun: ")
+    assert [line.split("#")[0].strip() for line in commands] == ["make generate", "make test"]
 
 
 def test_the_parser_sees_marked_blocks_and_titles():

@@ -23,8 +23,11 @@ Conventions (theta_i, d_i, a_i, alpha_i the joint's DH numbers):
 * ``urdf``:         the URDF joint form (ROS REP 103 / the URDF specification): each joint's
   ``origin``, one or a list of fixed transforms {translation, rotation} applied in order (a
   URDF joint's origin, with the fixed joints before it folded in), then the motion along
-  ``axis`` in the joint frame: T = Origin_1 ... Origin_k Motion(axis, q). URDF files are read
-  into this form by :mod:`derive.model.urdf`.
+  ``axis`` in the joint frame, then the optional ``after`` list (fixed transforms past the
+  motion, in the joint's own frame; a URDF has none, the export of another convention needs
+  them): T = Origin_1 ... Origin_k Motion(axis, q) After_1 ... After_m. URDF files are read
+  into this form by :mod:`derive.model.urdf`, and :mod:`derive.model.export` writes any robot
+  in it.
 """
 
 from __future__ import annotations
@@ -666,7 +669,7 @@ class _Context:
         if jtype not in JOINT_TYPES:
             raise RobotFileError(f"{where}: type {jtype!r} is not one of {JOINT_TYPES}")
 
-        geom = set(_DH_KEYS.get(self.conv, ("origin", "axis") if self.conv == "urdf" else ("axis", "link")))
+        geom = set(_DH_KEYS.get(self.conv, ("origin", "axis", "after") if self.conv == "urdf" else ("axis", "link")))
         unknown = set(jr) - geom - _COMMON_JOINT_KEYS
         if unknown:
             raise RobotFileError(f"{where}: unknown key(s) {sorted(unknown)} for convention "
@@ -693,7 +696,8 @@ class _Context:
         elif self.conv == "urdf":
             if "axis" not in jr:
                 raise RobotFileError(f"{where}: missing key 'axis' (convention urdf)")
-            pre, post = self.fixed(jr.get("origin", []), f"joint {jname!r} origin"), ()
+            pre = self.fixed(jr.get("origin", []), f"joint {jname!r} origin")
+            post = self.fixed(jr.get("after", []), f"joint {jname!r} after")
             axis = Op.rot(self.axis(where, jr["axis"]), 0.0)
             offset_raw = jr.get("offset", 0)
         else:
