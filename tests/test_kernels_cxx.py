@@ -529,13 +529,14 @@ int main()
 
 
 @needs_gcc
-@pytest.mark.parametrize("robot, n", [("ur5", 10_000), ("irb120", 2000), ("panda", 2000)])
+@pytest.mark.parametrize("robot, n", [("ur5", 10_000), ("irb120", 2000), ("panda", 2000), ("iiwa14", 500)])
 def test_ikfast_drop_in(tmp_path, robot, n):
     """The IKFast 61 drop-in, compiled with g++ -Werror against ikfast.h's documented API (the
     declarations above) the way MoveIt's plugin includes it (inside a namespace, IKFAST_NO_MAIN):
     on random poses ([R | t] from the independent 4x4 reference) ComputeIk finds the generating
     configuration among its solutions (up to 2 pi), every solution's ComputeFk reproduces the
-    pose within 1e-10, and a seven-joint arm's free joint is IKFast's free parameter."""
+    pose within 1e-10, and a seven-joint arm's free joint is IKFast's free parameter (joint 7 of
+    the Panda, joint 3 of the iiwa)."""
     name, text = render_ikfast(robot)
     assert name == f"{robot}_ikfast_solver.cpp"
     assert "#define IKFAST_HAS_LIBRARY" in text and '#include "ikfast.h"' in text
@@ -554,7 +555,7 @@ def test_ikfast_drop_in(tmp_path, robot, n):
     lo, hi = np.maximum(robot_.limits[:, 0], -np.pi), np.minimum(robot_.limits[:, 1], np.pi)
     q = rng.uniform(lo, hi, size=(n, dof))
     mats = reference.fk_matrix(robot, q)
-    free_index = 6 if dof == 7 else None
+    free_index = {"panda": 6, "iiwa14": 2}.get(robot)       # q7 (Panda class), q3 (SRS class)
     fv = q[:, free_index] if free_index is not None else np.zeros(n)
     text_in = f"{n}\n" + "\n".join(" ".join(repr(float(v)) for v in [*m[:3].reshape(12), f])
                                    for m, f in zip(mats, fv))
