@@ -555,7 +555,7 @@ def render_ikfast(robot, command: str | None = None) -> tuple:
         version=__version__, command=command, robot=robot, id=ctx["id"], dof=robot.dof,
         branches=ctx["ik"]["branches"], free_index=free_index, revolute=robot.revolute.tolist(),
         header=header, source=source)
-    return f"{prefix}_ikfast_solver.cpp", text
+    return f"{identifier(robot.name)}_ikfast_solver.cpp", text
 
 
 def write_ikfast(robot, out_dir, command: str | None = None) -> list:
