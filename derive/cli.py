@@ -42,7 +42,7 @@ from derive.algebra import dualquat as dq
 from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
 from derive.cache import find_artifact, shipped_index
-from derive.codegen.emit import write_kernels
+from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import classify, spherical_class
@@ -601,7 +601,11 @@ def cmd_export(args) -> int:
 
 
 def cmd_kernels(args) -> int:
-    return _report(write_kernels(_robot(args), args.out), as_json=args.json)
+    robot = _robot(args)
+    written = write_kernels(robot, args.out)
+    if args.ikfast:
+        written += write_ikfast(robot, args.out)
+    return _report(written, as_json=args.json)
 
 
 def cmd_plot(args) -> int:
@@ -948,8 +952,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--tol", type=float, default=1e-10, help="success tolerance on both errors (m and rad, > 0)")
     s.add_argument("--max-iter", type=int, default=50, help="iterations per seed (an integer >= 1)")
 
-    emitter("kernels", "emit the FK and IK kernels (pure Python, numpy, C99 header and source; IK for "
-                       "robots with a closed form)", cmd_kernels, quiet=False)
+    s = emitter("kernels", "emit the FK and IK kernels (pure Python, numpy, C99 header and source with a CMake "
+                           "package; IK for robots with a closed form)", cmd_kernels, quiet=False)
+    s.add_argument("--ikfast", action="store_true",
+                   help="also write <robot>_ikfast_solver.cpp, an IKFast 61 drop-in (MoveIt's IKFast plugin; "
+                        "docs/ros.md)")
 
     s = command("export", "write a robot (library, YAML or URDF) as a kinematic URDF or our YAML", cmd_export)
     robot_argument(s)

@@ -710,3 +710,86 @@ def test_block_size_changes_no_bit(robot, block, monkeypatch):
     # the solutions are real ones: each reproduces its pose (the reference FK, plain products)
     rows = np.nonzero(np.arange(8)[None, :] < counts[:, None])
     assert mod_sign(reference.fk(robot, sols[rows]), poses[rows[0]]) < 1e-9
+
+
+def test_extension_converts_matrices_and_rt_pairs_in_c():
+    """k.ik with (n, 4, 4), (n, 3, 4), (4, 4) and (3, 4) matrices (converted and checked in the C
+    extension) and with (R, t) pairs, single and batched, gives the solutions of the same poses
+    as dual quaternions (within rounding of the two conversions), for the C, numpy and python
+    backends alike; nearest takes matrices too."""
+    rng = np.random.default_rng(21)
+    q = rng.uniform(-np.pi, np.pi, size=(300, 6))
+    T = reference.fk_matrix("ur5", q)
+    P = reference.fk("ur5", q)
+    k = derive.kernels("ur5", "c")
+    ref_s, ref_c = k.ik(P)
+    for form in (T, T[:, :3, :], (T[:, :3, :3], T[:, :3, 3])):
+        s, c = k.ik(form)
+        assert np.array_equal(c, ref_c)
+        assert np.nanmax(np.abs(s - ref_s)) < 1e-9
+    for form in (T[7], T[7, :3], (T[7, :3, :3], T[7, :3, 3]), (T[7, :3, :3].tolist(), list(T[7, :3, 3]))):
+        s, c = k.ik(form)
+        assert c == ref_c[7] and np.nanmax(np.abs(s - ref_s[7])) < 1e-9
+    for backend in ("numpy", "python"):
+        kb = derive.kernels("ur5", backend)
+        s, c = kb.ik((T[:20, :3, :3], T[:20, :3, 3]))
+        assert np.array_equal(c, ref_c[:20]) and np.nanmax(np.abs(s - ref_s[:20])) < 1e-9
+        s, c = kb.ik(T[:20, :3])
+        assert np.array_equal(c, ref_c[:20])
+    near = k.nearest(T[:50], q[:50] + 0.01)
+    assert np.all(near.found) and np.abs(near.q - q[:50]).max() < 1e-9
+    # the tool: the same poses of the tool frame
+    tool = dualquat.from_rt(np.array([np.cos(0.2), 0.0, np.sin(0.2), 0.0]), np.array([0.0, 0.01, 0.1]))
+    kt = k.with_tool(tool)
+    s, c = kt.ik(dualquat.to_matrix(dualquat.mul(P[:30], tool[None])))
+    assert np.array_equal(c, ref_c[:30]) and np.nanmax(np.abs(s - ref_s[:30])) < 1e-9
+
+
+def test_extension_matrix_checks_in_c():
+    """The C extension checks matrices as the numpy path does (tests above: the same messages),
+    also for the (3, 4) form and in a batch (the first bad matrix's number, the largest error)."""
+    k = derive.kernels("ur5", "c")
+    T = reference.fk_matrix("ur5", np.random.default_rng(2).uniform(-3, 3, size=(5, 6)))
+    bad = T.copy()
+    bad[3, :3, :3] *= 1.1
+    with pytest.raises(InputError, match=r"^pose: the 3x3 block is not a rotation matrix \(max \|R\^T R - I\| = 0\.21\)$"):
+        k.ik(bad[:, :3])
+    nan = T.copy()
+    nan[2, 1, 2] = math.nan
+    with pytest.raises(InputError, match=r"^pose: contains NaN at index \(2, 1, 2\)$"):
+        k.ik(nan)
+    bottom = T.copy()
+    bottom[4, 3, 3] = 2.0
+    with pytest.raises(InputError, match=r"the last row of a homogeneous matrix must be \(0, 0, 0, 1\)"):
+        k.ik(bottom)
+    with pytest.raises(InputError, match=r"\(R, t\) needs R"):
+        k.ik((T[0, :3, :3], T[:2, :3, 3]))
+
+
+def test_extension_batches_release_the_gil():
+    """Two threads calling k.ik / k.fk / k.nearest on large batches at once (the GIL released
+    around the C batch work) give the same results as one thread, bit for bit."""
+    import threading
+
+    k = derive.kernels("ur5", "c")
+    rng = np.random.default_rng(8)
+    q = rng.uniform(-np.pi, np.pi, size=(2, 20_000, 6))
+    P = [reference.fk("ur5", qi) for qi in q]
+    alone = [k.ik(p) for p in P]
+    fk_alone = [k.fk(qi) for qi in q]
+    near_alone = [k.nearest(p, qi).q for p, qi in zip(P, q)]
+    out: dict = {}
+
+    def work(i):
+        out[i] = [(k.ik(P[i]), k.fk(q[i]), k.nearest(P[i], q[i]).q) for _ in range(3)]
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for i in range(2):
+        for (s, c), f, nq in out[i]:
+            assert np.array_equal(s, alone[i][0], equal_nan=True) and np.array_equal(c, alone[i][1])
+            assert np.array_equal(f, fk_alone[i])
+            assert np.array_equal(nq, near_alone[i], equal_nan=True)

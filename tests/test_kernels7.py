@@ -246,4 +246,4 @@ def test_c_header_documents_the_branch_ids_the_kernels_return():
     labels = redundant.branch_labels("iiwa14")
     assert f"index = 4 x ({labels[0]}: 1 for the second root) + 2 x ({labels[1]}: 1 for the second root) " \
            f"+ 1 x ({labels[2]}: 1 for the second root)" in text
-    assert "double fv" in text and "const double *restrict fv" in text
+    assert "double fv" in text and "const double *DQ_RESTRICT fv" in text

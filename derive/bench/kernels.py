@@ -267,6 +267,10 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
         rep = max(repeats, 3) if backend == "c" else 1   # single calls: the noisiest figure
         out[backend]["fk_single_ns"] = _time(lambda: [k.fk(row) for row in q[:s]], rep) / s * 1e9
         out[backend]["ik_single_ns"] = _time(lambda: [k.ik(row) for row in poses[:s]], rep) / s * 1e9
+        if backend == "c" and k.has_ik:
+            # the same poses as 4x4 matrices (converted and checked in C by the extension)
+            k.ik(mats[:10])
+            out[backend]["ik_batch_matrix_ns"] = _time(lambda: k.ik(mats), repeats) / n * 1e9
     k = kernels(robot, "c")
     if k.has_ik:
         seeds = q + 0.01
@@ -344,6 +348,10 @@ def report(r: dict) -> str:
         x = r[b]
         lines.append(f"  {b:<6} via kernels()  {x['fk_batch_ns']:9.1f} {x['fk_single_ns']:10.1f} "
                      f"{x['ik_batch_ns']:10.1f} {x['ik_single_ns']:10.1f}")
+    if "ik_batch_matrix_ns" in r["c"]:
+        x = r["c"]
+        lines.append(f"IK batch with 4x4 matrices (converted in C) via kernels(): {x['ik_batch_matrix_ns']:.1f} ns per "
+                     f"pose ({100 * (x['ik_batch_matrix_ns'] / x['ik_batch_ns'] - 1):+.0f} % on dual quaternions)")
     if "error" not in h and "nearest_batch_ns" in h:
         lines.append(f"IK batch in chunks of 1000 poses (output in cache): C harness {h['ik_batch_chunked_ns']:.1f}, "
                      f"via kernels() {r['c'].get('ik_batch_chunked_ns', float('nan')):.1f} ns per pose")

@@ -24,6 +24,7 @@ from derive.ik.closed_form import MERGE_TOL
 from derive.ik.select import LIMIT_SLACK
 from derive.ik.ir import leaf_of, leaf_weights
 from derive.ik.program import ik_program
+from derive.ik.redundant import FREE_CHOICES, redundant_kind
 from derive.model.robot import load_robot
 
 
@@ -161,6 +162,7 @@ def _context(robot, command: str, free: str | None = None) -> dict:
 
     temps = [{"name": str(n), **code(e)} for n, e in k.temps]
     outs = [code(e) for e in k.outputs]
+    _mark_used_c(trig, temps, outs)
     limits = _limit_context(robot)
     return {
         "version": __version__, "command": command, "robot": robot, "id": _prefix(robot, free),
@@ -171,6 +173,26 @@ def _context(robot, command: str, free: str | None = None) -> dict:
         "always_winding": all(lim["revolute"] and lim["full_turn"] for lim in limits),
         **_ik_context(robot, free),
     }
+
+
+def _mark_used_c(trig, temps, outs) -> None:
+    """Mark in place which FK names the C code reads (``used`` on temps, ``use_s`` / ``use_c``
+    on sines and cosines), so that the C kernels declare no unused variable (-Wall -Werror as C
+    and C++: a sine whose cosine the products never need, a temp of a dropped output)."""
+    used: set = set()
+    for o in outs:
+        used.update(_IDENT.findall(o["cc"]))
+    for t in reversed(temps):
+        t["used"] = t["name"] in used
+        if t["used"]:
+            used.update(_IDENT.findall(t["cc"]))
+    for t in reversed(trig):
+        t["use_s"], t["use_c"] = t["s"] in used, t["c"] in used
+        if t["derived"]:
+            if t["use_s"]:
+                used.update(_IDENT.findall(t["se"]))
+            if t["use_c"]:
+                used.update(_IDENT.findall(t["ce"]))
 
 
 def _limit_context(robot) -> list:
@@ -226,8 +248,9 @@ def _ik_context(robot, free: str | None = None) -> dict:
         ops.append(d)
     k = len(branch_index)
     leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
-    flat_full = _flat_ops(prog, _C(), numeric)
-    flat = _live(flat_full)
+    flat_raw = _flat_ops(prog, _C(), numeric)
+    flat_full = _live(flat_raw, full=True)
+    flat = _live(flat_raw)
     # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
     # is common to four leaves of the UR, ...): the nearest pass computes each value's winding once
     first: dict = {}
@@ -443,10 +466,11 @@ def _flat_ops(prog, printer, numeric) -> list:
 _IDENT = re.compile(r"[A-Za-z_]\w*")
 
 
-def _live(flat: list) -> list:
+def _live(flat: list, full: bool = False) -> list:
     """The flat lines without the values nothing reads: where a select's condition can hold only
     on a singular set (``regular``), its first arm is left to the scalar pass, and the lines that
-    only it read go (no unused variables in the emitted C)."""
+    only it read go (no unused variables in the emitted C). ``full``: for the whole program of
+    the scalar pass (every select with both arms), only the values nothing reads go."""
     live: set = set()
     kept = []
     for d in reversed(flat):
@@ -455,7 +479,7 @@ def _live(flat: list) -> list:
             if not names & live:
                 continue
         if d["kind"] == "select":
-            reads = [d["other"]] if d["regular"] else [d["e"], d["cond"], d["other"]]
+            reads = [d["other"]] if d["regular"] and not full else [d["e"], d["cond"], d["other"]]
         elif d["kind"] == "double":
             reads = [d["hs"], d["hc"]]
         elif d["kind"] == "solution":
@@ -481,6 +505,69 @@ FILES = {
     "c_header": ("kinematics.h.j2", "{id}_kinematics.h"),
     "c_source": ("kinematics.c.j2", "{id}_kinematics.c"),
 }
+
+
+#: The CMake package written beside the C kernels by :func:`write_kernels` (not a kernel: the
+#: loader neither needs nor checks them).
+CMAKE_FILES = {
+    "cmake_lists": ("CMakeLists.txt.j2", "CMakeLists.txt"),
+    "cmake_config": ("kinematicsConfig.cmake.j2", "{id}_kinematicsConfig.cmake"),
+}
+
+
+def render_cmake(robot, command: str | None = None) -> dict:
+    """{role: (file name, text)} of the CMake package of a robot's C kernels (:data:`CMAKE_FILES`):
+    a library target, install rules and ``<id>_kinematicsConfig.cmake``, so that
+    ``find_package(<id>_kinematics)`` finds the installed kernels."""
+    robot = load_robot(robot)
+    ctx = {"version": __version__, "version_numeric": re.match(r"\d+(\.\d+)*", __version__).group(0),
+           "command": command or f"dq-derive kernels {robot.name}", "robot": robot, "id": _prefix(robot)}
+    env = template_environment()
+    return {role: (name.format(id=ctx["id"]), env.get_template(tpl).render(ctx))
+            for role, (tpl, name) in CMAKE_FILES.items()}
+
+
+def render_ikfast(robot, command: str | None = None) -> tuple:
+    """(file name, text) of the IKFast 61 drop-in of a robot with a closed-form IK
+    (``<id>_ikfast_solver.cpp``, templates/ikfast_solver.cpp.j2): the IKFast C++ API on the C
+    kernels, which it embeds (renamed ``<id>_ikfast_*`` and compiled as C++ in the including
+    file's namespace, so they clash neither with the robot's C library nor with another robot's
+    solver). A seven-joint arm's free parameter is a joint, as IKFast's is: q7 for the Panda
+    class, q3 (the joint-3 kernels) for the SRS class."""
+    robot = load_robot(robot)
+    command = command or f"dq-derive kernels {robot.name} --ikfast"
+    free = "q3" if "q3" in FREE_CHOICES.get(redundant_kind(robot) or "", ()) else None
+    ctx = _context(robot, command, free)
+    if ctx["ik"] is None:
+        raise DeriveError(f"{robot.name}: no closed-form IK kernel ({ctx['ik_missing']}); an IKFast drop-in "
+                          "needs one")
+    prefix = ctx["id"]
+    ctx["id"] = f"{prefix}_ikfast"
+    env = template_environment()
+    header = env.get_template("kinematics.h.j2").render(ctx)
+    source = env.get_template("kinematics.c.j2").render(ctx).replace(
+        f'#include "{ctx["id"]}_kinematics.h"\n', "")
+    prog_free = ctx["ik"]["free"]
+    free_index = int(prog_free[1:]) - 1 if prog_free else None
+    if prog_free and not re.fullmatch(r"q\d+", prog_free):
+        raise DeriveError(f"{robot.name}: the IK's free parameter {prog_free} is not a joint; IKFast needs one")
+    text = env.get_template("ikfast_solver.cpp.j2").render(
+        version=__version__, command=command, robot=robot, id=ctx["id"], dof=robot.dof,
+        branches=ctx["ik"]["branches"], free_index=free_index, revolute=robot.revolute.tolist(),
+        header=header, source=source)
+    return f"{identifier(robot.name)}_ikfast_solver.cpp", text
+
+
+def write_ikfast(robot, out_dir, command: str | None = None) -> list:
+    """Write the IKFast drop-in (:func:`render_ikfast`) into out_dir/<robot name>/."""
+    robot = load_robot(robot)
+    out = Path(out_dir) / robot.name
+    with task(robot.name):
+        step("rendering the IKFast drop-in")
+        name, text = render_ikfast(robot, command)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / name).write_text(text, encoding="utf-8")
+    return [out / name]
 
 
 def render_kernels(robot, command: str | None = None, free: str | None = None) -> dict:
@@ -514,14 +601,16 @@ def kernel_manifest(robot, free: str | None = None) -> dict:
 
 
 def write_kernels(robot, out_dir, command: str | None = None, force: bool = False) -> list:
-    """Write the kernel files into out_dir/<robot name>/ and record them in its manifest (a
-    folder of another robot is refused unless ``force``: :func:`derive.cache.claim_folder`)."""
+    """Write the kernel files and the CMake package of the C kernels (:func:`render_cmake`) into
+    out_dir/<robot name>/ and record them in its manifest (a folder of another robot is refused
+    unless ``force``: :func:`derive.cache.claim_folder`)."""
     robot = load_robot(robot)
     out = Path(out_dir) / robot.name
     claim_folder(out, robot.id, robot.name, force)
     with task(robot.name):
         step("rendering the FK/IK kernels")
         files = render_kernels(robot, command)
+        files.update(render_cmake(robot, command))
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in files.values():

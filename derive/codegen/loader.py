@@ -569,9 +569,10 @@ class Kernels:
     def ik(self, P, within_limits: bool = False, details: bool = False, free=None):
         """All closed-form solutions: (solutions (n, 8, dof) NaN-padded, counts (n,)).
 
-        P: unit dual quaternions (n, 8) / (8,) or matrices (n, 4, 4) / (4, 4) of the end frame
-        (of the tool frame after :meth:`with_tool`); a pose farther than 1e-6 from unit raises
-        InputError. At the wrist singularity the free joint is chosen as the generated file's
+        P: unit dual quaternions (n, 8) / (8,), matrices (n, 4, 4) / (4, 4) or [R | t] (n, 3, 4) /
+        (3, 4), or a pair (R, t) (:func:`derive.kinematics.pose.as_pose_batch`) of the end frame
+        (of the tool frame after :meth:`with_tool`); a pose farther than 1e-6 from unit (a
+        rotation block farther than 1e-6 from orthonormal) raises InputError. At the wrist singularity the free joint is chosen as the generated file's
         header says.
 
         ``free``: a 7-joint arm's free parameter (:attr:`free`: the arm angle psi or q7, rad), a
@@ -634,8 +635,9 @@ class Kernels:
         return self._ext_ik(P, True, free)
 
     def _ext_ik(self, P, details: bool, free):
-        """The extension's ik of poses P of the tool frame: dual quaternions are read and checked
-        in C, 4x4 matrices converted here first (the extension returns NotImplemented for them)."""
+        """The extension's ik of poses P of the tool frame: dual quaternions and 4x4 / 3x4
+        matrices are read, converted and checked in C, (R, t) pairs converted here first (the
+        extension returns NotImplemented for them)."""
         out = self._ext.ik(P, self._tool, details, *self._ext_args(free))
         if out is NotImplemented:
             poses, single = as_pose_batch(P)

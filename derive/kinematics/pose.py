@@ -91,9 +91,36 @@ def from_scipy(rotation, translation) -> np.ndarray:
     return from_position_quaternion(translation, rotation.as_quat(), "xyzw")
 
 
+def _is_rt_pair(pose) -> bool:
+    """Whether pose is a pair (R, t): a tuple of a rotation (a scipy Rotation or numbers of shape
+    (3, 3) / (n, 3, 3)) and translations (3,) / (n, 3)."""
+    if not (isinstance(pose, tuple) and len(pose) == 2):
+        return False
+    rot, t = pose
+    if hasattr(rot, "as_matrix"):
+        return True
+    return np.shape(rot)[-2:] == (3, 3) and np.shape(t)[-1:] == (3,)
+
+
 def as_pose_batch(pose) -> tuple:
-    """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4) or (n, 4, 4) input; single flag."""
+    """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4), (n, 4, 4), (3, 4) or (n, 3, 4)
+    ([R | t]) input, or a pair (R, t) of rotations (3, 3) / (n, 3, 3) or a scipy Rotation and
+    translations (3,) / (n, 3); single flag."""
+    if _is_rt_pair(pose):
+        rot, t = pose
+        if hasattr(rot, "as_matrix"):
+            rot = rot.as_matrix()
+        r = as_finite_array(rot, "pose rotation")
+        t = as_finite_array(t, "pose translation", last_dim=3)
+        if r.shape[-2:] != (3, 3) or r.ndim > 3 or r.shape[:-2] != t.shape[:-1]:
+            raise InputError(f"pose: (R, t) needs R (3, 3) and t (3,), or R (n, 3, 3) and t (n, 3), "
+                             f"got {r.shape} and {t.shape}")
+        pose = np.concatenate([r, t[..., None]], axis=-1)
     arr = as_finite_array(pose, "pose", ndim_min=1)
+    if arr.shape[-2:] == (3, 4) and arr.ndim <= 3:
+        bottom = np.zeros(arr.shape[:-2] + (1, 4))
+        bottom[..., 0, 3] = 1.0
+        arr = np.concatenate([arr, bottom], axis=-2)
     if arr.shape[-2:] == (4, 4):
         if arr.ndim > 3:
             raise InputError(f"pose: expected a dual quaternion (8,) / (n, 8) or a matrix (4, 4) / "

@@ -5,20 +5,67 @@
  *
  * Joint values in rad. Output: unit dual quaternion [real w x y z, dual w x y z],
  * dual = 1/2 t real, in the sign the product of the joint transforms gives.
- * Only <math.h>; no allocation, no globals.
+ * The source uses the C standard library only (<math.h>: sqrt, fabs, copysign, fma; <string.h>:
+ * memcpy; <stdint.h>); no allocation, no mutable state (its only data are read-only constant
+ * tables, such as the joint limits), so every function is reentrant and may run on several
+ * threads at once. This header compiles as C99 and later and as C++ (extern "C" linkage); the
+ * source refuses -ffast-math / -Ofast (#error), which would break its sine, cosine and
+ * rounding (see the source).
  */
 #ifndef IIWA7_KINEMATICS_H
 #define IIWA7_KINEMATICS_H
 
 #include <stddef.h>
 
+/* restrict: C99's keyword in C, the common extension __restrict in C++ (g++, clang++, MSVC);
+   nothing before C99 */
+#ifndef DQ_RESTRICT
+#if defined(__cplusplus)
+#define DQ_RESTRICT __restrict
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 199901L
+#define DQ_RESTRICT restrict
+#else
+#define DQ_RESTRICT
+#endif
+#endif
+
+/* C linkage in C++ (the functions are compiled as C), unless DQ_CXX_LINKAGE is defined: the
+   IKFast drop-in compiles this source as C++ inside its own namespace */
+#if defined(__cplusplus) && !defined(DQ_CXX_LINKAGE)
+extern "C" {
+#endif
+
 #define IIWA7_DOF 7
 
 /* One pose: q[7] -> out[8]. */
-void iiwa7_fk(const double *restrict q, double *restrict out);
+void iiwa7_fk(const double *DQ_RESTRICT q, double *DQ_RESTRICT out);
 
 /* n poses: q is n x 7 (row-major), out is n x 8. */
-void iiwa7_fk_batch(size_t n, const double *restrict q, double *restrict out);
+void iiwa7_fk_batch(size_t n, const double *DQ_RESTRICT q, double *DQ_RESTRICT out);
+
+/* Pose conversions (no robot in them: they carry the prefix so that several robots' kernels link
+ * into one program). A matrix is row-major with rows of 4 numbers: rows = 4 the homogeneous
+ * [R t; 0 0 0 1] (16 numbers per pose), rows = 3 its top [R | t] (12). Positions in m,
+ * quaternions scalar-first (w, x, y, z).
+ *
+ * n matrices -> n unit dual quaternions (n x 8, real part with w >= 0; Shepperd's method).
+ * Returns 0, or 1 + the index of the first matrix that is not a rigid transform (a number not
+ * finite, max |R^T R - I| > 1e-6, det R <= 0, or with rows = 4 a last row other than
+ * (0, 0, 0, 1) within 1e-9); the poses of such matrices are meaningless. */
+size_t iiwa7_poses_from_matrices(size_t n, int rows, const double *DQ_RESTRICT m, double *DQ_RESTRICT poses);
+
+/* n unit dual quaternions -> n matrices of `rows` rows (3 or 4) as above. */
+void iiwa7_poses_to_matrices(size_t n, int rows, const double *DQ_RESTRICT poses, double *DQ_RESTRICT m);
+
+/* n positions (n x 3) and quaternions (n x 4, w x y z; normalised here) -> n unit dual
+ * quaternions. Returns 0, or 1 + the index of the first pose with a number not finite or a
+ * quaternion whose norm is not 1 within 1e-6. */
+size_t iiwa7_poses_from_position_quaternion(size_t n, const double *DQ_RESTRICT position,
+                                               const double *DQ_RESTRICT quaternion, double *DQ_RESTRICT poses);
+
+/* n unit dual quaternions -> positions (n x 3) and quaternions (n x 4, w x y z, the real part). */
+void iiwa7_poses_to_position_quaternion(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT position,
+                                          double *DQ_RESTRICT quaternion);
 
 #define IIWA7_IK_MAX 8
 
@@ -35,17 +82,17 @@ void iiwa7_fk_batch(size_t n, const double *restrict q, double *restrict out);
  * (8 x 7, row-major, NaN past the count) and returns their number (0: out of reach).
  * Solutions closer than 1e-06 rad in every
  * joint are one; on a singular set the free joint is set to 0 (q1 at the shoulder's alignment, sin q2 = 0; q5 at the wrist's, sin q6 = 0), the next joint taking the rest. */
-int iiwa7_ik(const double *restrict pose, double fv, double *restrict sols);
+int iiwa7_ik(const double *DQ_RESTRICT pose, double fv, double *DQ_RESTRICT sols);
 
 /* n poses (n x 8): sols is n x 8 x 7, rows past counts[i] set to NaN. */
-void iiwa7_ik_batch(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts);
+void iiwa7_ik_batch(size_t n, const double *DQ_RESTRICT poses, const double *DQ_RESTRICT fv, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts);
 
 /* As iiwa7_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
  * index of the closed form's branch it comes from, index = 4 x (shoulder GC2 = sign of sin q2 (+ / -): 1 for the second root) + 2 x (elbow GC4 = sign of theta4 = s4 q4 (+ / -): 1 for the second root) + 1 x (wrist GC6 = sign of sin q6 (+ / -): 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
- * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
-void iiwa7_ik_batch_ex(size_t n, const double *restrict poses, const double *restrict fv, double *restrict sols, int *restrict counts,
-                        int *restrict branch, int *restrict singular);
+ * a singular set (the free joint chosen as above). Either array may be NULL (not written). */
+void iiwa7_ik_batch_ex(size_t n, const double *DQ_RESTRICT poses, const double *DQ_RESTRICT fv, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts,
+                        int *DQ_RESTRICT branch, int *DQ_RESTRICT singular);
 
 /* n poses (n x 8) and n seed configurations (n x 7): per pose the solution nearest to its seed
  * among those inside the joint limits compiled in from the description ([-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706, 2.96706], [-2.0944, 2.0944], [-2.96706, 2.96706], [-2.0944, 2.0944], [-3.05433, 3.05433]),
@@ -53,9 +100,14 @@ void iiwa7_ik_batch_ex(size_t n, const double *restrict poses, const double *res
  * move, then the smallest summed move (both compared in steps of 1e-9; on a tie the first in branch
  * order). Writes q (n x 7, NaN where no solution is inside the
  * limits), max_move and total_move (n, NaN there), branch (n, the index as above, -1 there) and
- * singular (n). The seeds obey the input contract too. */
-void iiwa7_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict fv, const double *restrict seeds,
-                               double *restrict q, double *restrict max_move, double *restrict total_move,
-                               int *restrict branch, int *restrict singular);
+ * singular (n); each of these four may be NULL (not written). The seeds obey the input
+ * contract too. */
+void iiwa7_ik_nearest_batch(size_t n, const double *DQ_RESTRICT poses, const double *DQ_RESTRICT fv, const double *DQ_RESTRICT seeds,
+                               double *DQ_RESTRICT q, double *DQ_RESTRICT max_move, double *DQ_RESTRICT total_move,
+                               int *DQ_RESTRICT branch, int *DQ_RESTRICT singular);
+
+#if defined(__cplusplus) && !defined(DQ_CXX_LINKAGE)
+}
+#endif
 
 #endif

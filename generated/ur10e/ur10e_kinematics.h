@@ -5,20 +5,67 @@
  *
  * Joint values in rad. Output: unit dual quaternion [real w x y z, dual w x y z],
  * dual = 1/2 t real, in the sign the product of the joint transforms gives.
- * Only <math.h>; no allocation, no globals.
+ * The source uses the C standard library only (<math.h>: sqrt, fabs, copysign, fma; <string.h>:
+ * memcpy; <stdint.h>); no allocation, no mutable state (its only data are read-only constant
+ * tables, such as the joint limits), so every function is reentrant and may run on several
+ * threads at once. This header compiles as C99 and later and as C++ (extern "C" linkage); the
+ * source refuses -ffast-math / -Ofast (#error), which would break its sine, cosine and
+ * rounding (see the source).
  */
 #ifndef UR10E_KINEMATICS_H
 #define UR10E_KINEMATICS_H
 
 #include <stddef.h>
 
+/* restrict: C99's keyword in C, the common extension __restrict in C++ (g++, clang++, MSVC);
+   nothing before C99 */
+#ifndef DQ_RESTRICT
+#if defined(__cplusplus)
+#define DQ_RESTRICT __restrict
+#elif defined(__STDC_VERSION__) && __STDC_VERSION__ >= 199901L
+#define DQ_RESTRICT restrict
+#else
+#define DQ_RESTRICT
+#endif
+#endif
+
+/* C linkage in C++ (the functions are compiled as C), unless DQ_CXX_LINKAGE is defined: the
+   IKFast drop-in compiles this source as C++ inside its own namespace */
+#if defined(__cplusplus) && !defined(DQ_CXX_LINKAGE)
+extern "C" {
+#endif
+
 #define UR10E_DOF 6
 
 /* One pose: q[6] -> out[8]. */
-void ur10e_fk(const double *restrict q, double *restrict out);
+void ur10e_fk(const double *DQ_RESTRICT q, double *DQ_RESTRICT out);
 
 /* n poses: q is n x 6 (row-major), out is n x 8. */
-void ur10e_fk_batch(size_t n, const double *restrict q, double *restrict out);
+void ur10e_fk_batch(size_t n, const double *DQ_RESTRICT q, double *DQ_RESTRICT out);
+
+/* Pose conversions (no robot in them: they carry the prefix so that several robots' kernels link
+ * into one program). A matrix is row-major with rows of 4 numbers: rows = 4 the homogeneous
+ * [R t; 0 0 0 1] (16 numbers per pose), rows = 3 its top [R | t] (12). Positions in m,
+ * quaternions scalar-first (w, x, y, z).
+ *
+ * n matrices -> n unit dual quaternions (n x 8, real part with w >= 0; Shepperd's method).
+ * Returns 0, or 1 + the index of the first matrix that is not a rigid transform (a number not
+ * finite, max |R^T R - I| > 1e-6, det R <= 0, or with rows = 4 a last row other than
+ * (0, 0, 0, 1) within 1e-9); the poses of such matrices are meaningless. */
+size_t ur10e_poses_from_matrices(size_t n, int rows, const double *DQ_RESTRICT m, double *DQ_RESTRICT poses);
+
+/* n unit dual quaternions -> n matrices of `rows` rows (3 or 4) as above. */
+void ur10e_poses_to_matrices(size_t n, int rows, const double *DQ_RESTRICT poses, double *DQ_RESTRICT m);
+
+/* n positions (n x 3) and quaternions (n x 4, w x y z; normalised here) -> n unit dual
+ * quaternions. Returns 0, or 1 + the index of the first pose with a number not finite or a
+ * quaternion whose norm is not 1 within 1e-6. */
+size_t ur10e_poses_from_position_quaternion(size_t n, const double *DQ_RESTRICT position,
+                                               const double *DQ_RESTRICT quaternion, double *DQ_RESTRICT poses);
+
+/* n unit dual quaternions -> positions (n x 3) and quaternions (n x 4, w x y z, the real part). */
+void ur10e_poses_to_position_quaternion(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT position,
+                                          double *DQ_RESTRICT quaternion);
 
 #define UR10E_IK_MAX 8
 
@@ -33,17 +80,17 @@ void ur10e_fk_batch(size_t n, const double *restrict q, double *restrict out);
  * (8 x 6, row-major, NaN past the count) and returns their number (0: out of reach).
  * Solutions closer than 1e-06 rad in every
  * joint are one; at a singular set (sin theta5 = 0) joint 6 is free and chosen for reach (the cosine of the next acos step nearest to 0). */
-int ur10e_ik(const double *restrict pose, double *restrict sols);
+int ur10e_ik(const double *DQ_RESTRICT pose, double *DQ_RESTRICT sols);
 
 /* n poses (n x 8): sols is n x 8 x 6, rows past counts[i] set to NaN. */
-void ur10e_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts);
+void ur10e_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts);
 
 /* As ur10e_ik_batch, and per solution (n x 8, -1 / 0 in the padding): branch[i][k] the
  * index of the closed form's branch it comes from, index = 4 x (theta1: 1 for the second root) + 2 x (theta5 sign: 1 for the second root) + 1 x (theta3: 1 for the second root), the same for the same
  * root on every call (a path stays on its branch by keeping the index); singular[i][k] 1 on
- * a singular set (the free joint chosen as above). Either array may be NULL only if both are. */
-void ur10e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
-                        int *restrict branch, int *restrict singular);
+ * a singular set (the free joint chosen as above). Either array may be NULL (not written). */
+void ur10e_ik_batch_ex(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts,
+                        int *DQ_RESTRICT branch, int *DQ_RESTRICT singular);
 
 /* n poses (n x 8) and n seed configurations (n x 6): per pose the solution nearest to its seed
  * among those inside the joint limits compiled in from the description ([-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319], [-6.28319, 6.28319]),
@@ -51,9 +98,14 @@ void ur10e_ik_batch_ex(size_t n, const double *restrict poses, double *restrict 
  * move, then the smallest summed move (both compared in steps of 1e-9; on a tie the first in branch
  * order). Writes q (n x 6, NaN where no solution is inside the
  * limits), max_move and total_move (n, NaN there), branch (n, the index as above, -1 there) and
- * singular (n). The seeds obey the input contract too. */
-void ur10e_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
-                               double *restrict q, double *restrict max_move, double *restrict total_move,
-                               int *restrict branch, int *restrict singular);
+ * singular (n); each of these four may be NULL (not written). The seeds obey the input
+ * contract too. */
+void ur10e_ik_nearest_batch(size_t n, const double *DQ_RESTRICT poses, const double *DQ_RESTRICT seeds,
+                               double *DQ_RESTRICT q, double *DQ_RESTRICT max_move, double *DQ_RESTRICT total_move,
+                               int *DQ_RESTRICT branch, int *DQ_RESTRICT singular);
+
+#if defined(__cplusplus) && !defined(DQ_CXX_LINKAGE)
+}
+#endif
 
 #endif

@@ -8,6 +8,18 @@
 #include <string.h>
 #include "ur5_kinematics.h"
 
+/* -ffast-math (and -Ofast, which implies it) lets the compiler assume no NaN and reassociate
+ * sums: dq_sincos's and dq_rint's rounding by adding and subtracting 1.5 * 2^52 then folds to
+ * nothing (sin and cos wrong by up to 1, IK solutions all zero), and the NaN padding and checks
+ * go. Refused rather than silently wrong; compile this file without it (the rest of a program
+ * may use it). -ffinite-math-only alone breaks the NaN padding and is refused too. */
+#if defined(__FAST_MATH__)
+#error "dq-derive kernels: do not compile with -ffast-math / -Ofast (they break dq_sincos's range reduction and the NaN padding); use -O3 (with -fno-math-errno) for this file"
+#endif
+#if defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__
+#error "dq-derive kernels: do not compile with -ffinite-math-only (the solutions are padded with NaN)"
+#endif
+
 /* The helpers are inlined into the batch loops, which the compiler can then vectorise. */
 #if defined(__GNUC__)
 #define DQ_INLINE static inline __attribute__((always_inline))
@@ -60,7 +72,7 @@ DQ_INLINE double dq_sel(int c, double a, double b)
  * there) in Horner form with fused multiply-adds where the target has them; the quadrant
  * k mod 4, read from the bits of the rounded value, picks signs and swaps. Accurate to a few ulp
  * for |x| up to about 1e6. */
-DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
+DQ_INLINE void dq_sincos(double x, double *DQ_RESTRICT s, double *DQ_RESTRICT c)
 {
     const double round_magic = 6755399441055744.0;
     const double t = x * 0.63661977236758134308 + round_magic;
@@ -96,7 +108,181 @@ DQ_INLINE void dq_sincos(double x, double *restrict s, double *restrict c)
     memcpy(c, &ub, sizeof ub);
 }
 
-DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
+/* Pose conversions between unit dual quaternions and rotation matrix + translation or position +
+ * quaternion (nothing robot-specific; the functions carry the robot's prefix so that the kernels
+ * of several robots link into one program). A matrix is row-major, its rows of 4: [R | t] (3 x 4)
+ * or the homogeneous [R t; 0 0 0 1] (4 x 4). */
+
+/* The unit quaternion (w >= 0) of the rotation block of m and the dual part 1/2 t q: Shepperd's
+ * method as derive.algebra.quaternion.from_matrix (thesis eq. 3.42-3.45: the largest of 1 + tr R,
+ * 1 + 2 r11 - tr R, 1 + 2 r22 - tr R, 1 + 2 r33 - tr R as the pivot, the first on a tie), the
+ * choice made with selects so that a loop over poses vectorises; then normalised. */
+DQ_INLINE void dq_pose_from_rt(const double *DQ_RESTRICT m, double *DQ_RESTRICT out)
+{
+    const double r11 = m[0], r12 = m[1], r13 = m[2], r21 = m[4], r22 = m[5], r23 = m[6];
+    const double r31 = m[8], r32 = m[9], r33 = m[10];
+    const double tr = r11 + r22 + r33;
+    const double p0 = 1.0 + tr, p1 = 1.0 + 2.0 * r11 - tr, p2 = 1.0 + 2.0 * r22 - tr, p3 = 1.0 + 2.0 * r33 - tr;
+    const int c1 = p1 > p0;
+    const double b1 = dq_sel(c1, p1, p0);
+    const int c2 = p2 > b1;
+    const double b2 = dq_sel(c2, p2, b1);
+    const int c3 = p3 > b2;
+    const double best = dq_sel(c3, p3, b2);
+    const int k3 = c3, k2 = c2 & !c3, k1 = c1 & !c2 & !c3, k0 = !(c1 | c2 | c3);
+    const double s = sqrt(best), h = 0.5 / s, hs = 0.5 * s;
+    const double a = (r32 - r23) * h, b = (r13 - r31) * h, c = (r21 - r12) * h;
+    const double d = (r12 + r21) * h, e = (r13 + r31) * h, f = (r23 + r32) * h;
+    double w = dq_sel(k0, hs, dq_sel(k1, a, dq_sel(k2, b, c)));
+    double x = dq_sel(k0, a, dq_sel(k1, hs, dq_sel(k2, d, e)));
+    double y = dq_sel(k0, b, dq_sel(k1, d, dq_sel(k2, hs, f)));
+    double z = dq_sel(k0, c, dq_sel(k1, e, dq_sel(k2, f, hs)));
+    const double g = dq_sel(w < 0.0, -1.0, 1.0) / sqrt(w * w + x * x + y * y + z * z);
+    w *= g;
+    x *= g;
+    y *= g;
+    z *= g;
+    (void)k3;
+    const double tx = m[3], ty = m[7], tz = m[11];
+    out[0] = w;
+    out[1] = x;
+    out[2] = y;
+    out[3] = z;
+    out[4] = -0.5 * (tx * x + ty * y + tz * z);
+    out[5] = 0.5 * (w * tx + ty * z - tz * y);
+    out[6] = 0.5 * (w * ty + tz * x - tx * z);
+    out[7] = 0.5 * (w * tz + tx * y - ty * x);
+}
+
+/* How far the rotation block of m is from a rotation: max |R^T R - I| (an element) in *orth and
+ * det R in *det; for rows = 4 also max |last row - (0, 0, 0, 1)| in *bottom (else 0). NaN where
+ * an element is not finite. */
+DQ_INLINE void dq_matrix_error(const double *DQ_RESTRICT m, int rows, double *orth, double *det, double *bottom)
+{
+    const double r11 = m[0], r12 = m[1], r13 = m[2], r21 = m[4], r22 = m[5], r23 = m[6];
+    const double r31 = m[8], r32 = m[9], r33 = m[10];
+    const double e11 = fabs(r11 * r11 + r21 * r21 + r31 * r31 - 1.0);
+    const double e22 = fabs(r12 * r12 + r22 * r22 + r32 * r32 - 1.0);
+    const double e33 = fabs(r13 * r13 + r23 * r23 + r33 * r33 - 1.0);
+    const double e12 = fabs(r11 * r12 + r21 * r22 + r31 * r32);
+    const double e13 = fabs(r11 * r13 + r21 * r23 + r31 * r33);
+    const double e23 = fabs(r12 * r13 + r22 * r23 + r32 * r33);
+    /* a sum (NaN for non-finite input) plus the max by selects */
+    const double any = (m[3] + m[7] + m[11]) * 0.0;
+    double e = dq_sel(e12 > e11, e12, e11);
+    e = dq_sel(e13 > e, e13, e);
+    e = dq_sel(e22 > e, e22, e);
+    e = dq_sel(e23 > e, e23, e);
+    e = dq_sel(e33 > e, e33, e);
+    *orth = e + any + (e11 + e12 + e13 + e22 + e23 + e33) * 0.0;
+    *det = r11 * (r22 * r33 - r23 * r32) - r12 * (r21 * r33 - r23 * r31) + r13 * (r21 * r32 - r22 * r31);
+    if (rows == 4) {
+        double bt = dq_sel(fabs(m[13]) > fabs(m[12]), fabs(m[13]), fabs(m[12]));
+        bt = dq_sel(fabs(m[14]) > bt, fabs(m[14]), bt);
+        bt = dq_sel(fabs(m[15] - 1.0) > bt, fabs(m[15] - 1.0), bt);
+        *bottom = bt + (m[12] + m[13] + m[14] + m[15]) * 0.0;
+    } else {
+        *bottom = 0.0;
+    }
+}
+
+/* n matrices of `rows` rows (3 or 4) to poses; returns the index of the first that is not a
+ * rigid transform (finite, max |R^T R - I| <= 1e-6, det R > 0 and, with 4 rows, a last row
+ * (0, 0, 0, 1) within 1e-9), n if all are. A loop without exits (the index a min reduction),
+ * inlined with rows a constant, so it vectorises. */
+DQ_INLINE size_t dq_poses_from_matrices(size_t n, int rows, const double *DQ_RESTRICT m, double *DQ_RESTRICT poses)
+{
+    size_t first = n;
+    const size_t step = (size_t)rows * 4;
+    for (size_t i = 0; i < n; ++i) {
+        double orth, det, bottom;
+        dq_pose_from_rt(m + i * step, poses + 8 * i);
+        dq_matrix_error(m + i * step, rows, &orth, &det, &bottom);
+        const int bad = !(orth <= 1e-6) | !(det > 0.0) | !(bottom <= 1e-9);
+        const size_t at = bad ? i : n;
+        first = at < first ? at : first;
+    }
+    return first;
+}
+
+size_t ur5_poses_from_matrices(size_t n, int rows, const double *DQ_RESTRICT m, double *DQ_RESTRICT poses)
+{
+    const size_t first = rows == 3 ? dq_poses_from_matrices(n, 3, m, poses) : dq_poses_from_matrices(n, 4, m, poses);
+    return first < n ? first + 1 : 0;
+}
+
+void ur5_poses_to_matrices(size_t n, int rows, const double *DQ_RESTRICT poses, double *DQ_RESTRICT m)
+{
+    const size_t step = rows == 3 ? 12 : 16;
+    for (size_t i = 0; i < n; ++i) {
+        const double *p = poses + 8 * i;
+        double *o = m + i * step;
+        const double w = p[0], x = p[1], y = p[2], z = p[3];
+        const double dw = p[4], dx = p[5], dy = p[6], dz = p[7];
+        /* R of the unit quaternion; t = 2 (w d - dw v + v x d), the vector part of 2 dual conj(real) */
+        o[0] = 1.0 - 2.0 * (y * y + z * z);
+        o[1] = 2.0 * (x * y - w * z);
+        o[2] = 2.0 * (x * z + w * y);
+        o[4] = 2.0 * (x * y + w * z);
+        o[5] = 1.0 - 2.0 * (x * x + z * z);
+        o[6] = 2.0 * (y * z - w * x);
+        o[8] = 2.0 * (x * z - w * y);
+        o[9] = 2.0 * (y * z + w * x);
+        o[10] = 1.0 - 2.0 * (x * x + y * y);
+        o[3] = 2.0 * (w * dx - dw * x + y * dz - z * dy);
+        o[7] = 2.0 * (w * dy - dw * y + z * dx - x * dz);
+        o[11] = 2.0 * (w * dz - dw * z + x * dy - y * dx);
+        if (rows != 3) {
+            o[12] = 0.0;
+            o[13] = 0.0;
+            o[14] = 0.0;
+            o[15] = 1.0;
+        }
+    }
+}
+
+size_t ur5_poses_from_position_quaternion(size_t n, const double *DQ_RESTRICT position,
+                                               const double *DQ_RESTRICT quaternion, double *DQ_RESTRICT poses)
+{
+    size_t first = n;
+    for (size_t i = 0; i < n; ++i) {
+        const double *q = quaternion + 4 * i, *t = position + 3 * i;
+        const double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+        const int bad = !(fabs(nq - 1.0) <= 1e-6) | !((t[0] + t[1] + t[2]) * 0.0 == 0.0);
+        const size_t at = bad ? i : n;
+        first = at < first ? at : first;
+        const double g = 1.0 / nq;
+        const double w = q[0] * g, x = q[1] * g, y = q[2] * g, z = q[3] * g;
+        double *o = poses + 8 * i;
+        o[0] = w;
+        o[1] = x;
+        o[2] = y;
+        o[3] = z;
+        o[4] = -0.5 * (t[0] * x + t[1] * y + t[2] * z);
+        o[5] = 0.5 * (w * t[0] + t[1] * z - t[2] * y);
+        o[6] = 0.5 * (w * t[1] + t[2] * x - t[0] * z);
+        o[7] = 0.5 * (w * t[2] + t[0] * y - t[1] * x);
+    }
+    return first < n ? first + 1 : 0;
+}
+
+void ur5_poses_to_position_quaternion(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT position,
+                                          double *DQ_RESTRICT quaternion)
+{
+    for (size_t i = 0; i < n; ++i) {
+        const double *p = poses + 8 * i;
+        const double w = p[0], x = p[1], y = p[2], z = p[3];
+        const double dw = p[4], dx = p[5], dy = p[6], dz = p[7];
+        for (int k = 0; k < 4; ++k) {
+            quaternion[4 * i + k] = p[k];
+        }
+        position[3 * i + 0] = 2.0 * (w * dx - dw * x + y * dz - z * dy);
+        position[3 * i + 1] = 2.0 * (w * dy - dw * y + z * dx - x * dz);
+        position[3 * i + 2] = 2.0 * (w * dz - dw * z + x * dy - y * dx);
+    }
+}
+
+DQ_INLINE void fk_core(const double *DQ_RESTRICT q, double *DQ_RESTRICT out)
 {
     double s0, c0;
     dq_sincos((1.0/2.0)*q[0], &s0, &c0);
@@ -150,7 +336,7 @@ DQ_INLINE void fk_core(const double *restrict q, double *restrict out)
 
 /* One pose: the 6 sines and cosines in one short loop (padded to 8), which the compiler
  * can vectorise, then the products. */
-void ur5_fk(const double *restrict q, double *restrict out)
+void ur5_fk(const double *DQ_RESTRICT q, double *DQ_RESTRICT out)
 {
     const double x[8] = {
         (1.0/2.0)*q[0],
@@ -166,12 +352,18 @@ void ur5_fk(const double *restrict q, double *restrict out)
     for (int k = 0; k < 8; ++k) {
         dq_sincos(x[k], &sv[k], &cv[k]);
     }
-    const double s0 = sv[0], c0 = cv[0];
-    const double s1 = sv[1], c1 = cv[1];
-    const double s2 = sv[2], c2 = cv[2];
-    const double s3 = sv[3], c3 = cv[3];
-    const double s4 = sv[4], c4 = cv[4];
-    const double s5 = sv[5], c5 = cv[5];
+    const double s0 = sv[0];
+    const double c0 = cv[0];
+    const double s1 = sv[1];
+    const double c1 = cv[1];
+    const double s2 = sv[2];
+    const double c2 = cv[2];
+    const double s3 = sv[3];
+    const double c3 = cv[3];
+    const double s4 = sv[4];
+    const double c4 = cv[4];
+    const double s5 = sv[5];
+    const double c5 = cv[5];
     const double s6 = s4*c5 - c4*s5;
     const double c6 = c4*c5 + s4*s5;
     const double s7 = 2.0*s0*c0;
@@ -223,7 +415,7 @@ void ur5_fk(const double *restrict q, double *restrict out)
 #error "DQ_BLOCK must be at least 1"
 #endif
 
-void ur5_fk_batch(size_t n, const double *restrict q, double *restrict out)
+void ur5_fk_batch(size_t n, const double *DQ_RESTRICT q, double *DQ_RESTRICT out)
 {
     double qb[6][DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
@@ -305,7 +497,7 @@ DQ_INLINE double dq_max(double a, double b)
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
-static void dq_ik_full(const double *restrict pose, double cand[8][6],
+static void dq_ik_full(const double *DQ_RESTRICT pose, double cand[8][6],
                        int valid[8], int sing[8])
 {
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
@@ -609,13 +801,13 @@ static void dq_singular_block(size_t m, const double pb[8][DQ_BLOCK], double cb[
 /* The scalar pass after the vectorised loops of the batch IK: the kept candidates of each of the
  * m poses of a block (kb: valid and no earlier valid candidate within the merge tolerance in
  * every joint: the first of each group of near-duplicates kept) packed in branch order and
- * NaN-padded, with their count, and (where branch is not NULL) each solution's branch index and
- * singular flag (-1 and 0 in the padding). Every candidate is written at the next free slot and
+ * NaN-padded, with their count, and each solution's branch index (where branch is not NULL) and
+ * singular flag (where singular is not NULL) (-1 and 0 in the padding). Every candidate is written at the next free slot and
  * the slot advances only when it is kept, so the pass has no data-dependent branch. Kept out of
  * the batch function so that its loops are the vectorised ones only. */
 static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK], int sb[][DQ_BLOCK],
-                          double *restrict sols, int *restrict counts, int *restrict branch,
-                          int *restrict singular)
+                          double *DQ_RESTRICT sols, int *DQ_RESTRICT counts, int *DQ_RESTRICT branch,
+                          int *DQ_RESTRICT singular)
 {
     for (size_t j = 0; j < m; ++j) {
         double *const s = sols + j * 48;
@@ -635,6 +827,10 @@ static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK]
         if (branch) {
             for (int k = 0; k < 8; ++k) {
                 branch[j * 8 + k] = k < c ? ids[k] : -1;
+            }
+        }
+        if (singular) {
+            for (int k = 0; k < 8; ++k) {
                 singular[j * 8 + k] = k < c ? sb[ids[k]][j] : 0;
             }
         }
@@ -1040,8 +1236,8 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
 
 /* n poses (n x 8) in blocks of DQ_BLOCK: dq_ik_block, then dq_pack_block. Inlined into the batch
  * function, with the scheduling of DQ_SCHED, and into the single-pose one, without. */
-DQ_INLINE void dq_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts,
-                           int *restrict branch, int *restrict singular)
+DQ_INLINE void dq_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts,
+                           int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
 {
     double pb[8][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
@@ -1055,12 +1251,12 @@ DQ_INLINE void dq_ik_batch(size_t n, const double *restrict poses, double *restr
         }
         dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
         dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
-                      branch ? branch + i0 * 8 : NULL, branch ? singular + i0 * 8 : NULL);
+                      branch ? branch + i0 * 8 : NULL, singular ? singular + i0 * 8 : NULL);
     }
 }
 
-DQ_SCHED void ur5_ik_batch_ex(size_t n, const double *restrict poses, double *restrict sols,
-                                 int *restrict counts, int *restrict branch, int *restrict singular)
+DQ_SCHED void ur5_ik_batch_ex(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols,
+                                 int *DQ_RESTRICT counts, int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
 {
     dq_ik_batch(n, poses, sols, counts, branch, singular);
 }
@@ -1068,7 +1264,7 @@ DQ_SCHED void ur5_ik_batch_ex(size_t n, const double *restrict poses, double *re
 /* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
  * program without data-dependent branches is faster than a branching one). sols (IK_MAX x DOF)
  * is NaN past the returned count. */
-int ur5_ik(const double *restrict pose, double *restrict sols)
+int ur5_ik(const double *DQ_RESTRICT pose, double *DQ_RESTRICT sols)
 {
     int count;
     dq_ik_batch(1, pose, sols, &count, NULL, NULL);
@@ -1097,9 +1293,9 @@ static const double dq_lim_hi[6] = {6.283185307180586, 6.283185307180586, 6.2831
  * spans a full turn always has one). A prismatic joint must lie inside its limits. Written per
  * pose: q (n x DOF; NaN where none), max_move and total_move (n; NaN where none), branch (n; -1
  * where none) and singular (n). */
-DQ_SCHED void ur5_ik_nearest_batch(size_t n, const double *restrict poses, const double *restrict seeds,
-                                        double *restrict q, double *restrict max_move, double *restrict total_move,
-                                        int *restrict branch, int *restrict singular)
+DQ_SCHED void ur5_ik_nearest_batch(size_t n, const double *DQ_RESTRICT poses, const double *DQ_RESTRICT seeds,
+                                        double *DQ_RESTRICT q, double *DQ_RESTRICT max_move, double *DQ_RESTRICT total_move,
+                                        int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
 {
     double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
     double cb[8][6][DQ_BLOCK];
@@ -1478,15 +1674,28 @@ DQ_SCHED void ur5_ik_nearest_batch(size_t n, const double *restrict poses, const
             for (int k = 0; k < 6; ++k) {
                 q[(i0 + j) * 6 + k] = oq[k][j];
             }
-            max_move[i0 + j] = omx[j];
-            total_move[i0 + j] = ott[j];
-            branch[i0 + j] = (int)obr[j];
-            singular[i0 + j] = obr[j] >= 0.0 ? sb[(int)obr[j]][j] : 0;
+        }
+        /* the optional outputs, each tested once per block (outside the loops) */
+        if (max_move) {
+            memcpy(max_move + i0, omx, m * sizeof omx[0]);
+        }
+        if (total_move) {
+            memcpy(total_move + i0, ott, m * sizeof ott[0]);
+        }
+        if (branch) {
+            for (size_t j = 0; j < m; ++j) {
+                branch[i0 + j] = (int)obr[j];
+            }
+        }
+        if (singular) {
+            for (size_t j = 0; j < m; ++j) {
+                singular[i0 + j] = obr[j] >= 0.0 ? sb[(int)obr[j]][j] : 0;
+            }
         }
     }
 }
 
-void ur5_ik_batch(size_t n, const double *restrict poses, double *restrict sols, int *restrict counts)
+void ur5_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts)
 {
     ur5_ik_batch_ex(n, poses, sols, counts, NULL, NULL);
 }
