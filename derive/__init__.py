@@ -24,10 +24,20 @@ from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotE
 from derive.ik.closed_form import classify
 from derive.kinematics import pose
 from derive.model.robot import Robot, list_robots, load_robot
-from derive.refinement.solver import refine
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
     "Robot", "list_robots", "load_robot", "kernels", "refine", "classify",
     "dualquat", "quaternion", "reference", "pose", "__version__",
 ]
+
+
+def __getattr__(name: str):
+    """The public names whose modules are heavy, imported on first use (PEP 562): ``refine``
+    (CasADi). ``import derive`` and loading shipped or cached kernels import neither sympy,
+    CasADi, jinja2 nor yourdfpy (docs/architecture.md, "Light import")."""
+    if name == "refine":
+        from derive.refinement.solver import refine
+        globals()["refine"] = refine
+        return refine
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

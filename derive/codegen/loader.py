@@ -22,6 +22,7 @@ import functools
 import hashlib
 import importlib.machinery
 import importlib.util
+import json
 import math
 import os
 import platform
@@ -46,8 +47,11 @@ from derive.cache import (
     task,
     user_folder,
 )
-from derive.codegen.emit import FILES, KERNEL_FORMAT, kernel_manifest, render_kernels
-from derive.codegen.templates import template_environment
+# the package, not derive.codegen.emit / .templates: the emitters (sympy, jinja2) are imported on
+# first use through its attributes (derive/codegen/__init__.py), only when kernels are derived
+# or an extension is built, so loading shipped or cached kernels does not import them
+import derive.codegen as codegen
+from derive.codegen.formats import FILES, KERNEL_FORMAT, template_source
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
@@ -137,9 +141,9 @@ def kernel_folder(robot, free: str | None = None) -> tuple[Path, dict]:
             return folder, manifest
     with task(robot.name):
         step(f"no kernels of identity {key} in generated/ or the user cache: deriving them")
-        files = render_kernels(robot, free=free)
+        files = codegen.emit.render_kernels(robot, free=free)
         step("kernel sources rendered")
-    folder = store_artifacts(key, files, kernel_manifest(robot, free))
+    folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
     return folder, read_manifest(folder)
 
 
@@ -180,17 +184,21 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     include = sysconfig.get_paths().get("include")
     if not include or not (Path(include) / "Python.h").exists():
         return None
-    text = template_environment().get_template("pyext.c.j2").render(
+    context = dict(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
         prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
         revolute=robot.revolute.tolist(),
         unit_tol=repr(UNIT_TOL), module="MODULE")
-    digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
+    # keyed by the template and its context (the rendered text is a function of both), so that a
+    # built extension loads without jinja2; rendered only to build
+    digest = hashlib.sha256((template_source("pyext.c.j2") + json.dumps(context, sort_keys=True)
+                             + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + sysconfig.get_config_var("EXT_SUFFIX")).encode()).hexdigest()[:16]
     module = f"_dqk_{prefix}_{digest}"
-    text = text.replace("MODULE", module)
     lib = build_folder() / f"{module}{sysconfig.get_config_var('EXT_SUFFIX')}"
     if not lib.exists():
+        text = codegen.templates.template_environment().get_template("pyext.c.j2").render(
+            context).replace("MODULE", module)
         compiler = c_compiler()
         if compiler is None:
             return None
