@@ -19,6 +19,7 @@ bench -> cli.
 from derive import reference
 from derive._version import __version__
 from derive.algebra import dualquat, quaternion
+from derive.apps.path import path
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
 from derive.ik.closed_form import classify
@@ -28,7 +29,7 @@ from derive.model.robot import Robot, list_robots, load_robot
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
     "Robot", "list_robots", "load_robot", "kernels", "refine", "classify",
-    "dualquat", "quaternion", "reference", "pose", "__version__",
+    "dualquat", "quaternion", "reference", "pose", "path", "__version__",
 ]
 
 

@@ -13,7 +13,7 @@ LAYERS = {
     "derive._version": 0, "derive.errors": 0, "derive.cache": 0,
     "derive.algebra": 1, "derive.model": 2, "derive.kinematics": 3, "derive.symbolic": 4,
     "derive.ik": 5, "derive.reference": 5, "derive.codegen": 6, "derive.refinement": 7,
-    "derive.reports": 8, "derive.bench": 9, "derive.cli": 10, "derive.__main__": 11,
+    "derive.reports": 8, "derive.apps": 8, "derive.bench": 9, "derive.cli": 10, "derive.__main__": 11,
     "derive": 11,
 }
 
