@@ -172,7 +172,7 @@ def _failure(robot, k, pose, i: int) -> PathEvent:
             why = reference.ik(robot, pose).reason
         except DeriveError:
             why = ""
-        return PathEvent(i, "unreachable", why or "unreachable: the IK has no solution")
+        return PathEvent(i, "unreachable", why.removeprefix("unreachable: ") or "the IK has no solution")
     return PathEvent(i, "limit", f"{int(np.ravel(count)[0])} solution(s), none inside the joint limits")
 
 
