@@ -20,15 +20,26 @@ from derive import reference
 from derive._version import __version__
 from derive.apps.reach import place, reach
 from derive.algebra import dualquat, quaternion
+from derive.apps.path import path
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
 from derive.ik.closed_form import classify
 from derive.kinematics import pose
 from derive.model.robot import Robot, list_robots, load_robot
-from derive.refinement.solver import refine
 
 __all__ = [
     "DeriveError", "InputError", "RobotFileError", "UnknownRobotError",
     "Robot", "list_robots", "load_robot", "kernels", "refine", "classify",
-    "dualquat", "quaternion", "reference", "pose", "reach", "place", "__version__",
+    "dualquat", "quaternion", "reference", "pose", "path", "reach", "place", "__version__",
 ]
+
+
+def __getattr__(name: str):
+    """The public names whose modules are heavy, imported on first use (PEP 562): ``refine``
+    (CasADi). ``import derive`` and loading shipped or cached kernels import neither sympy,
+    CasADi, jinja2 nor yourdfpy (docs/architecture.md, "Light import")."""
+    if name == "refine":
+        from derive.refinement.solver import refine
+        globals()["refine"] = refine
+        return refine
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

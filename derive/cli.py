@@ -18,7 +18,8 @@ Arguments have the same names in every subcommand:
 
 Exit codes:
   0  success
-  1  no solution: the target is not reachable (ik), or refine found no exact solution
+  1  no solution: the target is not reachable (ik), refine found no exact solution, or a pose
+     of a path has no configuration (path)
   2  usage or input error: unknown option or robot, malformed number, wrong count of joint
      values, non-unit quaternion, a robot without a closed-form IK (ik, plot --ik-of: use
      refine), file that cannot be read or written; one line on stderr, never a traceback
@@ -39,6 +40,7 @@ import numpy as np
 from derive import reference
 from derive._version import __version__
 from derive.algebra import dualquat as dq
+from derive.apps import path as cartesian
 from derive.bench.runner import BENCHES
 from derive.bench.runner import main as bench_main
 from derive.cache import find_artifact, shipped_index
@@ -634,6 +636,50 @@ def cmd_plot(args) -> int:
     return EXIT_OK
 
 
+def cmd_path(args) -> int:
+    """A Cartesian path (--poses FILE) to a continuous joint path from --seed; CSV, URScript."""
+    robot = _robot(args)
+    if args.urscript is not None and robot.dof != 6:
+        raise InputError(f"path: --urscript drives six-joint arms; {robot.name} has {robot.dof} joints")
+    if args.urscript is not None:
+        cartesian.check_program_options(args.name, args.accel, args.speed, args.blend)
+    seed = _joints_in(robot, args.seed, "--seed", args.deg)
+    poses = cartesian.read_poses(args.poses)
+    jp = cartesian.path(robot, poses, seed, max_step=args.max_step)
+    program = None
+    if args.urscript is not None and jp.complete:
+        program = cartesian.urscript(jp, name=args.name, accel=args.accel, speed=args.speed, blend=args.blend)
+    if args.csv is not None:
+        with open(args.csv, "w", encoding="utf-8") as fh:
+            fh.write(cartesian.to_csv(jp))
+    if program is not None:
+        with open(args.urscript, "w", encoding="utf-8") as fh:
+            fh.write(program)
+    if args.json:
+        data = jp.to_dict()
+        data["written"] = [f for f in (args.csv, args.urscript if program is not None else None) if f]
+        _print_json(data)
+    else:
+        finite = jp.step[np.isfinite(jp.step)]
+        print(f"{robot.name}: {len(jp.q)} poses, {int(jp.found.sum())} configurations"
+              + (f", largest joint step {finite.max():.4g} (pose {int(np.nanargmax(jp.step))})" if finite.size else ""))
+        for event in jp.events:
+            print(event)
+        if args.csv is None and args.urscript is None:
+            names = list(robot.variable_names)
+            print("pose  " + "  ".join(f"{n:>12}" for n in names) + ("  (deg)" if args.deg else "  (rad)"))
+            for i, row in enumerate(jp.q):
+                print(f"{i:4d}  " + "  ".join(f"{x:12.6f}" for x in _joints_out(robot, row, args.deg)))
+        for f in (args.csv, args.urscript if program is not None else None):
+            if f:
+                print(f"wrote {f}")
+    if args.urscript is not None and program is None:
+        missing = ", ".join(str(i) for i in np.nonzero(~jp.found)[0][:10])
+        print(f"dq-derive: no URScript program written: pose(s) {missing} have no configuration",
+              file=sys.stderr)
+    return EXIT_OK if jp.complete else EXIT_NO_SOLUTION
+
+
 def cmd_generate(args) -> int:
     """Regenerate the outputs of the default robots and print an FK table."""
     t0 = time.perf_counter()
@@ -975,6 +1021,30 @@ def build_parser() -> argparse.ArgumentParser:
     json_option(s, "the drawn frame origins or solutions")
 
     _reach_commands(command, robot_argument)
+
+    s = command("path", "a Cartesian path (poses in a CSV or JSON file) to a continuous joint path, "
+                        "each configuration nearest to the previous one; CSV and URScript output", cmd_path)
+    robot_argument(s)
+    s.add_argument("--poses", required=True, metavar="FILE",
+                   help="the poses of the end frame: CSV with the header x,y,z,qx,qy,qz,qw (m, unit "
+                        "quaternion in scipy / ROS order), or a JSON list of such rows or objects")
+    s.add_argument("--seed", nargs="+", type=float, required=True, metavar="Q",
+                   help="the configuration the path starts from (rad, prismatic joints m; --deg: revolute "
+                        "in degrees); the first pose's configuration is the one nearest to it")
+    s.add_argument("--csv", default=None, metavar="OUT", help="write the joint path here as CSV (rad, m)")
+    s.add_argument("--urscript", default=None, metavar="OUT",
+                   help="write a URScript program here: one movej per pose (six-joint arms)")
+    s.add_argument("--name", default="dq_path", help="the URScript program's name")
+    s.add_argument("--speed", type=float, default=cartesian.UR_SPEED,
+                   help="URScript movej joint speed v (rad/s)")
+    s.add_argument("--accel", type=float, default=cartesian.UR_ACCEL,
+                   help="URScript movej joint acceleration a (rad/s^2)")
+    s.add_argument("--blend", type=float, default=cartesian.UR_BLEND,
+                   help="URScript movej blend radius r (m; 0 stops at every configuration)")
+    s.add_argument("--max-step", type=float, default=cartesian.MAX_STEP, dest="max_step",
+                   help="report a step larger than this between consecutive configurations (rad, m)")
+    deg_option(s, "revolute joint values of --seed and of the printed path (files stay in rad)")
+    json_option(s, "the joint path and its events")
 
     s = command("generate", "regenerate the outputs of the default robots", cmd_generate)
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)}, then the "

@@ -18,6 +18,7 @@ from sympy.printing.pycode import PythonCodePrinter
 from derive._version import __version__
 from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
+from derive.codegen.formats import FILES, KERNEL_FORMAT  # defined there for the loader
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
@@ -492,19 +493,6 @@ def _live(flat: list, full: bool = False) -> list:
             live.update(_IDENT.findall(str(text)))
         kept.append(d)
     return kept[::-1]
-
-
-#: The kernels' calling convention, recorded in each kernel manifest. The loader uses a kernel
-#: folder only when it records this one (2: the IK functions of 7-joint arms take the free
-#: parameter; kernels of an earlier convention in the user cache are derived again).
-KERNEL_FORMAT = 2
-
-FILES = {
-    "python": ("kinematics.py.j2", "{id}_kinematics.py"),
-    "numpy": ("kinematics_numpy.py.j2", "{id}_kinematics_numpy.py"),
-    "c_header": ("kinematics.h.j2", "{id}_kinematics.h"),
-    "c_source": ("kinematics.c.j2", "{id}_kinematics.c"),
-}
 
 
 #: The CMake package written beside the C kernels by :func:`write_kernels` (not a kernel: the

@@ -29,6 +29,7 @@ import functools
 import hashlib
 import importlib.machinery
 import importlib.util
+import json
 import math
 import os
 import platform
@@ -63,8 +64,11 @@ from derive.cache import (
     verify,
     writable_root,
 )
-from derive.codegen.emit import FILES, KERNEL_FORMAT, kernel_manifest, render_kernels
-from derive.codegen.templates import template_environment
+# the package, not derive.codegen.emit / .templates: the emitters (sympy, jinja2) are imported on
+# first use through its attributes (derive/codegen/__init__.py), only when kernels are derived
+# or an extension is built, so loading shipped or cached kernels does not import them
+import derive.codegen as codegen
+from derive.codegen.formats import FILES, KERNEL_FORMAT, template_source
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
@@ -176,11 +180,11 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) ->
                 if found is not None:      # another process derived them while this one waited
                     return found
             files = _derive_kernels(robot, key, free, rebuild)
-            folder = store_artifacts(key, files, kernel_manifest(robot, free))
+            folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
     except OSError as exc:                 # the lock's folder could not be made: derive unlocked
         fallback_root(exc)
         files = _derive_kernels(robot, key, free, rebuild)
-        folder = store_artifacts(key, files, kernel_manifest(robot, free))
+        folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
     return folder, read_manifest(folder)
 
 
@@ -213,7 +217,7 @@ def _derive_kernels(robot, key: str, free, rebuild: str | None) -> dict:
     with task(robot.name):
         step(f"deriving the kernels of {key} again" if rebuild else
              f"no kernels of identity {key} in generated/ or the user cache: deriving them")
-        files = render_kernels(robot, free=free)
+        files = codegen.emit.render_kernels(robot, free=free)
         step("kernel sources rendered")
     return files
 
@@ -312,18 +316,20 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     include = sysconfig.get_paths().get("include")
     if not include or not (Path(include) / "Python.h").exists():
         return None
-    text = template_environment().get_template("pyext.c.j2").render(
+    context = dict(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
         prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
         revolute=robot.revolute.tolist(),
         unit_tol=repr(UNIT_TOL), module="MODULE")
     ext_suffix = sysconfig.get_config_var("EXT_SUFFIX")
-    digest = hashlib.sha256((text + source.read_text(encoding="utf-8") + " ".join(c_flags())
+    # keyed by the template and its context (the rendered text is a function of both), so that a
+    # built extension loads without jinja2; rendered only to build
+    digest = hashlib.sha256((template_source("pyext.c.j2") + json.dumps(context, sort_keys=True)
+                             + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + _compiler_key() + ext_suffix + sys.version
                              + package_version("numpy") + np.__version__ + np.get_include())
                             .encode()).hexdigest()[:16]
     module = f"_dqk_{prefix}_{digest}"
-    text = text.replace("MODULE", module)
     name = f"{module}{ext_suffix}"
     compiler = c_compiler()
 
@@ -334,6 +340,8 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
         # process never sees a partial file
         src = tmp.parent / f"{module}.c"
         src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
+        text = codegen.templates.template_environment().get_template("pyext.c.j2").render(
+            context).replace("MODULE", module)
         src_tmp.write_text(text, encoding="utf-8")
         res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
                               f"-I{np.get_include()}", "-o", str(tmp), str(src_tmp), "-lm"],

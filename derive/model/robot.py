@@ -42,13 +42,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import sympy as sp
 import yaml
 
+# the package, not derive.model.urdf: the URDF reader (lxml, yourdfpy) is imported on first use
+# through the package's attribute (derive/model/__init__.py), so loading a YAML or library
+# robot does not import it
+import derive.model as model
 from derive.cache import memo
 from derive.errors import RobotFileError, UnknownRobotError
 from derive.model.identity import digest
-from derive.model.urdf import urdf_description
 
 LIBRARY_DIR = Path(__file__).resolve().parent.parent / "robots"
 
@@ -56,8 +58,6 @@ CONVENTIONS = ("standard_dh", "modified_dh", "kunze", "axis_angle", "urdf")
 JOINT_TYPES = ("revolute", "prismatic")
 LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
-_EXACT_FACTOR = {"m": sp.Integer(1), "cm": sp.Rational(1, 100), "mm": sp.Rational(1, 1000),
-                 "rad": sp.Integer(1), "deg": sp.pi / 180}
 
 #: A length above this many metres in a file declared in metres is taken for a unit mistake.
 MAX_LENGTH_M = 20.0
@@ -87,45 +87,43 @@ EX, EY, EZ = np.eye(3)
 # Data model
 # --------------------------------------------------------------------------- #
 class Num(float):
-    """A float read from a description file that also carries its exact value
-    ``sym``: a sympy expression in SI units over the file's named parameters
-    (``d1``, ``a2``, ...), with exact rationals and pi. The symbolic derivation
-    uses ``sym``; the numeric code sees a plain float."""
+    """A float read from a description file that also carries the ``recipe`` of its exact
+    value: a sympy expression in SI units over the file's named parameters (``d1``, ``a2``,
+    ...), with exact rationals and pi, which :func:`derive.model.exact.value` builds when the
+    symbolic derivation asks for it (reading a robot does not import sympy). The numeric code
+    sees a plain float. Recipes: ``("field", raw, kind, context)`` (a field as written, kind
+    "length", "angle" or "unitless"), ``("unit", components, k)`` (component k of a
+    normalised axis), ``("turn", angle)`` (the angle of a rotation given as a quaternion)."""
 
-    sym: sp.Expr
+    recipe: tuple
 
-    def __new__(cls, value, sym):
+    def __new__(cls, value, recipe):
         obj = super().__new__(cls, value)
-        obj.sym = sym
+        obj.recipe = recipe
         return obj
-
-
-def _exact(values) -> tuple:
-    """Exact sympy tuple of a vector of :class:`Num` (plain numbers made rational)."""
-    return tuple(v.sym if isinstance(v, Num) else sp.nsimplify(float(v), rational=True) for v in values)
 
 
 @dataclass(frozen=True)
 class Op:
     """Elementary rigid motion: ``kind`` "R" (rotation by ``angle`` about unit
-    ``axis``) or "T" (translation by ``vector``). ``sym`` holds the exact form:
-    (axis, angle) for "R", the vector for "T"."""
+    ``axis``) or "T" (translation by ``vector``). ``numbers`` holds the numbers as read
+    (:class:`Num` or plain floats): (axis, angle) for "R", the vector for "T"; their exact
+    form is :func:`derive.model.exact.op_form`."""
 
     kind: str
     axis: np.ndarray | None = None
     angle: float = 0.0
     vector: np.ndarray | None = None
-    sym: tuple = ()
+    numbers: tuple = ()
 
     @staticmethod
     def rot(axis, angle) -> "Op":
-        exact_angle = angle.sym if isinstance(angle, Num) else sp.nsimplify(float(angle), rational=True)
         return Op("R", axis=np.asarray(axis, dtype=float), angle=float(angle),
-                  sym=(_exact(axis), exact_angle))
+                  numbers=(tuple(axis), angle))
 
     @staticmethod
     def trans(vector) -> "Op":
-        return Op("T", vector=np.asarray(vector, dtype=float), sym=_exact(vector))
+        return Op("T", vector=np.asarray(vector, dtype=float), numbers=tuple(vector))
 
 
 @dataclass(frozen=True)
@@ -136,16 +134,16 @@ class Joint:
     type: str                      # "revolute" or "prismatic"
     parent: int                    # index of the parent joint, -1 for the base
     axis: np.ndarray               # unit motion axis in the parent frame (after ``pre``)
-                                   # (its exact form: derive.model.robot.exact_axis)
+                                   # (its exact form: derive.model.exact.joint_axis)
     pre: tuple[Op, ...]
     post: tuple[Op, ...]
-    offset: float                  # added to the joint value (rad or m); a Num (exact in .sym)
+    offset: float                  # added to the joint value (rad or m); a Num (exact: model.exact)
     limits: tuple[float, float] | None
     variable: int                  # index into q of the variable that drives this joint
     multiplier: float = 1.0        # joint value = multiplier * q[variable] + mimic_offset
     mimic_offset: float = 0.0
     params: dict = field(default_factory=dict)   # the file's fields, as written
-    exact_axis: tuple = ()         # the motion axis as exact sympy numbers
+    axis_numbers: tuple = ()       # the motion axis as read (Num or float; exact: model.exact)
 
     @property
     def is_mimic(self) -> bool:
@@ -433,7 +431,7 @@ def _load_file(path: str, base: str | None = None, tip: str | None = None, urdf:
 
 def _parse(path: str, text: str, base, tip, urdf: bool) -> Robot:
     if urdf:
-        return robot_from_dict(urdf_description(path, text, base, tip), path)
+        return robot_from_dict(model.urdf.urdf_description(path, text, base, tip), path)
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -542,11 +540,6 @@ def robot_from_dict(data: Any, path: str = "<dict>") -> Robot:
                  id=digest(joints, ends, default_end, exact))
 
 
-def _multiple_of_pi_12(angle) -> bool:
-    """Whether ``angle`` is exactly k pi / 12 (15 degrees) for an integer k."""
-    return angle == 0 or (sp.sympify(angle) * 12 / sp.pi).is_integer is True
-
-
 def is_exact(joints, ends) -> bool:
     """Whether every fixed angle of a description (twists, offsets, fixed rotations of the
     joints and end frames) is a multiple of pi/12 (15 degrees), so that the joint dual
@@ -554,16 +547,27 @@ def is_exact(joints, ends) -> bool:
     (decimal or calibrated angles) gets its kernels from the numeric product instead
     (:mod:`derive.codegen.fk`)."""
     ops = [op for j in joints for op in (*j.pre, *j.post)] + [op for e in ends.values() for op in e.ops]
-    angles = [op.sym[1] for op in ops if op.kind == "R"]
-    angles += [j.offset.sym for j in joints if j.type == "revolute"]
-    return all(_multiple_of_pi_12(a) for a in angles)
+    angles = [op.numbers[1] for op in ops if op.kind == "R"]
+    angles += [j.offset for j in joints if j.type == "revolute"]
+    return all(_exact_multiple(a) for a in angles)
 
 
-def _snap_angle(value: float):
-    """k pi / 12 when ``value`` (rad) is within SNAP_TOL of it, else None."""
+def _exact_multiple(angle) -> bool:
+    """Whether the exact value of a fixed angle (:func:`derive.model.exact.value`) is a multiple
+    of pi/12, decided without building it: an angle read from a file (a field, or the angle of
+    a quaternion) is a multiple exactly when its number is within SNAP_TOL of one (it is then
+    that multiple; farther off it stays the float, see :func:`derive.model.exact.value`); a
+    plain float is made rational, a multiple of pi/12 only when it is 0."""
+    if isinstance(angle, Num) and angle.recipe[0] in ("field", "turn"):
+        return snap_multiple(float(angle)) is not None
+    return float(angle) == 0.0
+
+
+def snap_multiple(value: float) -> int | None:
+    """k when ``value`` (rad) is within SNAP_TOL of k pi / 12, else None."""
     k = round(value / (math.pi / 12))
     if abs(value - k * math.pi / 12) <= SNAP_TOL:
-        return sp.Rational(k, 12) * sp.pi
+        return k
     return None
 
 
@@ -584,8 +588,7 @@ class _Context:
         self.where, self.conv, self.params = where, conv, params
         self.params_raw = params_raw or {}
         self.lf, self.af, self.degrees = LENGTH_UNITS[lu], ANGLE_UNITS[au], au == "deg"
-        self.exact = {"length": _EXACT_FACTOR[lu], "angle": _EXACT_FACTOR[au], "unitless": sp.Integer(1)}
-        self.symbols = {p: sp.Symbol(p, real=True) for p in params}
+        self.length_unit, self.angle_unit = lu, au     # for the exact values (derive.model.exact)
         self.used: set[str] = set()
         self.kind_of: dict[str, str] = {}
 
@@ -600,33 +603,13 @@ class _Context:
             if self.kind_of.setdefault(p, kind) != kind:
                 raise RobotFileError(f"{where}: parameter {p!r} is used both as a length and an angle")
         self.used |= ev.used
-        return Num(v, self._exact_value(raw, kind))
-
-    def _exact_value(self, raw, kind):
-        """The field as an exact SI expression; length parameters stand for their SI values,
-        angle parameters are replaced by their exact values. A decimal angle within SNAP_TOL of
-        a multiple of pi/12 is that multiple; other angles that are not such multiples stay
-        floats (the robot is then not exact, see :func:`is_exact`)."""
-        e = self._sym(raw)
-        f = self.exact[kind]
-        subs = {s: s / self.exact[self.kind_of.get(p, kind)] for p, s in self.symbols.items()}
-        e = sp.nsimplify(f * e.subs(subs)) if f != 1 else e
-        if kind == "angle":
-            e = e.subs({s: self._sym(self.params_raw[p]) * self.exact["angle"]
-                        for p, s in self.symbols.items() if self.kind_of.get(p) == "angle"})
-            if not e.free_symbols and not _multiple_of_pi_12(e):
-                snapped = _snap_angle(float(e))
-                e = snapped if snapped is not None else sp.Float(float(e), 17)
-        return e
-
-    def _sym(self, raw):
-        if isinstance(raw, (int, float)):
-            return sp.nsimplify(raw, rational=True)
-        return sp.sympify(raw, locals={**self.symbols, "pi": sp.pi})
+        # the exact value is built from the field as written when asked for
+        # (derive.model.exact.value; the context's parameter kinds are complete by then)
+        return Num(v, ("field", raw, kind, self))
 
     def _scaled(self, where, raw, what, kind, limit, unit, hint):
         v = self._value(where, raw, what, kind)
-        v = Num(v * (self.lf if kind == "length" else self.af), v.sym)
+        v = Num(v * (self.lf if kind == "length" else self.af), v.recipe)
         if abs(v) > limit:
             raise RobotFileError(f"{where}: {what} = {v:g} {unit} is out of range; {hint}")
         return v
@@ -653,8 +636,7 @@ class _Context:
             raise RobotFileError(f"{where}: {what} is the zero vector; a joint axis needs a direction")
         if abs(n - 1.0) > 1e-6:
             raise RobotFileError(f"{where}: {what} = {raw!r} has length {n:.6g}; give a unit vector")
-        exact_norm = sp.sqrt(sum(x.sym**2 for x in v))
-        return [Num(float(x) / n, sp.nsimplify(x.sym / exact_norm)) for x in v]
+        return [Num(float(x) / n, ("unit", tuple(v), k)) for k, x in enumerate(v)]
 
     # -- joints --------------------------------------------------------------
     def joint(self, i, jr, names, joints, nvar) -> Joint:
@@ -708,12 +690,12 @@ class _Context:
         limits = self._limits(where, jr.get("limits"), jtype)
         mimic = jr.get("mimic")
         if isinstance(axis, Op):
-            exact_axis, axis = axis.sym[0], axis.axis
+            axis_numbers, axis = axis.numbers[0], axis.axis
         else:
-            exact_axis, axis = _exact(axis), np.asarray(axis, dtype=float)
+            axis_numbers, axis = tuple(axis), np.asarray(axis, dtype=float)
         return Joint(name=jname, type=jtype, parent=parent, axis=axis, pre=pre, post=post,
                      offset=offset, limits=limits, variable=-1 if mimic else nvar,
-                     params={k: v for k, v in jr.items() if k != "name"}, exact_axis=exact_axis)
+                     params={k: v for k, v in jr.items() if k != "name"}, axis_numbers=axis_numbers)
 
     def _dh(self, where, jr, jtype):
         keys = _DH_KEYS[self.conv]
@@ -809,7 +791,7 @@ class _Context:
             if vn == 0.0:
                 return []
             angle = 2.0 * math.atan2(vn, q[0])
-            return [Op.rot(q[1:] / vn, Num(angle, sp.nsimplify(angle, [sp.pi], tolerance=1e-12)))]
+            return [Op.rot(q[1:] / vn, Num(angle, ("turn", angle)))]
         if "rpy" in rot:
             r = rot["rpy"]
             if not isinstance(r, (list, tuple)) or len(r) != 3:

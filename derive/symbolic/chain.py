@@ -34,6 +34,7 @@ import sympy as sp
 
 from derive.algebra.quaternion import hamilton
 from derive.errors import DeriveError
+from derive.model import exact
 from derive.model.robot import Robot, load_robot, robot_from_dict
 
 Vec = tuple  # 3 sympy expressions
@@ -82,9 +83,9 @@ def _homog(r: sp.Matrix, t) -> sp.Matrix:
 
 def _op_matrix(op) -> sp.Matrix:
     if op.kind == "R":
-        axis, angle = op.sym
+        axis, angle = exact.op_form(op)
         return _homog(_rot_matrix(axis, angle), (0, 0, 0))
-    return _homog(sp.eye(3), op.sym)
+    return _homog(sp.eye(3), exact.op_form(op))
 
 
 def _simplify_vec(v) -> Vec:
@@ -138,18 +139,20 @@ def chain_from_robot(robot) -> SymChain:
         pre = frame
         for op in j.pre:
             pre = pre * _op_matrix(op)
-        axis_world = _simplify_vec(pre[:3, :3] * sp.Matrix(j.exact_axis))
+        joint_axis = exact.joint_axis(j)
+        offset = exact.value(j.offset)
+        axis_world = _simplify_vec(pre[:3, :3] * sp.Matrix(joint_axis))
         origin = _simplify_vec(pre[:3, 3])
-        motion = (_homog(_rot_matrix(j.exact_axis, j.offset.sym), (0, 0, 0)) if j.type == "revolute"
-                  else _homog(sp.eye(3), tuple(j.offset.sym * a for a in j.exact_axis)))
+        motion = (_homog(_rot_matrix(joint_axis, offset), (0, 0, 0)) if j.type == "revolute"
+                  else _homog(sp.eye(3), tuple(offset * a for a in joint_axis)))
         f = pre * motion
         # leading translations of the post operations along the joint axis (DH: Tz(d))
         shift = sp.zeros(3, 1)
         for op in j.post:
             if op.kind != "T":
                 break
-            v = sp.Matrix(op.sym)
-            if any(e != 0 for e in v) and all(sp.simplify(e) == 0 for e in v.cross(sp.Matrix(j.exact_axis))):
+            v = sp.Matrix(exact.op_form(op))
+            if any(e != 0 for e in v) and all(sp.simplify(e) == 0 for e in v.cross(sp.Matrix(joint_axis))):
                 shift += f[:3, :3] * v
                 continue
             break
