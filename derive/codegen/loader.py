@@ -332,7 +332,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
             return False
         # this process's own source and output names, renamed into place when built: another
         # process never sees a partial file
-        src = tmp.parent / f"{module}.c"
+        src = (tmp.parent / name).with_suffix(".c")
         src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
         src_tmp.write_text(text, encoding="utf-8")
         res = subprocess.run([compiler, *c_flags(), "-fPIC", "-shared", f"-I{include}",
