@@ -338,7 +338,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
             return False
         # this process's own source and output names, renamed into place when built: another
         # process never sees a partial file
-        src = tmp.parent / f"{module}.c"
+        src = (tmp.parent / name).with_suffix(".c")
         src_tmp = src.with_name(f"{src.stem}.{os.getpid()}.tmp.c")
         text = codegen.templates.template_environment().get_template("pyext.c.j2").render(
             context).replace("MODULE", module)

@@ -389,10 +389,9 @@ def resolve_name(name_or_path) -> str:
             return "library"
         hint = ""
         if path.is_file():
-            hint = (f"; a file {text!r} is in the current folder: a file needs a path with a separator "
-                    f"or an extension, so load it as './{text}'")
-        raise UnknownRobotError(f"unknown robot {text!r} (a bare name names a library robot){hint}; "
-                                f"the library has: {', '.join(library)}")
+            hint = (f". A bare name is a library robot; the file {text!r} in the current folder "
+                    f"loads as './{text}' (a file needs a path with a separator or an extension)")
+        raise UnknownRobotError(f"unknown robot {text!r}; the library has: {', '.join(library)}{hint}")
     if path.is_file():
         if in_library:
             raise UnknownRobotError(
