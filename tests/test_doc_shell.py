@@ -16,7 +16,8 @@ Each command line is one of
 * a ``dq-derive`` / ``python -m derive`` command: run in one temporary folder per test process
   (shared by the pages it runs), a page's commands in page order, so the files one command
   writes are there for the next; ``path/to/...``
-  placeholders are replaced by real files (:data:`PLACEHOLDERS`, the one place that maps them).
+  placeholders are replaced by real files (:data:`PLACEHOLDERS`, the one place that maps them),
+  and ``docs/examples/...`` by the repository's example files (:data:`EXAMPLES`).
   A plain command runs in this process through ``derive.cli.main`` (the function the console
   script calls: no 2 s start-up per command); one with shell syntax (``; echo $?``, a pipe, a
   redirection) runs in bash with the venv's ``bin`` first on ``PATH``, so through the console
@@ -26,6 +27,8 @@ Each command line is one of
   below it, and a time in s or ms may be anything); without shown output, the key part of the
   output of the subcommand (:data:`KEY`), or valid JSON with ``--json``; every file named by
   ``--out``, ``--urdf``, ``--yaml`` or ``--plot`` written (a PNG with its signature);
+* ``cat FILE`` with the file's contents below it: FILE (an example file of the repository or
+  one an earlier command wrote) must hold what the page shows (:func:`check_cat`);
 * anything else (``make``, ``pip``, ``cp``, ``./main``, ...): the block needs a marker on the
   line right before it, ``<!-- norun: WHY -->``, naming why it is not run (and where it is
   tested instead). A block without the marker that holds such a line fails.
@@ -76,6 +79,10 @@ def _example_robot_data(rel: str) -> Path:
 PLACEHOLDERS = {
     "path/to/ur5_robot.urdf": lambda: _example_robot_data("ur_description/urdf/ur5_robot.urdf"),
 }
+
+#: Example files of the repository that pages name by their path from its root (the commands run
+#: in a temporary folder): ``docs/examples/...`` becomes the absolute path.
+EXAMPLES = re.compile(r"(?<![\w/.])docs/examples/[\w./-]+")
 
 #: The key part of a subcommand's output, checked where the page shows none.
 KEY = {"robots": "closed-form IK", "fk": "position (m):", "ik": "solution", "refine": "seed(s)",
@@ -263,6 +270,7 @@ def _map(command: str) -> str:
     for placeholder, target in PLACEHOLDERS.items():
         if placeholder in command:
             command = command.replace(placeholder, shlex.quote(str(target())))
+    command = EXAMPLES.sub(lambda m: shlex.quote(str(ROOT / m.group(0))), command)
     left = re.findall(r"path/to/\S+", command)
     assert not left, f"placeholder(s) {left} not mapped: add them to PLACEHOLDERS"
     return command
@@ -286,8 +294,10 @@ def _run_inprocess(argv: list[str], cwd: Path) -> tuple[int, str, str]:
 def _run_bash(command: str, cwd: Path) -> tuple[int, str, str]:
     env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}",
                MPLBACKEND="Agg")
-    r = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
-    return r.returncode, r.stdout, r.stderr
+    # stderr into stdout, in the order printed: a page shows a transcript of the terminal
+    r = subprocess.run(["bash", "-c", command], cwd=cwd, env=env, stdout=subprocess.PIPE,
+                       stderr=subprocess.STDOUT, text=True, timeout=300)
+    return r.returncode, r.stdout, ""
 
 
 def _written(argv: list[str]) -> list[str]:
@@ -311,6 +321,23 @@ def check_synopsis(command: str) -> str:
     named = set(re.findall(r"(?<![\w-])(--?[a-z][\w-]*)", " ".join(words[1:])))
     unknown = sorted(named - known)
     return f"synopsis {command!r}: {words[0]} has no option(s) {unknown}" if unknown else ""
+
+
+CAT = re.compile(r"^cat (\S+)$")
+
+
+def check_cat(command: str, shown: list[str] | None, cwd: Path) -> str:
+    """``cat FILE`` in a transcript: the page shows the file, which must hold what is shown (a
+    file of the repository, ``docs/examples/...``, or one an earlier command of the page wrote
+    into the folder); '' when it does."""
+    name = shlex.split(_map(CAT.match(_code(command)).group(1)))[0]
+    path = Path(name) if Path(name).is_absolute() else cwd / name
+    if not path.is_file():
+        return f"`{command}`: {name} does not exist (neither in the repository nor written by an earlier command)"
+    if shown is None:
+        return f"`{command}`: the page shows no content of {name}"
+    diff = compare(shown, path.read_text(encoding="utf-8"))
+    return f"`{command}`: {diff}" if diff else ""
 
 
 def run_command(command: str, shown: list[str] | None, cwd: Path) -> str:
@@ -395,7 +422,11 @@ def test_every_shell_example_runs(page, folder):
             continue
         for command, shown in cmds:
             kind = _kind(command)
-            if kind == "other":
+            if CAT.match(_code(command)):
+                msg = check_cat(command, shown, folder)
+                if msg:
+                    problems.append(f"{where}: {msg}")
+            elif kind == "other":
                 problems.append(f"{where}: `{command}` cannot be run by the test: mark the block with "
                                 "<!-- norun: WHY --> on the line before it")
             elif kind == "synopsis":

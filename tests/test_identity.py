@@ -246,8 +246,8 @@ def test_out_folder_is_the_robot_name_for_any_robot_argument(tmp_path, cache, mo
     out = tmp_path / "out"
     assert main(["kernels", str(path.resolve()), "--out", str(out)]) == 0
     assert sorted(p.name for p in (out / "my-arm").iterdir()) == [
-        "manifest.json", "my_arm_kinematics.c", "my_arm_kinematics.h", "my_arm_kinematics.py",
-        "my_arm_kinematics_numpy.py"]
+        "CMakeLists.txt", "manifest.json", "my_arm_kinematics.c", "my_arm_kinematics.h", "my_arm_kinematics.py",
+        "my_arm_kinematicsConfig.cmake", "my_arm_kinematics_numpy.py"]
     monkeypatch.chdir(tmp_path)
     assert main(["kernels", "arm.yaml", "--out", "rel"]) == 0
     assert (tmp_path / "rel" / "my-arm" / "my_arm_kinematics.c").is_file()

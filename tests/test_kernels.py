@@ -625,7 +625,10 @@ def test_extension_input_checks_vectorise_with_avx2(tmp_path):
     k = derive.kernels("ur5", "c")
     if k._ext is None:
         pytest.skip("no CPython extension (Python headers missing)")
-    _assert_marked_loops_vectorise(Path(k._ext.__file__).with_suffix(".c"), ("q check", "pose check"), tmp_path,
+    lib = Path(k._ext.__file__)
+    # the source beside the module: <module>.<abi>.c; extensions built before that name: <module>.c
+    source = next(p for p in (lib.with_suffix(".c"), lib.with_name(f"{k._ext.__name__}.c")) if p.exists())
+    _assert_marked_loops_vectorise(source, ("q check", "pose check"), tmp_path,
                                    ("-fPIC", f"-I{sysconfig.get_paths()['include']}", f"-I{np.get_include()}"))
 
 def test_fk_angle_sums_come_from_two_called_angles():

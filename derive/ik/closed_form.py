@@ -297,7 +297,7 @@ class IKSolutions(np.ndarray):
         out = super().__getitem__(key)
         if not isinstance(out, IKSolutions):
             return out
-        rows, cols = (key[0], key[1:]) if isinstance(key, tuple) else (key, ())
+        rows, cols = ((key[0] if key else Ellipsis), key[1:]) if isinstance(key, tuple) else (key, ())
         whole = all(c is Ellipsis or c == slice(None) for c in cols if not isinstance(c, np.ndarray))
         if rows is None or rows is Ellipsis or not whole or any(isinstance(c, np.ndarray) for c in cols) \
                 or out.ndim != 2 or out.shape[1] != self.shape[1]:
