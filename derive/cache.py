@@ -447,8 +447,9 @@ def task(label: str, progress: bool = True):
     :func:`check` raises DeriveError once the budget (:func:`budget_seconds`) is spent."""
     entry = {"label": label, "t0": time.perf_counter(), "budget": budget_seconds(), "progress": progress}
     _TASKS.append(entry)
-    alarm = _arm_alarm(entry)
+    alarm = None
     try:
+        alarm = _arm_alarm(entry)
         yield entry
         if entry.get("stopped"):
             # the timer's BudgetError was caught on the way (an ``except DeriveError`` that chose
@@ -465,6 +466,8 @@ def task(label: str, progress: bool = True):
 # is pure Python, so the signal is handled between two bytecodes of the call. Only the main
 # thread receives signals; in another thread (or without SIGALRM) the checks in the loops remain.
 _ALARM_GRACE = 0.05
+#: A budget this long (s, about 30 years; inf included) arms no timer: setitimer cannot hold it
+_ALARM_MAX = 1e9
 
 
 def _on_alarm(signum, frame):
@@ -484,7 +487,7 @@ def _arm_alarm(entry):
     """Arm the budget timer for the outermost task in the main thread; returns what
     :func:`_disarm_alarm` restores (None when no timer was armed)."""
     if len(_TASKS) != 1 or not hasattr(signal, "setitimer") \
-            or threading.current_thread() is not threading.main_thread():
+            or threading.current_thread() is not threading.main_thread() or not entry["budget"] < _ALARM_MAX:
         return None
     try:
         old_handler = signal.signal(signal.SIGALRM, _on_alarm)

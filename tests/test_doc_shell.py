@@ -353,6 +353,11 @@ def run_command(command: str, shown: list[str] | None, cwd: Path) -> str:
     if code != 0:
         return f"{where}: exit code {code}\n{out[-2000:]}\n{err[-2000:]}"
     notes = [line for line in err.splitlines() if line.startswith("dq-derive")]
+    if SHELL_SYNTAX.search(code_text):
+        # stderr is merged into the output there: a message of ours is fine only where the page
+        # shows it
+        notes = [line for line in out.splitlines()
+                 if line.startswith("dq-derive: ") and line.strip() not in [x.strip() for x in shown or []]]
     if notes:
         return f"{where}: {notes}"
     if shown is not None:

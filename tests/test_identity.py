@@ -82,6 +82,23 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
     assert len(ids) == len(derive.list_robots())
 
 
+def test_a_file_robot_pickles_with_its_exact_values(tmp_path):
+    """A robot read from a file crosses to another process (Dask workers of reach / place) by
+    pickle: the copy has the same identity, the same numbers and the same exact values."""
+    import pickle
+
+    from derive.model import exact
+    path = _write(tmp_path / "arm.yaml", _ur5(name="pickled"))
+    robot = derive.load_robot(path)
+    copy = pickle.loads(pickle.dumps(robot))
+    assert copy.id == robot.id
+    for a, b in zip(robot.joints, copy.joints):
+        for op_a, op_b in zip(a.pre + a.post, b.pre + b.post):
+            assert exact.op_form(op_a) == exact.op_form(op_b)
+    q = np.linspace(-1, 1, 6)
+    assert np.array_equal(derive.reference.fk(copy, q), derive.reference.fk(robot, q))
+
+
 def test_an_edited_file_is_read_again(tmp_path):
     path = _write(tmp_path / "arm.yaml", _ur5(name="arm"))
     first = derive.load_robot(path)

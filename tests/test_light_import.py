@@ -18,7 +18,7 @@ import derive
 from derive.model import exact
 from derive.model.robot import is_exact, list_robots, robot_from_dict
 
-HEAVY = ("sympy", "casadi", "jinja2", "yourdfpy", "lxml")
+HEAVY = ("sympy", "casadi", "jinja2", "yourdfpy", "lxml", "dask", "distributed", "zarr", "matplotlib")
 LIBRARY = Path(derive.__file__).resolve().parent / "robots"
 
 _LOAD = r"""

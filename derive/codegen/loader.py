@@ -52,7 +52,6 @@ from derive.cache import (
     locked,
     memo,
     notice,
-    package_version,
     read_manifest,
     record,
     shipped_index,
@@ -327,7 +326,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
     digest = hashlib.sha256((template_source("pyext.c.j2") + json.dumps(context, sort_keys=True)
                              + source.read_text(encoding="utf-8") + " ".join(c_flags())
                              + _machine_key() + _compiler_key() + ext_suffix + sys.version
-                             + package_version("numpy") + np.__version__ + np.get_include())
+                             + np.__version__ + np.get_include())
                             .encode()).hexdigest()[:16]
     module = f"_dqk_{prefix}_{digest}"
     name = f"{module}{ext_suffix}"

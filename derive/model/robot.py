@@ -102,6 +102,10 @@ class Num(float):
         obj.recipe = recipe
         return obj
 
+    def __reduce__(self):
+        # pickled with its recipe (a Robot sent to another process: Dask workers of reach/place)
+        return (type(self), (float(self), self.recipe))
+
 
 @dataclass(frozen=True)
 class Op:
