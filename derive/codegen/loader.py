@@ -23,6 +23,7 @@ second failure is a DeriveError. One process derives or compiles an entry while 
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import ctypes
 import functools
@@ -171,17 +172,17 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) ->
         found = _find_kernels(key, free, shipped, report=True)
         if found is not None:
             return found
-    folder = user_folder(key, writable_root())
-    try:
-        with build_lock(folder, f"the kernels of {robot.name} ({key})"):
+    with contextlib.ExitStack() as stack:
+        try:
+            stack.enter_context(build_lock(user_folder(key, writable_root()),
+                                           f"the kernels of {robot.name} ({key})"))
+        except OSError as exc:             # the lock's folder could not be made: derive unlocked
+            fallback_root(exc)
+        else:
             if rebuild is None:
                 found = _find_kernels(key, free, None, report=False)
                 if found is not None:      # another process derived them while this one waited
                     return found
-            files = _derive_kernels(robot, key, free, rebuild)
-            folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
-    except OSError as exc:                 # the lock's folder could not be made: derive unlocked
-        fallback_root(exc)
         files = _derive_kernels(robot, key, free, rebuild)
         folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
     return folder, read_manifest(folder)
