@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import jinja2
+
+from derive.codegen.formats import TEMPLATE_DIR
 
 
 def template_environment() -> jinja2.Environment:
     """jinja2 environment over the project's ``templates/`` folder."""
-    source = Path(__file__).resolve().parents[2] / "templates"
-    if source.is_dir():
-        loader = jinja2.FileSystemLoader(str(source))
+    if TEMPLATE_DIR.is_dir():
+        loader = jinja2.FileSystemLoader(str(TEMPLATE_DIR))
     else:  # installed from a wheel: templates are packaged as derive.templates
         loader = jinja2.PackageLoader("derive", "templates")
     return jinja2.Environment(loader=loader, keep_trailing_newline=True, trim_blocks=True,
