@@ -18,8 +18,8 @@ from sympy.printing.pycode import PythonCodePrinter
 from derive._version import __version__
 from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
-from derive.codegen.formats import FILES, KERNEL_FORMAT  # defined there for the loader
-from derive.codegen.polish import nominal_key, nominal_program, polish_context
+from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key  # defined there for the loader
+from derive.codegen.polish import nominal_program, polish_context
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL

@@ -30,13 +30,12 @@ a :class:`derive.ik.nearclass.Nominal`, FK_R(q) ~= B FK_N(s q + o) T. The kernel
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 import sympy as sp
 
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton
+from derive.codegen.formats import nominal_key
 from derive.errors import DeriveError
 from derive.ik.ir import IKProgram, Op, pos
 from derive.ik.nearclass import Nominal
@@ -58,16 +57,6 @@ POLISH_MAX_STEP = 0.5
 #: The one metric of the residual each solution reports.
 RESIDUAL_METRIC = ("max(|t_fk - t_pose| (m), rotation angle between fk and pose (rad)), fk the "
                    "kernels' own fk of the solution")
-
-
-def nominal_key(nominal: Nominal) -> str:
-    """12 hex digits identifying a nominal robot and its relation (the nominal's identity, B, T,
-    the signs and the offsets, each number to 17 significant digits): part of the cache key of the
-    kernels polished from it."""
-    parts = [nominal.robot.id]
-    for arr in (nominal.base, nominal.tool, nominal.signs, nominal.offsets):
-        parts.append(",".join(f"{float(x):.17g}" for x in np.asarray(arr, dtype=float).ravel()))
-    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:12]
 
 
 def _number(x: float):
