@@ -46,7 +46,7 @@ from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 
 #: The most Newton steps per candidate.
-POLISH_MAX_ITER = 12
+POLISH_MAX_ITER = 30
 #: Newton stops when every component of its error e (m and rad) is at most this.
 POLISH_STOP = 1e-14
 #: A polished candidate is a solution when its residual (:data:`RESIDUAL_METRIC`) is at most
