@@ -54,6 +54,10 @@ POLISH_STOP = 1e-14
 POLISH_ACCEPT = 1e-11
 #: The largest change of one joint in one Newton step (rad or m); longer steps are scaled down.
 POLISH_MAX_STEP = 0.5
+#: A step whose largest joint move is at most this (rad or m) ends the polish without another
+#: FK and Jacobian (quadratic convergence leaves an error of the order of its square); the
+#: residual of the kernels' own FK checks it, and where it fails the steps go on.
+POLISH_LAST_STEP = 1e-9
 #: The one metric of the residual each solution reports.
 RESIDUAL_METRIC = ("max(|t_fk - t_pose| (m), rotation angle between fk and pose (rad)), fk the "
                    "kernels' own fk of the solution")
@@ -274,7 +278,7 @@ def polish_context(robot, nominal: Nominal, printers: dict) -> dict:
     return {"lines": lines, "R": [pr(e) for e in code["R"]], "t": [pr(e) for e in code["t"]],
             "cols": cols, "lets": sorted(used), "prismatic_vars": prismatic_vars,
             "max_iter": POLISH_MAX_ITER, "stop": repr(POLISH_STOP), "accept": repr(POLISH_ACCEPT),
-            "max_step": repr(POLISH_MAX_STEP), "metric": RESIDUAL_METRIC,
+            "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "metric": RESIDUAL_METRIC,
             "nominal": nominal.robot.name, "nominal_id": nominal.robot.id, "key": nominal_key(nominal),
             "deviation": f"{nominal.deviation:.3g}", "how": nominal.how,
             "revolute": robot.revolute.tolist()}
