@@ -128,7 +128,7 @@ def nominal_program(robot, nominal: Nominal) -> IKProgram:
             args = tuple(s * (subs(sp.sympify(a)) - o) for a, s, o in zip(op.args, signs, offsets))
         ops.append(Op(op.kind, op.name, subs(op.expr), op.name2, subs(op.cond), subs(op.other), args, op.depth))
     steps = [(f"pose in the frames of the nominal robot {nominal.robot.name}", "B^-1 P T^-1",
-              [nominal.how, f"relation mismatch {nominal.deviation:.2g}"]),
+              [_comment_safe(nominal.how), f"relation mismatch {nominal.deviation:.2g}"]),
              *nom.steps,
              ("every candidate q = s (q_nominal - o)", "Newton polish",
               [f"damped Newton on the arm's own FK, at most {POLISH_MAX_ITER} steps, kept when "
@@ -159,6 +159,12 @@ def _relaxed(expr, tol: float):
         elif abs(x - (1.0 + REACH_TOL)) <= 1e-15:
             rep[f] = sp.Float(1.0 + tol, 17)
     return e.xreplace(rep)
+
+
+def _comment_safe(text: str) -> str:
+    """One line of text that ends neither a C comment nor a Python docstring."""
+    out = " ".join(str(text).split()).replace("*/", "* /").replace(chr(92), "/")
+    return out.replace(chr(34) * 3, chr(39) * 3)
 
 
 def poe_chain(robot):
@@ -280,5 +286,5 @@ def polish_context(robot, nominal: Nominal, printers: dict) -> dict:
             "max_iter": POLISH_MAX_ITER, "stop": repr(POLISH_STOP), "accept": repr(POLISH_ACCEPT),
             "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "metric": RESIDUAL_METRIC,
             "nominal": nominal.robot.name, "nominal_id": nominal.robot.id, "key": nominal_key(nominal),
-            "deviation": f"{nominal.deviation:.3g}", "how": nominal.how,
+            "deviation": f"{nominal.deviation:.3g}", "how": _comment_safe(nominal.how),
             "revolute": robot.revolute.tolist()}
