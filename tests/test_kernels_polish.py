@@ -246,3 +246,41 @@ def test_exact_kernels_are_unchanged_and_keys_name_the_relation(decimal, calibra
     with pytest.raises(DeriveError, match="joints"):
         nominal_program(robot, Nominal(derive.load_robot("iiwa14"), IDENTITY, IDENTITY, np.ones(7),
                                        np.zeros(7), 0.0, "wrong"))
+
+
+def test_seven_joint_arm_with_joint_3_given(tmp_path, fast_c):
+    """An iiwa14 whose elbow axis misses the shoulder-wrist plane by 0.4 mm (no SRS closed form of
+    its own), nominal iiwa14, joint 3 given (``free="q3"``): the nominal's q3 kernels' program,
+    the polish holding joint 3; every solution's FK within 1e-10, q3 as given, the generating
+    configuration among them and the nominal's count at the corresponding pose; the numpy and
+    Python kernels agree with C."""
+    text = (ROOT / "derive" / "robots" / "iiwa14.yaml").read_text().replace("name: iiwa14", "name: iiwa14-near")
+    text = text.replace("{name: A4, axis: [0, -1, 0], link: [0, 0, 0],", "{name: A4, axis: [0, -1, 0], link: [0.0004, 0, 0],")
+    assert "0.0004" in text
+    (tmp_path / "iiwa14-near.yaml").write_text(text)
+    robot = derive.load_robot(tmp_path / "iiwa14-near.yaml")
+    one = np.array([1.0, 0, 0, 0, 0, 0, 0, 0])
+    nominal = Nominal(derive.load_robot("iiwa14"), one, one, np.ones(7), np.zeros(7), 4e-4, "by hand")
+    with pytest.raises(DeriveError, match="not a joint"):
+        nominal_program(robot, nominal)                  # the arm angle psi: no joint to hold
+    rng = np.random.default_rng(6)
+    Q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], size=(100, 7))
+    P = reference.fk(robot, Q)
+    k = derive.kernels(robot, "c", free="q3", nominal=nominal)
+    assert k.free == "q3"
+    sols, counts, res, its = k.ik_polish(P, free=Q[:, 2])
+    filled = np.arange(sols.shape[1])[None, :] < counts[:, None]
+    dp, da = pose_error(reference.fk(robot, sols[filled]), np.repeat(P, counts, axis=0))
+    assert max(dp.max(), da.max()) <= 1e-10
+    assert np.abs(sols[filled][:, 2] - np.repeat(Q[:, 2], counts)).max() < 1e-12
+    gap = np.abs((sols - Q[:, None, :] + math.pi) % (2 * math.pi) - math.pi).max(axis=2)
+    assert np.all(np.where(filled, gap, np.inf).min(axis=1) < 1e-8)
+    _, nominal_counts = derive.kernels("iiwa14", "c", free="q3").ik(reference.fk("iiwa14", Q), free=Q[:, 2])
+    assert np.array_equal(counts, nominal_counts)
+    plain, plain_counts = k.ik(P, free=Q[:, 2])
+    assert np.array_equal(plain_counts, counts)
+    for backend, m in (("numpy", 100), ("python", 10)):
+        s2, c2, r2, i2 = derive.kernels(robot, backend, free="q3", nominal=nominal).ik_polish(P[:m], free=Q[:m, 2])
+        assert np.array_equal(c2, counts[:m])
+        f2 = filled[:m]
+        assert np.abs(s2[f2] - sols[:m][f2]).max() < 1e-9 and np.abs(i2[f2] - its[:m][f2]).max() <= 1

@@ -19,7 +19,7 @@ from derive._version import __version__
 from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
 from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key  # defined there for the loader
-from derive.codegen.polish import nominal_program, polish_context
+from derive.codegen.polish import held_joint, nominal_program, polish_context
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
@@ -176,14 +176,15 @@ def _context(robot, command: str, free: str | None = None, nominal=None) -> dict
         "limits": limits,
         "always_winding": all(lim["revolute"] and lim["full_turn"] for lim in limits),
         **_ik_context(robot, free, nominal),
-        "polish": None if nominal is None else _polish_context(robot, nominal),
+        "polish": None if nominal is None else _polish_context(robot, nominal, free),
     }
 
 
-def _polish_context(robot, nominal) -> dict:
+def _polish_context(robot, nominal, free=None) -> dict:
     """:func:`derive.codegen.polish.polish_context` with this module's printers, each let line
     marked ``used`` when the C code reads it (no unused variable under -Wall -Werror)."""
-    ctx = polish_context(robot, nominal, {"py": _Py(), "cc": _C()})
+    hold = held_joint(nominal_program(robot, nominal, free))
+    ctx = polish_context(robot, nominal, {"py": _Py(), "cc": _C()}, hold)
     used: set = set()
     for e in [*ctx["R"], *ctx["t"]]:
         used.update(_IDENT.findall(e["cc"]))
@@ -240,7 +241,7 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
     :func:`derive.codegen.polish.nominal_program` (a DeriveError when it has none)."""
 
     if nominal is not None:
-        prog = nominal_program(robot, nominal)
+        prog = nominal_program(robot, nominal, free)
     else:
         try:
             prog = ik_program(robot, free)
@@ -611,7 +612,7 @@ def kernel_manifest(robot, free: str | None = None, nominal=None) -> dict:
     (:func:`derive.codegen.polish.nominal_key`)."""
     robot = load_robot(robot)
     try:
-        prog = ik_program(robot, free) if nominal is None else nominal_program(robot, nominal)
+        prog = ik_program(robot, free) if nominal is None else nominal_program(robot, nominal, free)
     except DeriveError:
         prog = None
     out = {"id": robot.id, "robot": robot.name, "prefix": _prefix(robot, free),

@@ -169,7 +169,7 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None,
     user cache under "<identity>-n<key>", the key naming the nominal robot and the relation
     (:func:`derive.codegen.formats.nominal_key`)."""
     robot = load_robot(robot)
-    free = free_choice(robot, free)
+    free = free_choice(robot if nominal is None else nominal.robot, free)
     key = robot.id if free is None else f"{robot.id}-{free}"
     if nominal is not None:
         key = f"{key}-n{nominal_key(nominal)}"
@@ -761,38 +761,42 @@ class Kernels:
                                                                "branch", "singular")))
         return res
 
-    def ik_polish(self, P):
+    def ik_polish(self, P, free=None):
         """Near-class kernels (``nominal=``): the solutions with their polish, (solutions (n, 8,
         dof) NaN-padded, counts (n,), residual (n, 8), iterations (n, 8)): per solution its
         residual, the larger of the position error (m) and the rotation angle (rad) between the
-        kernels' FK of it and the pose, and the Newton steps it took (NaN and -1 in the padding)."""
+        kernels' FK of it and the pose, and the Newton steps it took (NaN and -1 in the padding).
+        ``free``: the given joint value of kernels that hold one (a 7-joint arm, ``free="q3"``)."""
         if self.nominal is None:
             raise DeriveError(f"{self.robot.name}: ik_polish is for near-class kernels "
                               "(derive.kernels(robot, backend, nominal=...))")
+        self._check_free(free)
         poses, single = self._tool_free(P)
         n = poses.shape[0]
+        fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
+        extra = () if fv is None else (fv,)
         if self.backend == "python":
             sols = np.full((n, 8, self.dof), np.nan)
             counts = np.zeros(n, dtype=np.int64)
             res, its = np.full((n, 8), np.nan), np.full((n, 8), -1, dtype=np.int64)
             for i, row in enumerate(poses.tolist()):
-                found = self._mod.ik_polish(row)
+                found = self._mod.ik_polish(row, *[float(x[i]) for x in extra])
                 counts[i] = len(found)
                 for k, (q, r, it) in enumerate(found):
                     sols[i, k], res[i, k], its[i, k] = q, r, it
         elif self.backend == "numpy":
-            sols, counts, res, its = self._mod.ik_polish(poses)
+            sols, counts, res, its = self._mod.ik_polish(poses, *extra)
         else:
             self._load_ctypes()
             if not hasattr(self, "_ik_polish"):
                 g = getattr(self._lib, f"{self._ident}_ik_batch_polish")
-                g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 7
+                g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * (8 if self.free else 7)
                 g.restype = None
                 self._ik_polish = g
             sols, res = np.empty((n, 8, self.dof)), np.empty((n, 8))
             c, it = np.empty(n, dtype=np.intc), np.empty((n, 8), dtype=np.intc)
-            self._ik_polish(n, poses.ctypes.data, sols.ctypes.data, c.ctypes.data, None, None,
-                            res.ctypes.data, it.ctypes.data)
+            self._ik_polish(n, poses.ctypes.data, *[x.ctypes.data for x in extra], sols.ctypes.data,
+                            c.ctypes.data, None, None, res.ctypes.data, it.ctypes.data)
             counts, its = c.astype(np.int64), it.astype(np.int64)
         if single:
             return sols[0], int(counts[0]), res[0], its[0]
@@ -822,7 +826,7 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
-    free = free_choice(r, free)
+    free = free_choice(r if nominal is None else nominal.robot, free)
     key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free,
            None if nominal is None else nominal_key(nominal))
     return memo("kernels", key, lambda: Kernels(r, backend, free, nominal))

@@ -87,18 +87,30 @@ def check_nominal(robot, nominal: Nominal) -> None:
         dq.check_unit(np.asarray(getattr(nominal, name), dtype=float), f"nominal.{name}")
 
 
-def nominal_program(robot, nominal: Nominal) -> IKProgram:
+def held_joint(prog: IKProgram) -> int | None:
+    """The index of the joint a program's free parameter is (``fv`` = q3 or q7: that joint is
+    given, and the polish holds it), None without one; DeriveError for a free parameter that is
+    not a joint (the SRS arm angle psi: near-class kernels take ``free="q3"``)."""
+    if not prog.free:
+        return None
+    if not (prog.free.startswith("q") and prog.free[1:].isdigit()):
+        raise DeriveError(f"{prog.robot}: near-class kernels of a 7-joint arm hold one joint at its given "
+                          f"value; the free parameter {prog.free} is not a joint (use free='q3')")
+    return int(prog.free[1:]) - 1
+
+
+def nominal_program(robot, nominal: Nominal, free: str | None = None) -> IKProgram:
     """The IK program of a near-class arm: the nominal robot's program
     (:func:`derive.ik.program.ik_program`) after eight lines that move the pose into its frames,
     B^-1 P T^-1 (as :func:`derive.ik.program._related_program`), each solution mapped back to
     the arm's joints by q = s (q_N - o). The candidates are the nominal's; the kernels polish
-    them (module docstring)."""
+    them (module docstring). ``free``: a 7-joint nominal's free parameter where its class offers
+    a choice; it must be a joint (:func:`held_joint`), whose given value fv of the arm is the
+    nominal's s fv + o."""
     robot = load_robot(robot)
     check_nominal(robot, nominal)
-    nom = ik_program(nominal.robot)
-    if nom.free:
-        raise DeriveError(f"{robot.name}: the nominal program of {nominal.robot.name} takes a free "
-                          "parameter; near-class kernels of 7-joint arms are not emitted yet")
+    nom = ik_program(nominal.robot, free)
+    hold = held_joint(nom)
     p = sp.symbols("p0:8", real=True)
     moved_syms = sp.symbols("pb0:8", real=True)
     conj_b = [_number(x) for x in dq.conj_quaternion(np.asarray(nominal.base, dtype=float))]
@@ -108,12 +120,20 @@ def nominal_program(robot, nominal: Nominal) -> IKProgram:
     rep = dict(zip(p, moved_syms))
     same = (list(map(float, nominal.base)) == identity and list(map(float, nominal.tool)) == identity)
 
+    signs = [int(round(float(s))) for s in nominal.signs]
+    offsets = [_number(o) for o in nominal.offsets]
+    if hold is not None:         # the arm's given joint value fv is the nominal's s fv + o
+        fv = sp.Symbol("fv", real=True)
+        rep[fv] = signs[hold] * fv + offsets[hold]
+        same = False
+
     def subs(e):
         return e if same or not isinstance(e, sp.Basic) else e.xreplace(rep)
 
-    ops = [] if same else [Op("let", str(s), sp.expand(e), depth=0) for s, e in zip(moved_syms, moved)]
-    signs = [int(round(float(s))) for s in nominal.signs]
-    offsets = [_number(o) for o in nominal.offsets]
+    moved_same = (list(map(float, nominal.base)) == identity and list(map(float, nominal.tool)) == identity)
+    if moved_same:
+        rep = {k: v for k, v in rep.items() if k not in p}
+    ops = [] if moved_same else [Op("let", str(s), sp.expand(e), depth=0) for s, e in zip(moved_syms, moved)]
     reach = near_reach_tol(nominal)
     for op in nom.ops:
         args = op.args
@@ -135,7 +155,8 @@ def nominal_program(robot, nominal: Nominal) -> IKProgram:
                f"the residual is <= {POLISH_ACCEPT:g}"])]
     return IKProgram(robot.name, robot.dof, ops=ops, branches=nom.branches, free_joint=nom.free_joint,
                      free_rule=nom.free_rule + " (on the nominal robot, then polished)", steps=steps,
-                     parameters=dict(nom.parameters), branch_labels=list(nom.branch_labels))
+                     parameters=dict(nom.parameters), branch_labels=list(nom.branch_labels),
+                     free=nom.free, free_doc=nom.free_doc, bit_weights=nom.bit_weights)
 
 
 def near_reach_tol(nominal: Nominal) -> float:
@@ -259,7 +280,7 @@ def _poe_code(robot, w, c, prismatic, variables, M) -> dict:
     return {"lines": lines, "R": R, "t": t, "cols": cols}
 
 
-def polish_context(robot, nominal: Nominal, printers: dict) -> dict:
+def polish_context(robot, nominal: Nominal, printers: dict, hold: int | None = None) -> dict:
     """What the templates need to emit the polish: the product-of-exponentials code printed per
     language (``printers``: {"py": ..., "cc": ...}), the Jacobian's columns, the constants and the
     nominal's description."""
@@ -287,4 +308,4 @@ def polish_context(robot, nominal: Nominal, printers: dict) -> dict:
             "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "metric": RESIDUAL_METRIC,
             "nominal": nominal.robot.name, "nominal_id": nominal.robot.id, "key": nominal_key(nominal),
             "deviation": f"{nominal.deviation:.3g}", "how": _comment_safe(nominal.how),
-            "revolute": robot.revolute.tolist()}
+            "revolute": robot.revolute.tolist(), "hold": hold}
