@@ -38,7 +38,7 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import panda, spherical, srs
+from derive.ik import classes, panda, spherical, srs
 from derive.ik.finish import finish, select_one
 from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
@@ -220,10 +220,8 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
     (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4).
     The candidates go through the finish step (:func:`derive.ik.finish.finish`: FK check, merge,
     compaction)."""
-    if isinstance(geo, SWGeometry):
-        batch, why = spherical.solve_batch, (spherical.REASON_LATERAL, spherical.REASON_REACH)
-    else:
-        batch, why = solve_batch, (REASON_WRIST_NEAR_AXIS, REASON_ARM_REACH)
+    cls = classes.find("spherical" if isinstance(geo, SWGeometry) else "ur")
+    batch, why = cls.candidates, cls.reasons
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
     sing_all = np.zeros((n, 8), dtype=bool)
@@ -238,6 +236,30 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
             reasons[s + k] = (why[0] if np.all(codes == 1) else
                               why[1] if np.all(codes > 0) else REASON_NO_CANDIDATE)
     return q_all, counts, sing_all, reasons
+
+
+def _ur_class():
+    """The UR family as a member of the class registry (:mod:`derive.ik.classes`)."""
+    def candidates(geo, poses, free=None):
+        return solve_batch(geo, poses, free)
+
+    return classes.IKClass(
+        name="ur", title="UR family (thesis section 4.3.5)", dof=6,
+        detect=classes.quiet_detect(ur_geometry), candidates=candidates,
+        steps=(("theta1", "sp4-type: y5 cos t1 - x5 sin t1 = -d4 (W.6), two roots"),
+               ("theta5", "the rotation: cos t5 = A22, |sin t5| = hypot(A12, A32), two signs"),
+               ("theta6", "the rotation: row 2 of Rz(t1)^T R; free at sin t5 = 0"),
+               ("theta2 + theta3 + theta4", "the rotation, once theta6 is fixed"),
+               ("theta3", "sp3-type: the cosine law in the arm plane (C.19, C.21), two roots"),
+               ("theta2, theta4", "sp1-type: the arm plane (C.12, C.14), then the sum")),
+        branch_labels=("theta1 root (+ / -)", "theta5 sign (+ / -)", "theta3 sign (+ / -)"),
+        singular_sets=("wrist, sin t5 = 0: theta6 free (from q_ref, else chosen for reach), marked singular",
+                       "shoulder: the two theta1 roots meet (merged)",
+                       "elbow stretched or folded, sin t3 = 0: the two theta3 roots meet (merged)"),
+        reasons=(REASON_WRIST_NEAR_AXIS, REASON_ARM_REACH), free_joint=5)
+
+
+classes.register(_ur_class())
 
 
 # --------------------------------------------------------------------------- #
@@ -376,19 +398,21 @@ def has_closed_form(robot) -> bool:
 
 
 def _solve_related(robot, poses, q_ref):
-    """:func:`solve` on the robot (UR family or spherical wrist), or on the library robot it is
+    """:func:`solve` on the robot (the 6R class :func:`derive.ik.classes.detect` finds: UR family
+    or spherical wrist), or on the library robot it is
     related to (poses moved into that robot's frames, B^-1 P T^-1, and the solutions' joint
     directions mapped back). ``q_ref`` (n, 6) or None: reference configurations whose free joint
     (theta6 of the UR, q4 of the spherical wrist) is used at the wrist singularity."""
-    geo = spherical_class(robot)
-    if geo is not None:
-        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, 3])
-    try:
-        return solve(robot, ur_geometry(robot), poses, None if q_ref is None else q_ref[:, 5])
-    except DeriveError as exc:
-        first = exc
+    hit = classes.detect(robot, dof=6)
+    if hit is not None:
+        cls, geo = hit
+        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, cls.free_joint])
     rel = closed_form_relation(robot)
     if rel is None:
+        try:
+            ur_geometry(robot)
+        except DeriveError as exc:
+            first = exc
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
                           "UR family and the spherical-wrist (OPW) class, and this chain is in "
                           f"neither ({str(first).split(': ', 1)[-1]}; "

@@ -65,7 +65,7 @@ from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import finish, panda, select, srs
+from derive.ik import classes, finish, panda, select, srs
 from derive.ik.closed_form import IKSolutions
 from derive.ik.tolerances import FREE_TOL, TIE
 from derive.kinematics.pose import as_pose_batch
@@ -158,11 +158,9 @@ def redundant_kind(robot) -> str | None:
 
 
 def _find_kind(robot) -> str | None:
-    if panda.is_panda_class(robot):
-        return "panda"
-    if srs.is_srs(robot):
-        return "srs"
-    return None
+    """The 7R class of :func:`derive.ik.classes.detect` (the Panda class before SRS)."""
+    hit = classes.detect(robot, dof=7)
+    return None if hit is None else hit[0].name
 
 
 def _kind(robot) -> str:
