@@ -85,7 +85,7 @@ from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik.euler import zyz, zyz_matrix
 from derive.ik import select
-from derive.ik.finish import Solutions, finish
+from derive.ik.finish import Solutions, finish, rotation_angle
 from derive.ik.tolerances import (ARC_MERGE, AXIS_TOL, CLASS_DIRECTION, CLASS_DISTANCE,
                                   MAP_ANGLE, MAP_POSITION, REACH_TOL, STRETCH_TOL,
                                   TRIG_DEGENERATE, WRIST_SINGULAR)
@@ -403,10 +403,15 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     return out, singular, reason
 
 
-def _finish(robot, poses, cand, singular, reason, free) -> Solutions:
-    """The finish step of all classes (:func:`derive.ik.finish.finish`: the check by the robot's
-    FK, the merge of branches that coincide on a singular set, compaction), with the reasons."""
-    out = Solutions(*finish(robot, poses, cand, singular), reason.copy(), free)
+def _finish(robot, geo, rc, w, poses, cand, singular, reason, free) -> Solutions:
+    """The finish step of all classes (:func:`derive.ik.finish.finish`: the FK check with its one
+    metric, here by the canonical chain against (R_c, W); the merge of branches that coincide on
+    a singular set; compaction), with the reasons."""
+    def errors(q):
+        r, p = _canonical_fk(geo, q * geo.signs)
+        return np.linalg.norm(p - w[:, None], axis=-1), rotation_angle(rc[:, None], r)
+
+    out = Solutions(*finish(robot, poses, cand, singular, errors=errors), reason.copy(), free)
     out.reason[(out.counts == 0) & (out.reason == "")] = REASON_ACCEPT
     return out
 
@@ -437,7 +442,7 @@ def ik_psi(robot, poses, psi, *, q_ref=None) -> SRSSolutions:
     qr = _q_ref(q_ref, n)
     rc, w = _into_canonical(geo, P)
     cand, singular, reason = _solve_psi(geo, rc, w, psi, qr)
-    return _single(_finish(robot, P, cand, singular, reason, psi), single)
+    return _single(_finish(robot, geo, rc, w, P, cand, singular, reason, psi), single)
 
 
 def arm_angle(robot, q) -> np.ndarray:
@@ -517,7 +522,7 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
     cand = np.where(bad[:, None, None], np.nan, wrap_angle(theta * geo.signs))
     singular = singular & ~bad[:, None]
     reason[~np.any(reach, 1) & (reason == "")] = REASON_JOINT
-    return _single(_finish(robot, P, cand, singular, reason, val), single)
+    return _single(_finish(robot, geo, rc, w, P, cand, singular, reason, val), single)
 
 
 def _reverse(geo: SRSGeometry, rc, w):
