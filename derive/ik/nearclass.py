@@ -45,6 +45,7 @@ from derive.ik.tolerances import (
            POLISH_MAX_ITER,
            POLISH_MAX_STEP,
            POLISH_TOL,
+           SEED_REACH,
 )
 from derive.kinematics.fk import _joint_values, _op_dq, _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
@@ -577,6 +578,7 @@ def _candidates(nom: Nominal, pn: np.ndarray, qr_n, given):
         q, sing, code = spherical.solve_batch(geo, pn, None if qr_n is None else qr_n[:, 3],
                                               keep_unreachable=True)
         why = (spherical.REASON_LATERAL, spherical.REASON_REACH)
+        q = _near_reach(nrob, pn, q, code, nom.deviation)
     else:
         try:
             ugeo = closed_form.ur_geometry(nrob)
@@ -599,9 +601,26 @@ def _candidates(nom: Nominal, pn: np.ndarray, qr_n, given):
             sing = np.concatenate([sing, np.zeros((n, pad.shape[1]), dtype=bool)], axis=1)
             code = np.concatenate([code, np.ones((n, pad.shape[1]), dtype=code.dtype)], axis=1)
         why = (closed_form.REASON_WRIST_NEAR_AXIS, closed_form.REASON_ARM_REACH)
+        q = _near_reach(nrob, pn, q, code, nom.deviation)
         q, sing, code = _elbow_seeds(q, sing, code, nom.deviation)
     reasons = [why[0] if np.all(c == 1) else why[1] if np.all(c > 0) else "" for c in code]
     return q, (code == 0) & np.all(np.isfinite(q), -1), sing, reasons
+
+
+def _near_reach(nrob, pn, q, code, deviation):
+    """The seeds of branches the nominal does not reach (code > 0, square roots clipped) kept
+    only where the nominal comes within SEED_REACH * deviation of the pose (m, rad): only there
+    can the arm, which deviates by at most ``deviation``, reach on that branch."""
+    far = (code > 0) & np.all(np.isfinite(q), -1)
+    if not np.any(far):
+        return q
+    n, k = code.shape
+    rows = np.nonzero(far.reshape(-1))[0]
+    dp, dr = _pose_error(fk(nrob, q.reshape(-1, q.shape[-1])[rows]), np.repeat(pn, k, axis=0)[rows])
+    drop = rows[np.maximum(dp, dr) > SEED_REACH * deviation + 1e-12]
+    q = q.copy().reshape(-1, q.shape[-1])
+    q[drop] = np.nan
+    return q.reshape(n, k, -1)
 
 
 def _elbow_seeds(q, sing, code, deviation):
@@ -609,7 +628,7 @@ def _elbow_seeds(q, sing, code, deviation):
     clipped, t3 at 0 or pi, a double root), the arm may still reach with two elbow roots close
     to it: extra seeds with t3 moved by +-sqrt(deviation) and +-2 sqrt(deviation) (rad; a
     clipped cosine root moves as the square root of the pose's offset) are added."""
-    far = code == 2
+    far = (code == 2) & np.all(np.isfinite(q), -1)
     if not np.any(far):
         return q, sing, code
     d = np.sqrt(max(deviation, 1e-12))
@@ -702,11 +721,12 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
         ok = pol.converged
         q[~ok] = np.nan
         keep = ok.copy()
-        for i in range(1, k):
-            for j in range(i):
-                d = q[:, i] - q[:, j]
-                d = np.abs(np.where(rev, wrap_angle(d), d))
-                keep[:, i] &= ~(np.all(d < MERGE_TOL, axis=-1) & keep[:, j])
+        for i in np.nonzero(ok.any(axis=0))[0]:
+            if i == 0:
+                continue
+            d = q[:, i:i + 1] - q[:, :i]
+            d = np.abs(np.where(rev, wrap_angle(d), d))
+            keep[:, i] &= ~np.any(np.all(d < MERGE_TOL, axis=-1) & keep[:, :i], axis=1)
         order = np.argsort(~keep, axis=1, kind="stable")
         kept = np.take_along_axis(keep, order, 1)
         q = np.take_along_axis(q, order[..., None], 1)

@@ -72,3 +72,7 @@ HOMOTOPY_FROM = 1e-4
 HOMOTOPY_STAGES = (0.25, 0.5, 0.75)
 #: Damped Newton steps per homotopy stage (the final polish at s = 1 is POLISH_MAX_ITER).
 HOMOTOPY_STEPS = 4
+#: A seed from a branch the nominal does not reach (its square root clipped) is polished only
+#: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
+#: pose (dimensionless; the comparison is in m and rad, max of the two).
+SEED_REACH = 4.0
