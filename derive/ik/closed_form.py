@@ -370,8 +370,8 @@ def classify(robot) -> Classification:
                 "Shimizu et al. 2008)")
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             f"closed-form IK {what}: up to 8 solutions per value, derive.reference.ik(robot, pose, "
-            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference; no "
-            "generated kernels yet)"])
+            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference, and "
+            "the generated kernels: derive.kernels(robot, 'c').ik(poses, free=v))"])
     geo = spherical_class(robot)
     if geo is not None:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
@@ -379,13 +379,27 @@ def classify(robot) -> Classification:
             "closed-form IK of the spherical-wrist class (derive.ik.spherical): " + spherical.describe(geo)])
     rel = closed_form_relation(robot)
     if rel is None:
-        return c
+        return _near_class(robot, c)
     notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
     return dataclasses.replace(
         c, closed_form=True,
         notes=notes + [f"closed-form IK through the library robot {rel.other}: " + rel.describe()],
         closed_form_through={"robot": rel.other, "base": rel.base.tolist(), "tool": rel.tool.tolist(),
                              "signs": rel.signs.tolist(), "mismatch": rel.error})
+
+
+def _near_class(robot, c: Classification) -> Classification:
+    """An arm with no exact class but a nominal robot of one (:func:`derive.ik.nearclass.nominal`):
+    the class, the nominal class and the polish named in one note, ``closed_form`` True (the
+    reference IK solves it: the nominal's closed form + Newton polish)."""
+    from derive.ik import nearclass          # nearclass builds on this module
+
+    line = nearclass.describe(robot)
+    if not line:
+        return c
+    stale = ("derive.refine", "no closed form", "implements none", "a calibrated arm")
+    notes = [n for n in c.notes if not any(k in n for k in stale)]
+    return dataclasses.replace(c, closed_form=True, notes=notes + [f"class: {c.cls}; {line}"])
 
 
 def has_closed_form(robot) -> bool:

@@ -50,10 +50,11 @@ from derive.ik.tolerances import (
 from derive.kinematics.fk import _joint_values, _op_dq, _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.kinematics.relate import relate
+from derive.model.classify import classify as geometric_classify
 from derive.model.geometry import numeric_chain, path_to_end
 from derive.model.robot import Op, Robot, load_robot, robot_from_dict
 
-__all__ = ["Nominal", "nominal", "exact_class", "polish", "Polished", "fk_jacobian", "solve",
+__all__ = ["Nominal", "nominal", "exact_class", "nominal_class", "polish", "Polished", "fk_jacobian", "solve",
            "NearSolutions", "NearIKSolutions", "describe", "relation_fk", "into_nominal",
            "from_nominal"]
 
@@ -744,16 +745,24 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
     return NearSolutions(q_all, counts, sing_all, res_all, it_all, dropped, reasons)
 
 
+def nominal_class(robot) -> str:
+    """The class (:func:`derive.model.classify.classify`: "UR", "OPW", "SRS", ...) of the arm's
+    nominal robot ("" without one)."""
+    nom = nominal(robot)
+    return "" if nom is None else geometric_classify(nom.robot).cls
+
+
 def describe(robot) -> str:
     """One line for messages: the nominal class, the deviation and how the arm is solved (""
-    for an arm without a nominal)."""
+    for an arm without a nominal), e.g. "nominal class: UR within 1.5e-05 m / rad (...);
+    closed-form IK: the nominal's closed form + Newton polish"."""
     nom = nominal(robot)
     if nom is None:
         return ""
-    return (f"nominal class: {exact_class(nom.robot)} within {nom.deviation:.2g} m / rad "
+    return (f"nominal class: {nominal_class(robot)} within {nom.deviation:.2g} m / rad "
             f"(nominal robot {nom.robot.name}: {nom.how}); closed-form IK: the nominal's closed "
-            f"form + Newton polish on this arm's FK (converged to {POLISH_TOL:g} m / rad, the "
-            "candidates that do not converge dropped)")
+            f"form + Newton polish on this arm's FK (derive.reference.ik; converged to "
+            f"{POLISH_TOL:g} m / rad, candidates that do not converge dropped)")
 
 
 class NearIKSolutions(IKSolutions):
@@ -845,7 +854,7 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
         order = select.sort_order(sols, ref, robot.revolute, windings=within_limits)
         sols, sing, res, its = sols[order], sing[order], res[order], its[order]
     nom = nominal(robot)
-    note = (f"nominal {nom.robot.name} ({exact_class(nom.robot)}, deviation {nom.deviation:.2g} m / rad), "
+    note = (f"nominal {nom.robot.name} ({nominal_class(robot)}, deviation {nom.deviation:.2g} m / rad), "
             f"closed form + Newton polish: {k} solution(s)"
             + (f", {int(r.dropped[0])} candidate(s) dropped (did not converge)" if r.dropped[0] else ""))
     return NearIKSolutions(sols.reshape(-1, robot.dof), sing, reason, res, its, note)
