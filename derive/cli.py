@@ -48,7 +48,8 @@ from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik import nearclass
-from derive.ik.closed_form import classify, spherical_class
+from derive.ik.closed_form import spherical_class
+from derive.ik.nearclass import classify
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
 from derive.ik.srs import arm_angle, ik_joint

@@ -357,7 +357,9 @@ def _find_relation(robot, tol: float = RELATE_TOL) -> Relation | None:
 def classify(robot) -> Classification:
     """The kinematic class of a robot (:func:`derive.model.classify.classify`), with the closed
     form of dq-derive as it applies: in the robot's own frames, or through a library robot it
-    is related to (then ``closed_form_through`` names it with the base and tool transforms)."""
+    is related to (then ``closed_form_through`` names it with the base and tool transforms).
+    Near-class arms (the nominal's closed form + Newton polish) are added by
+    :func:`derive.ik.nearclass.classify`, which is ``derive.classify``."""
     robot = load_robot(robot)
     c = geometric_classify(robot)
     if c.closed_form:
@@ -379,27 +381,13 @@ def classify(robot) -> Classification:
             "closed-form IK of the spherical-wrist class (derive.ik.spherical): " + spherical.describe(geo)])
     rel = closed_form_relation(robot)
     if rel is None:
-        return _near_class(robot, c)
+        return c
     notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
     return dataclasses.replace(
         c, closed_form=True,
         notes=notes + [f"closed-form IK through the library robot {rel.other}: " + rel.describe()],
         closed_form_through={"robot": rel.other, "base": rel.base.tolist(), "tool": rel.tool.tolist(),
                              "signs": rel.signs.tolist(), "mismatch": rel.error})
-
-
-def _near_class(robot, c: Classification) -> Classification:
-    """An arm with no exact class but a nominal robot of one (:func:`derive.ik.nearclass.nominal`):
-    the class, the nominal class and the polish named in one note, ``closed_form`` True (the
-    reference IK solves it: the nominal's closed form + Newton polish)."""
-    from derive.ik import nearclass          # nearclass builds on this module
-
-    line = nearclass.describe(robot)
-    if not line:
-        return c
-    stale = ("derive.refine", "no closed form", "implements none", "a calibrated arm")
-    notes = [n for n in c.notes if not any(k in n for k in stale)]
-    return dataclasses.replace(c, closed_form=True, notes=notes + [f"class: {c.cls}; {line}"])
 
 
 def has_closed_form(robot) -> bool:

@@ -54,7 +54,7 @@ from derive.model.classify import classify as geometric_classify
 from derive.model.geometry import numeric_chain, path_to_end
 from derive.model.robot import Op, Robot, load_robot, robot_from_dict
 
-__all__ = ["Nominal", "nominal", "exact_class", "nominal_class", "polish", "Polished", "fk_jacobian", "solve",
+__all__ = ["Nominal", "nominal", "exact_class", "classify", "nominal_class", "polish", "Polished", "fk_jacobian", "solve",
            "NearSolutions", "NearIKSolutions", "describe", "relation_fk", "into_nominal",
            "from_nominal"]
 
@@ -743,6 +743,24 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
             if counts[s + i] == 0:
                 reasons[s + i] = why[i] if why[i] and not reached[i].any() else REASON_NOT_CONVERGED
     return NearSolutions(q_all, counts, sing_all, res_all, it_all, dropped, reasons)
+
+
+def classify(robot):
+    """:func:`derive.ik.closed_form.classify` (``derive.classify``), and for an arm with no exact
+    class but a nominal robot of one: ``closed_form`` True and one note naming the class, the
+    nominal class and the polish ("class: general; nominal class: UR within 0.016 m / rad (...);
+    closed-form IK: the nominal's closed form + Newton polish ..."), the notes that said
+    derive.refine solves it or that there is no closed form dropped."""
+    robot = load_robot(robot)
+    c = closed_form.classify(robot)
+    if c.closed_form or exact_class(robot) is not None:
+        return c
+    line = describe(robot)
+    if not line:
+        return c
+    stale = ("derive.refine", "no closed form", "implements none", "a calibrated arm")
+    notes = [n for n in c.notes if not any(k in n for k in stale)]
+    return dataclasses.replace(c, closed_form=True, notes=notes + [f"class: {c.cls}; {line}"])
 
 
 def nominal_class(robot) -> str:
