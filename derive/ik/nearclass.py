@@ -572,6 +572,10 @@ def _candidates(nom: Nominal, pn: np.ndarray, qr_n, given):
                 q[out] = r2.q
                 sing = sing.copy()
                 sing[out] = r2.singular
+                still = np.zeros(n, dtype=bool)
+                still[np.nonzero(out)[0][r2.count == 0]] = True
+                if np.any(still):   # the given joint just out of the nominal's range for the pose
+                    q, sing = _psi_seeds(nrob, pn, q, sing, still, joint, value)
                 return q, np.all(np.isfinite(q), -1) & ~out[:, None], sing, reasons
         return q, np.all(np.isfinite(q), -1), sing, reasons
     geo = closed_form.spherical_class(nrob)
@@ -658,6 +662,25 @@ def _outside_d4(geo, pn: np.ndarray, margin: float) -> np.ndarray:
     shift[:, 0], shift[:, 1] = p5[:, 0] * scale, p5[:, 1] * scale
     shift[rad == 0, 0] = want
     return dq._from_rt(pn[:, :4], dq._translation(pn) + shift)
+
+
+def _psi_seeds(nrob, pn, q, sing, rows, joint: int, value, count: int = 8):
+    """Seeds for poses whose SRS nominal has no solution with the given joint at its value (the
+    arm, a little off, may have some): the nominal's solutions at ``count`` arm angles spread
+    over (-pi, pi] (:func:`derive.ik.srs.ik_psi`), the given joint then set to its value (the
+    polish holds it and moves the others)."""
+    reach = _within_reach(nrob, pn[rows])
+    extra = []
+    for psi in np.linspace(-np.pi, np.pi, count, endpoint=False):
+        r = srs.ik_psi(nrob, reach, np.full(len(reach), psi))
+        extra.append(r.q)
+    e = np.concatenate(extra, axis=1)
+    e[..., joint] = np.where(np.isfinite(e[..., joint]), value[rows][:, None], np.nan)
+    n, k, dof = q.shape
+    pad = np.full((n, e.shape[1], dof), np.nan)
+    pad[rows] = e
+    return (np.concatenate([q, pad], axis=1),
+            np.concatenate([sing, np.zeros((n, e.shape[1]), dtype=bool)], axis=1))
 
 
 def _within_reach(nrob, pn: np.ndarray) -> np.ndarray:
