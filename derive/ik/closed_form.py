@@ -355,7 +355,9 @@ def _find_relation(robot, tol: float = RELATE_TOL) -> Relation | None:
 def classify(robot) -> Classification:
     """The kinematic class of a robot (:func:`derive.model.classify.classify`), with the closed
     form of dq-derive as it applies: in the robot's own frames, or through a library robot it
-    is related to (then ``closed_form_through`` names it with the base and tool transforms)."""
+    is related to (then ``closed_form_through`` names it with the base and tool transforms).
+    Near-class arms (the nominal's closed form + Newton polish) are added by
+    :func:`derive.ik.nearclass.classify`, which is ``derive.classify``."""
     robot = load_robot(robot)
     c = geometric_classify(robot)
     if c.closed_form:
@@ -368,8 +370,8 @@ def classify(robot) -> Classification:
                 "Shimizu et al. 2008)")
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             f"closed-form IK {what}: up to 8 solutions per value, derive.reference.ik(robot, pose, "
-            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference; no "
-            "generated kernels yet)"])
+            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference, and "
+            "the generated kernels: derive.kernels(robot, 'c').ik(poses, free=v))"])
     geo = spherical_class(robot)
     if geo is not None:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]

@@ -117,3 +117,42 @@ SP_RANK_TOL = 1e-9
 #: square root of rounding). The candidate is still kept only if its residual is within
 #: SP_EXACT_TOL.
 SP_ROOT_MODULUS = 1e-6
+
+# --- Near-class arms (derive/ik/nearclass): the nominal robot and the Newton polish. Each
+# --- constant names its unit and the one quantity it is compared with.
+
+#: Axes projected onto the class (route "projection" of :func:`derive.ik.nearclass.nominal`):
+#: the angle (rad) between a joint axis at the zero pose, in the nominal's canonical frame, and
+#: the nearest coordinate axis. At or below it the axis is made that coordinate axis (a URDF's
+#: 1.570796325 twists: 2e-9 rad; a DH file's ``alpha: 1.5708``: 3.7e-6 rad).
+NEAR_AXIS_TOL = 1e-3
+#: Axis points projected onto the class: the difference (m) between two coordinates of the axis
+#: points (canonical frame, one coordinate direction at a time, single-linkage clusters). At or
+#: below it they are made equal, so nearly intersecting axes intersect and nearly coincident
+#: parallel axes coincide (an iiwa14 whose axes miss by 0.44 mm).
+NEAR_POINT_TOL = 1e-3
+#: The largest mismatch of the relation FK_robot(q) ~= B FK_nominal(s q + o) T that a nominal
+#: robot may have: max over sample configurations of the position error (m) and the rotation
+#: angle (rad), each compared with it (``Nominal.deviation``). The calibrated UR5
+#: (ur5-calibrated.yaml) is 0.016 from the UR5.
+NEAR_DEVIATION_MAX = 0.03
+#: A polished solution has converged when its residual, the larger of the position error (m)
+#: and the rotation angle (rad) of FK(q) against the pose, is at or below this.
+POLISH_TOL = 1e-12
+#: Newton iterations of the polish before a candidate counts as not converged.
+POLISH_MAX_ITER = 40
+#: The largest change of one joint (rad for revolute, m for prismatic joints) in one Newton
+#: step of the polish (a trust region: larger steps are scaled down).
+POLISH_MAX_STEP = 0.3
+#: A nominal whose ``deviation`` (m, rad: the largest relation mismatch) exceeds this is carried
+#: onto the arm by a homotopy (derive.ik.nearclass.track) before the polish; below it Newton
+#: starts from the nominal's candidates directly.
+HOMOTOPY_FROM = 1e-4
+#: The homotopy parameters s (dimensionless, 0 the nominal, 1 the arm) of the tracking stages.
+HOMOTOPY_STAGES = (0.25, 0.5, 0.75)
+#: Damped Newton steps per homotopy stage (the final polish at s = 1 is POLISH_MAX_ITER).
+HOMOTOPY_STEPS = 4
+#: A seed from a branch the nominal does not reach (its square root clipped) is polished only
+#: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
+#: pose (dimensionless; the comparison is in m and rad, max of the two).
+SEED_REACH = 4.0
