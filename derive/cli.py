@@ -279,9 +279,11 @@ def _robot_row(name: str) -> dict:
     # a near-class arm (only where the description has near misses or names a nominal: fast)
     near = (not closed and not kind and (r.nominal or c.near_misses) and reference._near(r))
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
-                    f"nominal {nearclass.nominal_class(r)} + Newton polish (numpy reference)" if near else
+                    f"nominal {nearclass.nominal_class(r)} + Newton polish" if near else
                     f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
-    has_ik = bool(closed or kind)          # the seven-joint arms' kernels solve IK with the free parameter
+    # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
+    # run the nominal's closed form and polish (derive.codegen.polish)
+    has_ik = bool(closed or kind or (near and r.dof == 6))
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
             "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else

@@ -12,6 +12,7 @@ import pytest
 import derive
 from derive import reference
 from derive.cache import generated_root, read_manifest
+from derive.codegen.loader import near_class_nominal
 from derive.cli import main
 from derive.errors import DeriveError
 from derive.model.robot import list_robots, load_robot
@@ -150,10 +151,11 @@ def test_robots_table_says_what_ships(capsys):
             assert row["casadi"].endswith(", shipped") == ("casadi/fk" in roles), name
             assert (", ik," in row["casadi"]) == ("casadi/ik" in roles), name
         else:
-            # a near-class arm (ur5-calibrated): the numpy reference solves it; its kernels' IK
-            # (the polish in C) comes with the emitted-kernel side of issue 30 item 3
-            assert row["kernels"].startswith("FK+IK") == (_has_closed_form_ik(robot)
-                                                         and not reference._near(robot)), name
+            # a near-class 6R arm (ur5-calibrated): its kernels run the nominal's closed form and
+            # the polish; the loader finds the nominal itself
+            assert row["kernels"].startswith("FK+IK") == _has_closed_form_ik(robot), name
+            if reference._near(robot) and robot.dof == 6:
+                assert near_class_nominal(robot) is not None, name
             assert not row["kernels"].endswith("shipped") and not row["casadi"].endswith("shipped"), name
 
 

@@ -808,6 +808,18 @@ class Kernels:
         return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
 
 
+def near_class_nominal(robot, free: str | None = None):
+    """The :class:`derive.ik.nearclass.Nominal` that :func:`kernels` uses for ``robot`` when
+    none is given: None for a robot whose kernels ship in generated/ or that has an exact class
+    (:func:`derive.ik.nearclass.nominal`), and for a 7-joint arm without ``free`` (the near-class
+    polish holds a joint, ``free="q3"``, not the arm angle). ``derive.ik.nearclass`` is imported
+    here, on first need, so that loading shipped kernels stays light."""
+    if shipped_index().get(robot.id) is not None or (robot.dof == 7 and free is None):
+        return None
+    from derive.ik import nearclass
+    return nearclass.nominal(robot)
+
+
 def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None) -> Kernels:
     """The generated kernels of ``robot`` (a library name, a description file under any name,
     or a :class:`~derive.model.robot.Robot`) for ``backend`` ("python", "numpy", "c"), loaded
@@ -822,10 +834,13 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal` (its exact nominal robot
     and the relation FK(q) ~= B FK_nominal(s q + o) T): the IK runs the nominal's closed form and
     polishes every candidate by Newton steps on the robot's own FK (:mod:`derive.codegen.polish`;
-    :meth:`Kernels.ik_polish` gives the residuals); derived into the user cache on first use."""
+    :meth:`Kernels.ik_polish` gives the residuals); derived into the user cache on first use.
+    Without it, a near-class arm's nominal is found by :func:`near_class_nominal`."""
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
+    if nominal is None:
+        nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)
     key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free,
            None if nominal is None else nominal_key(nominal))
