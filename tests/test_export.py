@@ -1,8 +1,9 @@
 """`dq-derive export` round-trips (issue 35): every library robot written as YAML and as URDF
-and read back. The YAML is the same robot (same identity, every frame bit for bit); the URDF
-keeps the FK of the end frame to 1e-15; both print their numbers so that they read back as the
-same doubles."""
+and read back. The YAML is the same robot (same identity, every frame bit for bit); the URDF,
+read back with every end frame as a tip, keeps the FK of every end frame to 1e-15 and the
+identity; both print their numbers so that they read back as the same doubles."""
 
+import dataclasses
 import math
 import sysconfig
 from pathlib import Path
@@ -13,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from derive import reference
 from derive.model import export
+from derive.model.identity import digest
 from derive.model.robot import list_robots, load_robot
 
 def _q(robot, n=12):
@@ -39,6 +41,26 @@ def test_export_then_load_is_the_same_robot(name, tmp_path):
     cols = [robot.variable_names.index(v) for v in urdf.variable_names]     # the joints on that chain
     gap = np.abs(reference.fk(urdf, q[:, cols]) - reference.fk(robot, q)).max()
     assert gap <= 1e-15, f"{name}: URDF export moves the end frame by {gap:.2g}"
+    # URDF with every end frame as a tip: the whole robot, so its identity
+    tree = load_robot(tmp_path / "r.urdf", tip=list(robot.ends))
+    assert tree.variable_names == robot.variable_names and list(tree.ends) == list(robot.ends)
+    for end in robot.ends:
+        gap = np.abs(reference.fk(tree, q, end) - reference.fk(robot, q, end)).max()
+        assert gap <= 1e-15, f"{name}: URDF export moves the end frame {end} by {gap:.2g}"
+    assert tree.exact == robot.exact
+    assert tree.id == _with_urdf_limits(robot).id
+    if all(j.limits is not None or j.type == "revolute" for j in robot.joints):
+        assert tree.id == robot.id
+
+
+def _with_urdf_limits(robot):
+    """``robot`` with the limits its URDF must carry: a prismatic joint without limits gets
+    +-PRISMATIC_RANGE (a URDF prismatic joint needs them; only the seed arm has such joints).
+    The identity counts joint limits, so the URDF's robot is this one."""
+    joints = tuple(dataclasses.replace(j, limits=(-export.PRISMATIC_RANGE, export.PRISMATIC_RANGE))
+                   if j.type == "prismatic" and j.limits is None else j for j in robot.joints)
+    return dataclasses.replace(robot, joints=joints,
+                               id=digest(joints, robot.ends, robot.default_end, robot.exact))
 
 
 def test_kinova_urdf_exported_does_not_move(tmp_path):
