@@ -1,8 +1,9 @@
 """`dq-derive export` round-trips (issue 35): every library robot written as YAML and as URDF
-and read back. The YAML is the same robot (same identity, every frame bit for bit); the URDF
-keeps the FK of the end frame to 1e-15; both print their numbers so that they read back as the
-same doubles."""
+and read back. The YAML is the same robot (same identity, every frame bit for bit); the URDF,
+read back with every end frame as a tip, keeps the FK of every end frame to 1e-15 and the
+identity; both print their numbers so that they read back as the same doubles."""
 
+import dataclasses
 import math
 import sysconfig
 from pathlib import Path
@@ -12,7 +13,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from derive import reference
-from derive.model import export
+from derive.model import export, origins
+from derive.model.identity import digest
 from derive.model.robot import list_robots, load_robot
 
 def _q(robot, n=12):
@@ -39,6 +41,26 @@ def test_export_then_load_is_the_same_robot(name, tmp_path):
     cols = [robot.variable_names.index(v) for v in urdf.variable_names]     # the joints on that chain
     gap = np.abs(reference.fk(urdf, q[:, cols]) - reference.fk(robot, q)).max()
     assert gap <= 1e-15, f"{name}: URDF export moves the end frame by {gap:.2g}"
+    # URDF with every end frame as a tip: the whole robot, so its identity
+    tree = load_robot(tmp_path / "r.urdf", tip=list(robot.ends))
+    assert tree.variable_names == robot.variable_names and list(tree.ends) == list(robot.ends)
+    for end in robot.ends:
+        gap = np.abs(reference.fk(tree, q, end) - reference.fk(robot, q, end)).max()
+        assert gap <= 1e-15, f"{name}: URDF export moves the end frame {end} by {gap:.2g}"
+    assert tree.exact == robot.exact
+    assert tree.id == _with_urdf_limits(robot).id
+    if all(j.limits is not None or j.type == "revolute" for j in robot.joints):
+        assert tree.id == robot.id
+
+
+def _with_urdf_limits(robot):
+    """``robot`` with the limits its URDF must carry: a prismatic joint without limits gets
+    +-PRISMATIC_RANGE (a URDF prismatic joint needs them; only the seed arm has such joints).
+    The identity counts joint limits, so the URDF's robot is this one."""
+    joints = tuple(dataclasses.replace(j, limits=(-export.PRISMATIC_RANGE, export.PRISMATIC_RANGE))
+                   if j.type == "prismatic" and j.limits is None else j for j in robot.joints)
+    return dataclasses.replace(robot, joints=joints,
+                               id=digest(joints, robot.ends, robot.default_end, robot.exact))
 
 
 def test_kinova_urdf_exported_does_not_move(tmp_path):
@@ -53,6 +75,7 @@ def test_kinova_urdf_exported_does_not_move(tmp_path):
     (tmp_path / "kinova.urdf").write_text(export.to_urdf(robot), encoding="utf-8")
     back = load_robot(tmp_path / "kinova.urdf")
     assert np.abs(reference.fk(back, q) - reference.fk(robot, q)).max() <= 1e-15
+    assert back.id == robot.id          # its fixed joints folded in, multiplied out once, read back as written
     (tmp_path / "kinova.yaml").write_text(export.to_yaml(robot), encoding="utf-8")
     back = load_robot(tmp_path / "kinova.yaml")
     assert back.id == robot.id
@@ -75,3 +98,40 @@ def test_rpy_of_rebuilds_the_rotation_at_every_pitch(pitch):
         assert np.abs(_rz_ry_rx(*got) - r).max() <= 2e-15
     for r in Rotation.random(200, random_state=3).as_matrix():
         assert np.abs(_rz_ry_rx(*export.rpy_of(r)) - r).max() <= 2e-15
+
+
+def _form_matrix(xyz, rpy) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, :3] = _rz_ry_rx(*rpy)
+    m[:3, 3] = xyz
+    return m
+
+
+@pytest.mark.parametrize("name", list_robots())
+def test_urdf_form_rebuilds_the_fk(name):
+    """The URDF form (one xyz + rpy per joint origin and end frame, what the export writes and the
+    identity hashes) is the robot: its chain rebuilt with scipy's rotations, each joint moving
+    about its axis by its value, gives the reference FK of every end frame."""
+    robot = load_robot(name)
+    joint_forms, end_forms = origins.urdf_form(robot.joints, robot.ends)
+    q = _q(robot, 20)
+    values = np.zeros((len(q), len(robot.joints)))
+    for i, j in enumerate(robot.joints):
+        values[:, i] = j.multiplier * q[:, j.variable] + j.mimic_offset
+    for end, e in robot.ends.items():
+        chain, k = [], e.parent
+        while k >= 0:
+            chain.append(k)
+            k = robot.joints[k].parent
+        for row, v in zip(q, values):
+            t = np.eye(4)
+            for i in reversed(chain):
+                j = robot.joints[i]
+                motion = np.eye(4)
+                if j.type == "revolute":
+                    motion[:3, :3] = Rotation.from_rotvec(v[i] * np.asarray(j.axis)).as_matrix()
+                else:
+                    motion[:3, 3] = v[i] * np.asarray(j.axis)
+                t = t @ _form_matrix(*joint_forms[i]) @ motion
+            t = t @ _form_matrix(*end_forms[end])
+            assert np.abs(t - reference.fk_matrix(robot, row, end)).max() < 1e-14, (name, end)

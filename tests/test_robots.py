@@ -13,10 +13,10 @@ from derive import dualquat as DQ
 from derive.model.robot import robot_from_dict
 
 DATA = Path(__file__).with_name("data")
-LIBRARY = ["abb-irb1600", "fr3", "general-6r", "gp8", "iiwa14", "iiwa7", "irb120", "irb1600", "irb6700",
-           "kr210-r2700", "kr6-r900", "kunze-2r", "lrmate200id", "m710ic", "panda", "puma560", "rs007n",
-           "rx160", "seed-arm", "tx2-60", "ur10", "ur10e", "ur16e", "ur3", "ur3-thesis", "ur3e", "ur5",
-           "ur5-calibrated", "ur5e", "vs060"]
+LIBRARY = ["abb-irb1600", "crx10ia", "fr3", "gen3", "general-6r", "gp8", "iiwa14", "iiwa7", "irb120", "irb1600",
+           "irb6700", "jaco2-6dof", "kr210-r2700", "kr6-r900", "kunze-2r", "lrmate200id", "m710ic", "panda",
+           "puma560", "rs007n", "rx160", "seed-arm", "tx2-60", "ur10", "ur10e", "ur16e", "ur3", "ur3-thesis",
+           "ur3e", "ur5", "ur5-calibrated", "ur5e", "vs060", "xarm6", "xarm7"]
 UR_DH = {  # d1 a2 a3 d4 d5 d6 from the issue / Universal Robots
     "ur3": (.1519, -.24365, -.21325, .11235, .08535, .0819),
     "ur5": (.089159, -.425, -.39225, .10915, .09465, .0823),
@@ -32,7 +32,7 @@ def test_library_contents():
     assert derive.list_robots() == LIBRARY
     dofs = {n: load_robot(n).dof for n in LIBRARY}
     assert dofs == {**{n: 6 for n in LIBRARY}, "kunze-2r": 2, "seed-arm": 5, "iiwa7": 7, "iiwa14": 7,
-                    "panda": 7, "fr3": 7}
+                    "panda": 7, "fr3": 7, "xarm7": 7, "gen3": 7}
 
 
 @pytest.mark.parametrize("name", sorted(UR_DH))

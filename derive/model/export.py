@@ -7,14 +7,15 @@ Motion(axis, value + offset) post):
   root link ``base_link``) and a fixed joint per end frame (``<end>_joint`` to the link
   ``<end>``); a name that another frame has already gets a trailing ``_``.
   A URDF joint has one origin before its motion and no offset, so each joint's origin is its
-  parent's ``post`` times its own ``pre`` times the motion by its offset, multiplied out into
-  one 4x4 matrix; revolute joints without limits become ``continuous``; prismatic joints without
+  parent's ``post``, its own ``pre`` and the motion by its offset, as one ``xyz`` and one
+  ``rpy`` (:func:`derive.model.origins.urdf_form`: multiplied out, rpy by :func:`rpy_of`,
+  accurate at every pitch, where yourdfpy's own conversion loses up to 1e-8 near pitch =
+  +-pi/2; an origin that is already one translation and rpy rotations is written as it is);
+  revolute joints without limits become ``continuous``; prismatic joints without
   limits get +-``PRISMATIC_RANGE`` (a URDF prismatic joint needs limits). Mimic joints keep
   their relation. Only kinematics: no inertia, geometry or effort limits.
-  Each origin's ``rpy`` comes from :func:`rpy_of` (accurate at every pitch; yourdfpy's own
-  conversion loses up to 1e-8 near pitch = +-pi/2), and every number is written as the
-  shortest text that reads back as the same double (Python's ``repr``, 17 significant digits
-  at most).
+  Every number (origin, axis, limits, mimic) is written as the shortest text that reads back
+  as the same double (Python's ``repr``, 17 significant digits at most).
 * YAML (:func:`to_yaml`, convention ``urdf``): the same joints with the operations kept
   one by one (no multiplication, so nothing is rounded): each joint's ``origin`` lists its
   own pre operations and ``after`` its post operations, each end's ``origin`` its operations,
@@ -22,53 +23,26 @@ Motion(axis, value + offset) post):
   robot: the same ``Robot.id``, every frame bit for bit.
 
 Round trips (tests/test_export.py, every library robot): the YAML gives the same identity and
-FK; the URDF gives the FK of every end frame to 1e-15, and Pinocchio on the exported URDF agrees
-(tests/test_urdf.py). A URDF cannot keep the operations one by one, so its robot is another
-description of the same end frames (joint frames at the joint origins, another identity).
+FK; the URDF, read back with every end frame as a tip, gives the FK of every end frame to
+1e-15 and the same identity (Pinocchio on the exported URDF agrees, tests/test_urdf.py). A URDF
+cannot keep the operations one by one, so its robot is another description of the same
+kinematics (joint frames at the joint origins); the identity sees the joint origins in the
+form the URDF writes (:mod:`derive.model.identity`), so it is the same robot.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 import yaml
 from lxml import etree
 
-from derive.model.geometry import op_matrix
-from derive.model.robot import Op, Robot, load_robot
+from derive.model.origins import rpy_of, urdf_form
+from derive.model.robot import Robot, load_robot
+
+__all__ = ["PRISMATIC_RANGE", "rpy_of", "to_urdf", "to_yaml", "write"]
 
 #: Limits (m) written for a prismatic joint that has none.
 PRISMATIC_RANGE = 10.0
-
-
-def _matrix(ops) -> np.ndarray:
-    m = np.eye(4)
-    for op in ops:
-        m = m @ op_matrix(op)
-    return m
-
-
-def rpy_of(m) -> tuple[float, float, float]:
-    """(roll, pitch, yaw) of a rotation (3x3 or 4x4) with R = Rz(yaw) Ry(pitch) Rx(roll), the
-    URDF ``rpy``. Roll and pitch come from the third row (r31, r32, r33) = (-sin p, cos p sin r,
-    cos p cos r), yaw from R (Ry(pitch) Rx(roll))^T = Rz(yaw): each step is well conditioned,
-    so the rotation rebuilt from the three angles is R to rounding at every pitch, also at
-    +-pi/2, where the textbook formula (yaw from r21, r11) divides by cos p."""
-    r = np.asarray(m, dtype=float)[:3, :3]
-    roll = math.atan2(r[2, 1], r[2, 2])
-    pitch = math.atan2(-r[2, 0], math.hypot(r[2, 1], r[2, 2]))
-    cr, sr, cp, sp_ = math.cos(roll), math.sin(roll), math.cos(pitch), math.sin(pitch)
-    ry_rx = np.array([[cp, sp_ * sr, sp_ * cr], [0.0, cr, -sr], [-sp_, cp * sr, cp * cr]])
-    rest = r @ ry_rx.T
-    yaw = math.atan2(rest[1, 0], rest[0, 0])
-    return roll + 0.0, pitch + 0.0, yaw + 0.0
-
-
-def _motion(j, value: float) -> Op:
-    if j.type == "revolute":
-        return Op("R", axis=j.axis, angle=value)
-    return Op("T", vector=value * j.axis)
 
 
 def _urdf_names(robot: Robot) -> tuple[str, list, dict, dict]:
@@ -98,44 +72,67 @@ def to_urdf(robot) -> str:
     robot = load_robot(robot)
     root, links, end_links, end_joints = _urdf_names(robot)
     names = [j.name for j in robot.joints]
-    joints, origins = [], {}
-    for j in robot.joints:
-        parent_post = robot.joints[j.parent].post if j.parent >= 0 else ()
-        origin = _matrix((*parent_post, *j.pre, _motion(j, float(j.offset))))
+    joint_origins, end_origins = urdf_form(robot.joints, robot.ends)
+    joints, origins, numbers = [], {}, {}
+    for j, origin in zip(robot.joints, joint_origins):
         kind = j.type
         limit = None
         if j.limits is not None:
-            limit = Limit(effort=0.0, velocity=0.0, lower=float(j.limits[0]), upper=float(j.limits[1]))
+            limit = (float(j.limits[0]), float(j.limits[1]))
         elif kind == "revolute":
             kind = "continuous"
         else:
-            limit = Limit(effort=0.0, velocity=0.0, lower=-PRISMATIC_RANGE, upper=PRISMATIC_RANGE)
+            limit = (-PRISMATIC_RANGE, PRISMATIC_RANGE)
         mimic = None
         if j.is_mimic:
             mimic = Mimic(joint=names[next(i for i, k in enumerate(robot.joints)
                                            if not k.is_mimic and k.variable == j.variable)],
                           multiplier=float(j.multiplier), offset=float(j.mimic_offset))
         origins[j.name] = origin
+        numbers[j.name] = (tuple(float(a) for a in j.axis), limit, mimic)
         joints.append(Joint(name=j.name, type=kind, parent=root if j.parent < 0 else links[j.parent],
-                            child=links[names.index(j.name)], origin=origin,
-                            axis=np.asarray(j.axis, dtype=float), limit=limit, mimic=mimic))
+                            child=links[names.index(j.name)], origin=np.eye(4),
+                            axis=np.asarray(j.axis, dtype=float),
+                            limit=None if limit is None else Limit(effort=0.0, velocity=0.0,
+                                                                   lower=limit[0], upper=limit[1]),
+                            mimic=mimic))
     for name, e in robot.ends.items():
-        origin = _matrix((*robot.joints[e.parent].post, *e.ops))
-        origins[end_joints[name]] = origin
+        origins[end_joints[name]] = end_origins[name]
         joints.append(Joint(name=end_joints[name], type="fixed", parent=links[e.parent],
-                            child=end_links[name], origin=origin))
+                            child=end_links[name], origin=np.eye(4)))
     all_links = [root] + links + list(end_links.values())
     urdf = URDF(robot=URDFRobot(name=robot.name, links=[Link(name=n) for n in all_links], joints=joints),
                 build_scene_graph=False, load_meshes=False)
     xml = urdf.write_xml()
-    for el in xml.getroot().iter("joint"):       # the origins written here (module docstring)
+    for el in xml.getroot().iter("joint"):       # the numbers, as repr writes them (module docstring)
+        xyz, rpy = origins[el.get("name")]
         o = el.find("origin")
-        if o is not None:
-            m = origins[el.get("name")]
-            o.set("xyz", " ".join(repr(float(x) + 0.0) for x in m[:3, 3]))
-            o.set("rpy", " ".join(repr(x) for x in rpy_of(m)))
+        if o is None:
+            o = etree.SubElement(el, "origin")
+            el.insert(0, o)
+        o.set("xyz", _text(xyz))
+        o.set("rpy", _text(rpy))
+        if el.get("name") not in numbers:
+            continue
+        axis, limit, mimic = numbers[el.get("name")]
+        el.find("axis").set("xyz", _text(axis))
+        if limit is not None:
+            el.find("limit").set("lower", _text(limit[:1]))
+            el.find("limit").set("upper", _text(limit[1:]))
+        if mimic is not None:       # yourdfpy (0.0.60) does not write <mimic>: written here
+            m = el.find("mimic")
+            if m is None:
+                m = etree.SubElement(el, "mimic")
+            m.set("joint", mimic.joint)
+            m.set("multiplier", _text([mimic.multiplier]))
+            m.set("offset", _text([mimic.offset]))
     text = etree.tostring(xml, xml_declaration=True, pretty_print=True, encoding="utf-8")
     return text.decode("utf-8").rstrip("\n") + "\n"
+
+
+def _text(numbers) -> str:
+    """Numbers as the shortest text that reads back as the same doubles (repr; -0.0 as 0.0)."""
+    return " ".join(repr(float(x) + 0.0) for x in numbers)
 
 
 def _op_entry(op) -> dict:

@@ -1,12 +1,19 @@
 """The identity of a robot: a hash of its normalised description.
 
 Two descriptions have the same identity exactly when they describe the same kinematics:
-the same joints (type, parent, driving variable, mimic relation, motion axis, fixed motions
-before and after, offset, limits) and the same end frames, every number in SI units after
-the file's units are applied, and the same exactness (whether every fixed angle is a multiple
-of pi/12, which decides how the equations are derived). The robot's name, title,
-source, joint names and file path do not enter: a copy of ``ur5.yaml`` under another name is
-the UR5, and a copy with one number changed is another robot.
+the same joints (type, parent, driving variable, mimic relation, motion axis, origin, limits)
+and the same end frames, every number in SI units after the file's units are applied, and the
+same exactness (whether every fixed angle is a multiple of pi/12, which decides how the
+equations are derived). The robot's name, title, source, joint names and file path do not
+enter: a copy of ``ur5.yaml`` under another name is the UR5, and a copy with one number
+changed is another robot.
+
+The fixed motions enter in their URDF form (:func:`kinematic`): each joint's origin (its
+parent's fixed motions after the motion, its own before, and its offset) and each end frame
+as one translation and one roll-pitch-yaw triple (:mod:`derive.model.origins`). So the way a
+file splits the same transform into operations does not matter where the form is taken as it
+is (a URDF origin), and a robot exported as URDF and read back (:mod:`derive.model.export`)
+has the identity of the robot it was exported from.
 
 Every cache and artifact of dq-derive is keyed by this identity (:mod:`derive.cache`).
 """
@@ -15,6 +22,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+
+from derive.model.origins import urdf_form
 
 #: Hex digits of the SHA-256 digest kept as the identity.
 ID_LENGTH = 16
@@ -29,24 +38,33 @@ def _vec(v) -> list:
     return [_num(x) for x in v]
 
 
-def _ops(ops) -> list:
-    return [["R", _vec(o.axis), _num(o.angle)] if o.kind == "R" else ["T", _vec(o.vector)] for o in ops]
+def _origin(form) -> list:
+    xyz, rpy = form
+    return [_vec(xyz), _vec(rpy)]
+
+
+def kinematic(joints, ends: dict) -> tuple[list, list]:
+    """The fixed motions of a description as the identity sees them: ([origin of each joint],
+    [origin of each end frame]), each [xyz, rpy] (:func:`derive.model.origins.urdf_form`)."""
+    joint_forms, end_forms = urdf_form(joints, ends)
+    return [_origin(f) for f in joint_forms], [_origin(end_forms[name]) for name in ends]
 
 
 def normalised(joints, ends: dict, default_end: str, exact: bool) -> dict:
     """The description reduced to what the kinematics depend on (see the module docstring):
     the joints and end frames of a description in the neutral form of
     :mod:`derive.model.robot`."""
+    joint_origins, end_origins = kinematic(joints, ends)
     out = []
-    for j in joints:
+    for j, origin in zip(joints, joint_origins):
         out.append({
             "type": j.type, "parent": j.parent, "variable": j.variable,
             "multiplier": _num(j.multiplier), "mimic_offset": _num(j.mimic_offset),
-            "axis": _vec(j.axis), "pre": _ops(j.pre), "post": _ops(j.post),
-            "offset": _num(j.offset), "limits": None if j.limits is None else _vec(j.limits),
+            "axis": _vec(j.axis), "origin": origin,
+            "limits": None if j.limits is None else _vec(j.limits),
         })
-    ends_out = [{"parent": e.parent, "ops": _ops(e.ops), "default": name == default_end}
-                for name, e in ends.items()]
+    ends_out = [{"parent": e.parent, "origin": origin, "default": name == default_end}
+                for (name, e), origin in zip(ends.items(), end_origins)]
     return {"joints": out, "ends": ends_out, "exact": bool(exact)}
 
 

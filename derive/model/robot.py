@@ -334,7 +334,8 @@ def load_robot(name_or_path, base: str | None = None, tip: str | None = None) ->
     """Load a robot by library name (``"ur5"``) or from a description file path: our YAML
     (``.yaml``/``.yml``, docs/robot-format.md) or a URDF (``.urdf``; ``base`` and ``tip`` name
     the links of the chain, by default the root link and the single leaf, see
-    :mod:`derive.model.urdf`).
+    :mod:`derive.model.urdf`; ``tip`` a list of links reads the tree of their chains, each tip
+    an end frame).
 
     Which one (docs/robot-format.md, "Library names and file paths"): a bare name (no path
     separator, no extension) is a library robot, even where the current folder holds a file of
@@ -354,6 +355,8 @@ def load_robot(name_or_path, base: str | None = None, tip: str | None = None) ->
     kind = resolve_name(name_or_path)
     if kind == "file":
         if path.suffix == ".urdf" or (path.suffix not in (".yaml", ".yml") and _looks_like_xml(path)):
+            if isinstance(tip, (list, tuple)):
+                tip = tuple(tip)
             return _load_file(str(path.resolve()), base, tip, urdf=True)
         if base is not None or tip is not None:
             raise RobotFileError(f"{text}: base and tip select the chain of a URDF; this is a YAML file")
