@@ -69,7 +69,10 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
     assert moved.name == "ur5" and moved.id != ur5.id
     limits = _ur5()
     limits["joints"][0]["limits"] = ["-pi", "pi"]
-    assert derive.load_robot(_write(tmp_path / "lim.yaml", limits)).id != ur5.id
+    # the limits are not part of the identity (they have their own key part, limits_id)
+    edited = derive.load_robot(_write(tmp_path / "lim.yaml", limits))
+    assert edited.id == ur5.id and edited.limits_id != ur5.limits_id
+    assert np.array_equal(edited.limits[0], [-np.pi, np.pi])
     # the same arm in millimetres and degrees: the numbers after units are the same
     mm = _ur5(name="ur5-mm", units={"length": "mm", "angle": "deg"},
               parameters={k: v * 1000 for k, v in _ur5()["parameters"].items()})
@@ -77,9 +80,12 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
         j["alpha"] = {"pi/2": 90, "-pi/2": -90, 0: 0}[j["alpha"]]
         j["limits"] = [-360, 360]
     assert derive.load_robot(_write(tmp_path / "mm.yaml", mm)).id == ur5.id
-    # every library robot has its own identity
-    ids = {derive.load_robot(n).id for n in derive.list_robots()}
-    assert len(ids) == len(derive.list_robots())
+    # every library robot has its own identity, but the FR3 is the Panda with other limits
+    robots = [derive.load_robot(n) for n in derive.list_robots()]
+    assert len({r.id for r in robots}) == len(robots) - 1
+    fr3, panda = derive.load_robot("fr3"), derive.load_robot("panda")
+    assert fr3.id == panda.id and fr3.limits_id != panda.limits_id
+    assert len({(r.id, r.limits_id) for r in robots}) == len(robots)
 
 
 def test_a_file_robot_pickles_with_its_exact_values(tmp_path):

@@ -50,7 +50,7 @@ import yaml
 import derive.model as model
 from derive.cache import memo
 from derive.errors import RobotFileError, UnknownRobotError
-from derive.model.identity import digest
+from derive.model.identity import digest, limits_digest
 
 LIBRARY_DIR = Path(__file__).resolve().parent.parent / "robots"
 
@@ -203,6 +203,12 @@ class Robot:
             if not j.is_mimic:
                 out.append(j.limits if j.limits is not None else (-math.inf, math.inf))
         return np.array(out, dtype=float).reshape(-1, 2)
+
+    @property
+    def limits_id(self) -> str:
+        """The key part of the joint limits (:func:`derive.model.identity.limits_digest`), which
+        ``id`` leaves out: artifacts that embed the limits (the kernels) are keyed by both."""
+        return limits_digest(self.joints)
 
     @property
     def revolute(self) -> np.ndarray:
