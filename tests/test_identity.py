@@ -168,7 +168,8 @@ def test_file_named_ur5_with_another_d1_gets_its_own_kernels(tmp_path, cache, ba
 
 
 def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache, rng, capfd):
-    # decimal twists (snapped to pi/2 within 1e-12) and a number of its own: derived, not shipped
+    # decimal twists (snapped to pi/2 within 1e-12) and a number of its own: made on first use,
+    # not shipped, from the UR class's shipped program (no derivation on its chain)
     path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="decimal-ur5", parameters={"d1": 0.1}),
                                                          1.5707963267948966))
     assert derive.load_robot(path).exact and derive.load_robot(path).id != derive.load_robot("ur5").id
@@ -187,7 +188,8 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
             found += bool(np.any(np.all(d < 1e-8, axis=1)))
         assert found == len(q)
     err = capfd.readouterr().err
-    assert "[decimal-ur5] no kernels of identity" in err and "set B" in err   # progress lines
+    assert "[decimal-ur5] no kernels of identity" in err and "known class" in err   # progress lines
+    assert "set B" not in err                                                       # nothing derived
 
 
 def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
@@ -200,7 +202,8 @@ def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, 
     assert not k.has_ik
     with pytest.raises(DeriveError, match="derive.refine"):
         k.ik(reference.fk(path, q[0]))
-    assert (user_folder(derive.load_robot(path).id) / "manifest.json").is_file()
+    robot = derive.load_robot(path)
+    assert (user_folder(f"{robot.id}-L{robot.limits_id}") / "manifest.json").is_file()
 
 
 def test_derivation_stops_at_its_time_budget(tmp_path, cache, monkeypatch):
