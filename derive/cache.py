@@ -205,7 +205,11 @@ def generated_root() -> Path | None:
 
 
 def shipped_index() -> dict:
-    """{robot identity: folder} of the shipped ``generated/<robot>/`` folders (read once)."""
+    """{robot identity: folder} of the shipped ``generated/<robot>/`` folders (read once), and
+    {"<identity>-L<limits key>": folder} for the folders whose manifest records the joint
+    limits' key (kernels: two robots that differ only in their limits, the Panda and the FR3,
+    share the identity but not the kernels); the first folder in name order where two share a
+    key."""
     return memo("shipped-index", None, _shipped_index)
 
 
@@ -215,9 +219,12 @@ def _shipped_index() -> dict:
     if root is not None:
         for m in sorted(root.glob(f"*/{MANIFEST}")):
             try:
-                index[json.loads(m.read_text(encoding="utf-8"))["id"]] = m.parent
-            except (OSError, ValueError, KeyError):
+                data = json.loads(m.read_text(encoding="utf-8"))
+                keys = [data["id"]] + ([f"{data['id']}-L{data['limits']}"] if "limits" in data else [])
+            except (OSError, ValueError, KeyError, TypeError):
                 continue
+            for key in keys:
+                index.setdefault(key, m.parent)
     return index
 
 

@@ -50,6 +50,7 @@ from derive.errors import DeriveError, InputError
 from derive.ik import nearclass
 from derive.ik.closed_form import spherical_class
 from derive.ik.nearclass import classify
+from derive.ik.program import write_class_data
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
 from derive.ik.srs import arm_angle, ik_joint
@@ -754,6 +755,10 @@ def cmd_generate(args) -> int:
               f"{time.perf_counter() - t:.2f} s")
     if not args.robots:
         t = time.perf_counter()
+        written.append(write_class_data(args.class_data))
+        print(f"the UR and spherical-wrist classes' IK with symbolic lengths derived and written in "
+              f"{time.perf_counter() - t:.2f} s")
+        t = time.perf_counter()
         sw = SW_ROBOTS
         name = sw[0]
         written += write_appendix(name, args.out, progress=True, command=f"dq-derive appendix {name}", force=True)
@@ -1108,6 +1113,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("robots", nargs="*", help=f"robots (default: {' '.join(DEFAULT_ROBOTS)}, then the "
                                              "spherical-wrist reports and every shipped kernel)")
     s.add_argument("--out", default="generated", help="output folder")
+    s.add_argument("--class-data", default=None, metavar="FILE",
+                   help="where the 6R classes' symbolic IK goes (default: the package's "
+                        "derive/data/ik_classes.json; written when no robots are named)")
 
     s = command("bench", "speed measurements (see docs/benchmarks.md)", cmd_bench)
     s.add_argument("what", nargs="?", default="derivation", choices=BENCHES,

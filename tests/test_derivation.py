@@ -171,8 +171,11 @@ def test_generated_is_byte_identical_to_a_fresh_regeneration(tmp_path, capsys):
     """`make generate` run again writes exactly the committed generated/ tree: the same files
     (appendices, IK reports, kernels, CasADi functions, manifests), byte for byte."""
     from derive.cli import main
-    assert main(["generate", "--out", str(tmp_path)]) == 0
+    assert main(["generate", "--out", str(tmp_path), "--class-data", str(tmp_path.parent / "ik_classes.json")]) == 0
     capsys.readouterr()
+    # the classes' symbolic IK shipped in derive/data, derived again (issue 30, fast first use)
+    assert filecmp.cmp(tmp_path.parent / "ik_classes.json", ROOT / "derive" / "data" / "ik_classes.json",
+                       shallow=False), "derive/data/ik_classes.json differs: run make generate"
     fresh = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*") if p.is_file())
     committed = sorted(p.relative_to(GENERATED) for p in GENERATED.rglob("*") if p.is_file())
     assert fresh == committed, "generated/ has other files than a regeneration: run make generate"

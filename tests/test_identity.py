@@ -69,7 +69,10 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
     assert moved.name == "ur5" and moved.id != ur5.id
     limits = _ur5()
     limits["joints"][0]["limits"] = ["-pi", "pi"]
-    assert derive.load_robot(_write(tmp_path / "lim.yaml", limits)).id != ur5.id
+    # the limits are not part of the identity (they have their own key part, limits_id)
+    edited = derive.load_robot(_write(tmp_path / "lim.yaml", limits))
+    assert edited.id == ur5.id and edited.limits_id != ur5.limits_id
+    assert np.array_equal(edited.limits[0], [-np.pi, np.pi])
     # the same arm in millimetres and degrees: the numbers after units are the same
     mm = _ur5(name="ur5-mm", units={"length": "mm", "angle": "deg"},
               parameters={k: v * 1000 for k, v in _ur5()["parameters"].items()})
@@ -77,9 +80,12 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
         j["alpha"] = {"pi/2": 90, "-pi/2": -90, 0: 0}[j["alpha"]]
         j["limits"] = [-360, 360]
     assert derive.load_robot(_write(tmp_path / "mm.yaml", mm)).id == ur5.id
-    # every library robot has its own identity
-    ids = {derive.load_robot(n).id for n in derive.list_robots()}
-    assert len(ids) == len(derive.list_robots())
+    # every library robot has its own identity, but the FR3 is the Panda with other limits
+    robots = [derive.load_robot(n) for n in derive.list_robots()]
+    assert len({r.id for r in robots}) == len(robots) - 1
+    fr3, panda = derive.load_robot("fr3"), derive.load_robot("panda")
+    assert fr3.id == panda.id and fr3.limits_id != panda.limits_id
+    assert len({(r.id, r.limits_id) for r in robots}) == len(robots)
 
 
 def test_a_file_robot_pickles_with_its_exact_values(tmp_path):
@@ -162,7 +168,8 @@ def test_file_named_ur5_with_another_d1_gets_its_own_kernels(tmp_path, cache, ba
 
 
 def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache, rng, capfd):
-    # decimal twists (snapped to pi/2 within 1e-12) and a number of its own: derived, not shipped
+    # decimal twists (snapped to pi/2 within 1e-12) and a number of its own: made on first use,
+    # not shipped, from the UR class's shipped program (no derivation on its chain)
     path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="decimal-ur5", parameters={"d1": 0.1}),
                                                          1.5707963267948966))
     assert derive.load_robot(path).exact and derive.load_robot(path).id != derive.load_robot("ur5").id
@@ -181,7 +188,8 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
             found += bool(np.any(np.all(d < 1e-8, axis=1)))
         assert found == len(q)
     err = capfd.readouterr().err
-    assert "[decimal-ur5] no kernels of identity" in err and "set B" in err   # progress lines
+    assert "[decimal-ur5] no kernels of identity" in err and "known class" in err   # progress lines
+    assert "set B" not in err                                                       # nothing derived
 
 
 def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
@@ -194,7 +202,8 @@ def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, 
     assert not k.has_ik
     with pytest.raises(DeriveError, match="derive.refine"):
         k.ik(reference.fk(path, q[0]))
-    assert (user_folder(derive.load_robot(path).id) / "manifest.json").is_file()
+    robot = derive.load_robot(path)
+    assert (user_folder(f"{robot.id}-L{robot.limits_id}") / "manifest.json").is_file()
 
 
 def test_derivation_stops_at_its_time_budget(tmp_path, cache, monkeypatch):

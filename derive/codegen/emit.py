@@ -615,7 +615,7 @@ def kernel_manifest(robot, free: str | None = None, nominal=None) -> dict:
         prog = ik_program(robot, free) if nominal is None else nominal_program(robot, nominal, free)
     except DeriveError:
         prog = None
-    out = {"id": robot.id, "robot": robot.name, "prefix": _prefix(robot, free),
+    out = {"id": robot.id, "limits": robot.limits_id, "robot": robot.name, "prefix": _prefix(robot, free),
            "dof": robot.dof, "dq_derive": __version__, "format": KERNEL_FORMAT,
            "branch_labels": list(prog.branch_labels) if prog else []}
     if prog is not None and prog.free:

@@ -26,6 +26,7 @@ It takes no simplification, so it is made in about a second whatever the numbers
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
@@ -34,10 +35,11 @@ from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo, step
 from derive.errors import BudgetError, DeriveError
-from derive.ik.closed_form import spherical_class
+from derive.ik.closed_form import spherical_class, ur_geometry
 from derive.ik.extract import _rot
 from derive.model.geometry import path_to_end
-from derive.model.robot import load_robot
+from derive.ik.redundant import redundant_kind
+from derive.model.robot import LIBRARY_DIR, load_robot
 from derive.symbolic.equations import derive_equations
 
 
@@ -163,12 +165,35 @@ def _sums(called: list) -> dict:
     return out
 
 
+def _library_file(robot) -> bool:
+    """Whether the robot was read from the library's folder (derive/robots)."""
+    return robot.path != "<dict>" and Path(robot.path).parent == LIBRARY_DIR
+
+
+def _known_class(robot) -> bool:
+    """Whether the robot's IK program comes from a class (UR family in its own frames or
+    related to a library robot, or a 7-joint class), not from an extraction on its chain."""
+    if redundant_kind(robot) is not None:
+        return True
+    try:
+        ur_geometry(robot)
+        return True
+    except DeriveError:
+        return False
+
+
 def _fk_kernel(robot) -> Kernel:
     qs = sp.symbols(f"q0:{robot.dof}", real=True)
     symbolic = None
     if spherical_class(robot) is not None:
         # a spherical-wrist arm: the product of its joints' dual quaternions, constants multiplied
         # out (a second; folding the expanded product of the canonical chain gave 20x more code)
+        return _fk_numeric(robot, qs)
+    if robot.exact and not _library_file(robot) and _known_class(robot):
+        # a new robot of a class with a shipped IK program: no symbolic derivation on its chain
+        # on first use (issue 30: substitution and a compile); the library's robots, whose
+        # kernels make generate ships, keep the folded products
+        step("FK from the numeric product of the joint dual quaternions (a new robot of a known class)")
         return _fk_numeric(robot, qs)
     if robot.exact:
         try:

@@ -170,11 +170,13 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None,
     (:func:`derive.codegen.formats.nominal_key`)."""
     robot = load_robot(robot)
     free = free_choice(robot if nominal is None else nominal.robot, free)
-    key = robot.id if free is None else f"{robot.id}-{free}"
+    # the identity leaves the joint limits out; the kernels compile them in, so their key has
+    # the limits' part too: a limit edit renders and compiles again, it derives nothing
+    key = (robot.id if free is None else f"{robot.id}-{free}") + f"-L{robot.limits_id}"
     if nominal is not None:
         key = f"{key}-n{nominal_key(nominal)}"
     if rebuild is None:
-        shipped = shipped_index().get(robot.id) if free is None and nominal is None else None
+        shipped = shipped_index().get(key) if free is None and nominal is None else None
         found = _find_kernels(key, free, shipped, report=True)
         if found is not None:
             return found
@@ -202,7 +204,9 @@ def _find_kernels(key: str, free, shipped, report: bool):
             continue
         manifest = read_manifest(folder)
         files = manifest.get("files", {})
-        if not (manifest.get("id") == key and manifest.get("format") == KERNEL_FORMAT
+        # a user folder records the whole key as its id, a shipped one the identity and limits
+        shipped_key = f"{manifest.get('id')}-L{manifest.get('limits')}" if folder == shipped else None
+        if not (key in (manifest.get("id"), shipped_key) and manifest.get("format") == KERNEL_FORMAT
                 and all(r in files for r in KERNEL_ROLES) and (free is None or manifest.get("free") == free)):
             continue
         if folder != shipped:
@@ -434,9 +438,11 @@ class Kernels:
         self.folder = folder
         self.free = manifest.get("free")   # the free parameter of a 7-joint arm's IK, else None
         if backend == "python":
-            self._mod = _import(folder / files["python"], f"{ident}_kinematics_{self.robot.id}")
+            self._mod = _import(folder / files["python"],
+                                f"{ident}_kinematics_{self.robot.id}_{self.robot.limits_id}")
         elif backend == "numpy":
-            self._mod = _import(folder / files["numpy"], f"{ident}_kinematics_numpy_{self.robot.id}")
+            self._mod = _import(folder / files["numpy"],
+                                f"{ident}_kinematics_numpy_{self.robot.id}_{self.robot.limits_id}")
         else:
             self._c_source, self._ident = folder / files["c_source"], ident
             try:
@@ -842,6 +848,6 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     if nominal is None:
         nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)
-    key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free,
+    key = (r.id, r.limits_id, backend, tuple(c_flags()) if backend == "c" else (), free,
            None if nominal is None else nominal_key(nominal))
     return memo("kernels", key, lambda: Kernels(r, backend, free, nominal))

@@ -44,7 +44,7 @@ from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
 from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
 from derive.kinematics.pose import as_pose_batch
-from derive.kinematics.relate import RELATE_TOL, Relation, relate
+from derive.kinematics.relate import RELATE_TOL, Relation, _axis_invariants, relate
 from derive.model.classify import Classification
 from derive.model.classify import classify as geometric_classify
 from derive.model.geometry import numeric_chain
@@ -337,19 +337,54 @@ def _find_relation(robot, tol: float = RELATE_TOL) -> Relation | None:
     below ``tol``, or None."""
     if robot.dof != 6 or any(j.type != "revolute" for j in robot.joints if not j.is_mimic):
         return None
+    try:
+        mine = _axis_invariants(robot)
+    except DeriveError:                 # mimic joints on the path: relate decides alone
+        mine = None
     best = None
+    for lib, theirs in _library_ur():
+        if lib.id == robot.id:
+            continue
+        if mine is not None and theirs is not None and not _same_invariants(mine, theirs, max(10 * tol, 1e-6)):
+            continue                    # relate's own first test, with the library's kept
+        rel = relate(robot, lib, tol=tol)
+        if rel is not None and (best is None or rel.error < best.error):
+            best = rel
+    return best
+
+
+def _library_ur() -> list:
+    """(robot, axis invariants) of the library robots with the UR closed form (exact, 6 joints,
+    :func:`ur_geometry`), read once per process: :func:`_find_relation` compares a robot's
+    invariants (:func:`derive.kinematics.relate._axis_invariants`) with these before it fits a
+    relation, so a search reads no library file twice and fits only the congruent ones."""
+    return memo("library-ur", None, _read_library_ur)
+
+
+def _read_library_ur() -> list:
+    out = []
     for name in list_robots():
         lib = load_robot(name)
-        if lib.dof != 6 or not lib.exact or lib.id == robot.id:
+        if lib.dof != 6 or not lib.exact:
             continue
         try:
             ur_geometry(lib)
         except DeriveError:
             continue
-        rel = relate(robot, lib, tol=tol)
-        if rel is not None and (best is None or rel.error < best.error):
-            best = rel
-    return best
+        try:
+            inv = _axis_invariants(lib)
+        except DeriveError:
+            inv = None
+        out.append((lib, inv))
+    return out
+
+
+def _same_invariants(mine, theirs, tol: float) -> bool:
+    (c1, d1), (c2, d2) = mine, theirs
+    if c1.shape != c2.shape or np.abs(c1 - c2).max(initial=0) > tol:
+        return False
+    both = np.isfinite(d1) & np.isfinite(d2)
+    return bool(np.all(np.abs(d1 - d2)[both] <= tol))
 
 
 def classify(robot) -> Classification:

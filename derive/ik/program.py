@@ -31,20 +31,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
 import sympy as sp
 
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError, InputError
-from derive.ik.closed_form import closed_form_relation, spherical_class, ur_geometry
+from derive.ik import class_programs
+from derive.ik.closed_form import URGeometry, closed_form_relation, spherical_class, ur_geometry
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
 from derive.ik.program7 import seven_joint_program
 from derive.ik.redundant import free_choice, redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.ik.spherical import SWGeometry, canonical_robot
 from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
-from derive.model.robot import load_robot
+from derive.model.robot import load_robot, robot_from_dict
 from derive.symbolic.chain import runs_quaternion
 from derive.symbolic.equations import POSES, derive_equations
 
@@ -112,15 +114,24 @@ def _ik_program(robot, free) -> IKProgram:
     if geo is not None:
         return _spherical_program(robot, geo)
     try:
-        ur_geometry(robot)
+        ur = ur_geometry(robot)
     except DeriveError:
         rel = closed_form_relation(robot)
         if rel is not None:
             return _related_program(robot, rel)
+    else:
+        return _ur_program(robot, ur)
     if not robot.exact:
         raise DeriveError(f"{robot.name}: no closed-form IK kernel: the description's fixed angles "
                           "are not all multiples of pi/12, so there are no exact equations to "
                           "solve; use derive.refine for the IK")
+    return _extracted_program(robot)
+
+
+def _extracted_program(robot, keep_symbols: bool = False) -> IKProgram:
+    """The program from the extraction on the robot's own derived equations, the robot's numbers
+    substituted (``keep_symbols``: its length parameters kept as symbols, for a class's shipped
+    program, :mod:`derive.ik.class_programs`)."""
     ext = extract(robot)
     chain = ext.chain
     _, sets = derive_equations(robot, symbolic=False)
@@ -129,7 +140,7 @@ def _ik_program(robot, free) -> IKProgram:
     loc = {str(t): t for t in thetas}
     values = {k: (sp.Integer(int(v)) if float(v).is_integer() else sp.Float(v, 17))
               for k, v in chain.parameters.items()}
-    bld = Builder(values)
+    bld = Builder({} if keep_symbols else values)
     _chain_pose(bld, chain.end_transform)
     defs = {k: v for k, v in ext.definitions.items()}
     emitted_defs: set = set()
@@ -288,6 +299,117 @@ def _related_program(robot, rel) -> IKProgram:
                      branch_labels=list(lib.branch_labels))
 
 
+#: The UR family's chain in thesis form (:data:`derive.ik.closed_form.UR_AXES`) as a description
+#: with its lengths as parameters (the UR5's values; the class program keeps them as symbols) and
+#: the end frame of the UR arms' standard-DH descriptions (Rx(pi/2) after the thesis chain), so
+#: that a standard-DH UR needs no pose transform before the shipped program.
+UR_CANONICAL = {
+    "name": "ur-canonical",
+    "title": "UR family, chain in thesis form (axes z, -y, -y, -y, -z, -y)",
+    "source": "thesis section 4.3.5; derive.ik.closed_form.ur_geometry",
+    "convention": "axis_angle",
+    "parameters": {"d1": 0.089159, "a2": -0.425, "a3": -0.39225, "d4": 0.10915, "d5": 0.09465,
+                   "d6": 0.0823},
+    "joints": [
+        {"name": "j1", "axis": [0, 0, 1], "link": [0, 0, "d1"]},
+        {"name": "j2", "axis": [0, -1, 0], "link": ["a2", 0, 0]},
+        {"name": "j3", "axis": [0, -1, 0], "link": ["a3", "-d4", 0]},
+        {"name": "j4", "axis": [0, -1, 0], "link": [0, 0, "-d5"]},
+        {"name": "j5", "axis": [0, 0, -1], "link": [0, "-d6", 0]},
+        {"name": "j6", "axis": [0, -1, 0], "link": [0, 0, 0]},
+    ],
+    "tool": {"rotation": {"axis": [1, 0, 0], "angle": "pi/2"}},
+}
+
+#: The UR class's length names (fields of :class:`derive.ik.closed_form.URGeometry`).
+UR_PARAMETERS = ("d1", "a2", "a3", "d4", "d5", "d6")
+
+
+def _clean(x: float) -> float:
+    """A length read off the numeric chain (a sum of the description's numbers) to 15
+    significant digits: -0.39225000000000004 is -0.39225 (a change below 1e-15 relative)."""
+    return float(f"{float(x):.15g}")
+
+
+def _dq_numbers(part_q, part_t, values: dict) -> np.ndarray:
+    q = [float(sp.sympify(e).xreplace(values)) for e in part_q]
+    t = [float(sp.sympify(e).xreplace(values)) for e in part_t]
+    return dq.from_rt(np.array(q), np.array(t))
+
+
+def _ur_program(robot, geo: URGeometry) -> IKProgram:
+    """The IK program of a robot with the UR structure in its own frames
+    (:func:`derive.ik.closed_form.ur_geometry`): the UR class's shipped program
+    (:mod:`derive.ik.class_programs`, derived once on :data:`UR_CANONICAL`) with the robot's
+    lengths substituted, after lines that move the pose into the canonical chain's end frame
+    (P G^-1 G_c, G the robot's end transform after its chain, G_c the canonical one's) when the
+    two end transforms differ. No symbolic derivation on the robot's own chain."""
+    tpl, params, (gq, gt) = class_programs.ur_template()
+    values = {params[k]: _number(_clean(getattr(geo, k))) for k in UR_PARAMETERS}
+    g_c = _dq_numbers(gq, gt, values)
+    move = dq._mul(dq.conj_quaternion(geo.g)[None], g_c[None])[0]
+    p = sp.symbols("p0:8", real=True)
+    ops = []
+    rep = dict(values)
+    if np.max(np.abs(move - dq.IDENTITY.reshape(8))) > 1e-15:
+        moved_syms = sp.symbols("pb0:8", real=True)
+        moved = dual_hamilton(p, [_number(x) if abs(x) > 1e-15 else sp.Integer(0) for x in move])
+        ops = [Op("let", str(s), sp.expand(e), depth=0) for s, e in zip(moved_syms, moved)]
+        rep.update(zip(p, moved_syms))
+
+    def subs(e):
+        return e.xreplace(rep) if isinstance(e, sp.Basic) else e
+
+    for op in tpl.ops:
+        args = tuple(subs(a) for a in op.args) if op.kind == "solution" else op.args
+        ops.append(Op(op.kind, op.name, subs(op.expr), op.name2, subs(op.cond), subs(op.other), args, op.depth))
+    steps = ([("pose in the canonical chain's end frame", "P G^-1 G_c", ["the robot's end transform G "
+                                                                         "differs from the canonical chain's"])]
+             if len(ops) > len(tpl.ops) else []) + list(tpl.steps)
+    return IKProgram(robot.name, robot.dof, ops=ops, branches=tpl.branches, free_joint=tpl.free_joint,
+                     free_rule=tpl.free_rule, steps=steps,
+                     parameters={params[k]: _clean(getattr(geo, k)) for k in UR_PARAMETERS},
+                     branch_labels=list(tpl.branch_labels))
+
+
+def class_data() -> dict:
+    """The class programs, derived now (the UR program from the extraction on
+    :data:`UR_CANONICAL` with its lengths as symbols, the spherical-wrist forms from the
+    canonical chain's equations), as the JSON data of :mod:`derive.ik.class_programs`."""
+    canon = robot_from_dict(UR_CANONICAL)
+    prog = _extracted_program(canon, keep_symbols=True)
+    prog.parameters = {sp.Symbol(k, real=True): None for k in UR_PARAMETERS}
+    chain = extract(canon).chain
+    ur = {"program": class_programs.dump_program(prog),
+          "g": [[class_programs.dump_expr(e) for e in part] for part in chain.end_transform]}
+    sw = canonical_robot(SWGeometry("canonical", *(1.0,) * 7, base=dq.IDENTITY.reshape(8),
+                                    tool=dq.IDENTITY.reshape(8), signs=np.ones(6),
+                                    offsets=np.zeros(6), error=0.0))
+    chain, sets = derive_equations(sw, symbolic=False)
+    eqs = {e.id: sp.expand(e.lhs - e.rhs) for s in sets for e in s.equations}
+    sf = spherical_forms(chain, eqs)
+    dump = class_programs.dump_expr
+    forms = {k: [dump(e) for e in getattr(sf, k)] for k in ("theta1", "theta3", "theta2")}
+    forms.update({k: dump(getattr(sf, k)) for k in ("x_def", "z_def", "X", "Z")})
+    forms["halves"] = {k: [dump(ns), dump(nc), dump(kk), list(ids)] for k, (ns, nc, kk, ids) in sf.halves.items()}
+    spherical = {"thetas": [dump(j.theta) for j in chain.joints],
+                 "parameters": [dump(k) for k in chain.parameters],
+                 "axes": [[dump(a) for a in j.axis] for j in chain.joints[:3]],
+                 "g": [[dump(e) for e in part] for part in chain.end_transform],
+                 "forms": forms}
+    return {"ur": ur, "spherical": spherical}
+
+
+def write_class_data(path=None) -> str:
+    """Derive the class programs (:func:`class_data`) and write them to ``path`` (default: the
+    shipped file, :data:`derive.ik.class_programs.DATA`); returns the path."""
+    path = class_programs.DATA if path is None else path
+    text = class_programs.render(class_data())
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
+    return str(path)
+
+
 def _free_for_reach(bld: Builder, ext, free, defs: dict, with_defs):
     """Lines for the free joint's value at the singular set, chosen for reach.
 
@@ -413,12 +535,10 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
        (exact at t5 = 0 and pi); at the wrist singularity (sin t5 below WRIST_SINGULAR) joint 4
        is free: the program takes the robot's q4 = 0 and joint 6 takes the rest.
     """
-    canon = canonical_robot(geo)
-    chain, sets = derive_equations(canon, symbolic=False)
-    eqs = {e.id: sp.expand(e.lhs - e.rhs) for s in sets for e in s.equations}
-    thetas = [j.theta for j in chain.joints]
+    tpl = class_programs.spherical_template()      # shipped: no derivation on the robot's chain
+    thetas = tpl["thetas"]
     t1, t2, t3, t4, t5, t6 = thetas
-    values = {k: _number(v) for k, v in chain.parameters.items()}
+    values = {tpl["parameters"][k]: _number(v) for k, v in geo.values.items()}
 
     def num(e):
         return sp.sympify(e).xreplace(values)
@@ -431,7 +551,7 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     conj_t = [_number(x) for x in dq.conj_quaternion(geo.tool)]
     moved = [sp.expand(e) for e in dual_hamilton(dual_hamilton(conj_b, p), conj_t)]
     pb = list(p) if moved == list(p) else [bld.let(f"pb{i}", e) for i, e in enumerate(moved)]
-    gq, gt = chain.end_transform
+    gq, gt = tpl["g"]
     if tuple(sp.sympify(e) for e in gq) != (1, 0, 0, 0):
         raise DeriveError(f"{robot.name}: the canonical chain's end transform has a rotation")
     qw = pb[:4]
@@ -441,7 +561,7 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     g_t = [num(e) for e in gt]
     for i, sym in enumerate((x_w, y_w, z_w)):
         bld.let(sym, sp.expand(trans[i] - sum(rot[i, k] * g_t[k] for k in range(3))))
-    sf = spherical_forms(chain, eqs)
+    sf = SphericalForms(**tpl["forms"])
     X, Z = sf.X, sf.Z
     # 1. theta1 (P.13)
     ka, kb, kc = (bld.tmp(num(e)) for e in sf.theta1)
@@ -467,8 +587,8 @@ def _spherical_program(robot, geo: SWGeometry) -> IKProgram:
     bld.let(t2, sp.atan2(sd * ns, sd * nc))
     # 4. the wrist (O.15-O.18): O pose quaternion = (Q1 Q2 Q3)^-1 rotation of the chain pose
     w_r, a_r, b_r, c_r = POSES["O"][:4]
-    j = chain.joints
-    inv = runs_quaternion([(j[2].axis, -t3), (j[1].axis, -t2), (j[0].axis, -t1)])
+    ax = tpl["axes"]
+    inv = runs_quaternion([(ax[2], -t3), (ax[1], -t2), (ax[0], -t1)])
     for sym, e in zip((w_r, a_r, b_r, c_r), hamilton(inv, qw)):
         bld.let(sym, sp.expand(e))
     halves = sf.halves

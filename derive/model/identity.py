@@ -1,12 +1,12 @@
 """The identity of a robot: a hash of its normalised description.
 
 Two descriptions have the same identity exactly when they describe the same kinematics:
-the same joints (type, parent, driving variable, mimic relation, motion axis, origin, limits)
-and the same end frames, every number in SI units after the file's units are applied, and the
-same exactness (whether every fixed angle is a multiple of pi/12, which decides how the
-equations are derived). The robot's name, title, source, joint names and file path do not
-enter: a copy of ``ur5.yaml`` under another name is the UR5, and a copy with one number
-changed is another robot.
+the same joints (type, parent, driving variable, mimic relation, motion axis, origin) and the
+same end frames, every number in SI units after the file's units are applied, and the same
+exactness (whether every fixed angle is a multiple of pi/12, which decides how the equations are
+derived). The robot's name, title, source, joint names, file path and joint limits do not enter:
+a copy of ``ur5.yaml`` under another name is the UR5, a copy with one joint limit edited is
+still the UR5 (nothing is derived again), and a copy with one length changed is another robot.
 
 The fixed motions enter in their URDF form (:func:`kinematic`): each joint's origin (its
 parent's fixed motions after the motion, its own before, and its offset) and each end frame
@@ -15,7 +15,10 @@ file splits the same transform into operations does not matter where the form is
 is (a URDF origin), and a robot exported as URDF and read back (:mod:`derive.model.export`)
 has the identity of the robot it was exported from.
 
-Every cache and artifact of dq-derive is keyed by this identity (:mod:`derive.cache`).
+Every cache and artifact of dq-derive is keyed by this identity (:mod:`derive.cache`). The
+artifacts that embed the joint limits (the generated kernels: the C nearest-solution pass and
+the extension's windings compile the limits in) add :func:`limits_digest` to their key, so a
+limit edit renders and compiles them again from the derivation kept under the identity.
 """
 
 from __future__ import annotations
@@ -61,7 +64,6 @@ def normalised(joints, ends: dict, default_end: str, exact: bool) -> dict:
             "type": j.type, "parent": j.parent, "variable": j.variable,
             "multiplier": _num(j.multiplier), "mimic_offset": _num(j.mimic_offset),
             "axis": _vec(j.axis), "origin": origin,
-            "limits": None if j.limits is None else _vec(j.limits),
         })
     ends_out = [{"parent": e.parent, "origin": origin, "default": name == default_end}
                 for (name, e), origin in zip(ends.items(), end_origins)]
@@ -74,3 +76,15 @@ def digest(joints, ends: dict, default_end: str, exact: bool) -> str:
     text = json.dumps(normalised(joints, ends, default_end, exact), sort_keys=True,
                       separators=(",", ":"))
     return hashlib.sha256(text.encode()).hexdigest()[:ID_LENGTH]
+
+
+#: Hex digits of the SHA-256 digest kept as the limits' key part.
+LIMITS_LENGTH = 8
+
+
+def limits_digest(joints) -> str:
+    """The key part (8 hex digits) of a description's joint limits (each joint's [lower, upper]
+    in SI units, or none), for the artifacts that embed them besides ``Robot.id``."""
+    text = json.dumps([None if j.limits is None else _vec(j.limits) for j in joints],
+                      separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest()[:LIMITS_LENGTH]

@@ -50,7 +50,7 @@ import yaml
 import derive.model as model
 from derive.cache import memo
 from derive.errors import RobotFileError, UnknownRobotError
-from derive.model.identity import digest
+from derive.model.identity import digest, limits_digest
 
 LIBRARY_DIR = Path(__file__).resolve().parent.parent / "robots"
 
@@ -203,6 +203,12 @@ class Robot:
             if not j.is_mimic:
                 out.append(j.limits if j.limits is not None else (-math.inf, math.inf))
         return np.array(out, dtype=float).reshape(-1, 2)
+
+    @property
+    def limits_id(self) -> str:
+        """The key part of the joint limits (:func:`derive.model.identity.limits_digest`), which
+        ``id`` leaves out: artifacts that embed the limits (the kernels) are keyed by both."""
+        return limits_digest(self.joints)
 
     @property
     def revolute(self) -> np.ndarray:
@@ -435,11 +441,16 @@ def _load_file(path: str, base: str | None = None, tip: str | None = None, urdf:
     return memo("robot-file", (path, text, base, tip, urdf), lambda: _parse(path, text, base, tip, urdf))
 
 
+#: PyYAML's safe loader, the libyaml (C) parser where PyYAML has it (ten times faster: the
+#: library's files are read in classify's search for a related robot).
+_YAML_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
 def _parse(path: str, text: str, base, tip, urdf: bool) -> Robot:
     if urdf:
         return robot_from_dict(model.urdf.urdf_description(path, text, base, tip), path)
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_YAML_LOADER)
     except yaml.YAMLError as exc:
         raise RobotFileError(f"{path}: not valid YAML ({exc})") from None
     except (ValueError, OverflowError, RecursionError) as exc:     # e.g. an integer of > 4300 digits
