@@ -193,17 +193,28 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
 
 
 def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
+    # a decimal UR5 (alpha 1.5708) is a near-class arm: its kernels solve the nominal's closed
+    # form and polish (derive.codegen.polish); an arm near no class gets FK kernels only
     path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="approx-ur5"), 1.5708))
     k = derive.kernels(path, "c")
     err = capfd.readouterr().err
     assert "[approx-ur5]" in err and "deriving" in err and "numeric product" in err
     q = rng.uniform(-np.pi, np.pi, (200, 6))
     assert _same_pose(k.fk(q), reference.fk(path, q)) < 1e-12
-    assert not k.has_ik
-    with pytest.raises(DeriveError, match="derive.refine"):
-        k.ik(reference.fk(path, q[0]))
+    assert k.has_ik and k.nominal is not None
+    sols, counts = k.ik(reference.fk(path, q[:20]))
+    for i in range(20):
+        assert _same_pose(k.fk(sols[i, :counts[i]]), np.repeat(reference.fk(path, q[i])[None], counts[i], 0)) < 1e-10
     robot = derive.load_robot(path)
-    assert (user_folder(f"{robot.id}-L{robot.limits_id}") / "manifest.json").is_file()
+    folder = user_folder(f"{robot.id}-L{robot.limits_id}")
+    assert any(f.name.startswith(folder.name + "-n") for f in folder.parent.iterdir())
+    far = _write(tmp_path / "far.yaml", _decimal_alphas(_ur5(name="tilted-ur5"), 1.4))
+    kf = derive.kernels(far, "c")
+    assert not kf.has_ik and kf.nominal is None
+    with pytest.raises(DeriveError, match="derive.refine"):
+        kf.ik(reference.fk(far, q[0]))
+    far_robot = derive.load_robot(far)
+    assert (user_folder(f"{far_robot.id}-L{far_robot.limits_id}") / "manifest.json").is_file()
 
 
 def test_derivation_stops_at_its_time_budget(tmp_path, cache, monkeypatch):

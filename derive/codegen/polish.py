@@ -112,7 +112,7 @@ def nominal_program(robot, nominal: Nominal, free: str | None = None) -> IKProgr
     nom = ik_program(nominal.robot, free)
     hold = held_joint(nom)
     p = sp.symbols("p0:8", real=True)
-    moved_syms = sp.symbols("pb0:8", real=True)
+    moved_syms = sp.symbols("pn0:8", real=True)
     conj_b = [_number(x) for x in dq.conj_quaternion(np.asarray(nominal.base, dtype=float))]
     conj_t = [_number(x) for x in dq.conj_quaternion(np.asarray(nominal.tool, dtype=float))]
     moved = dual_hamilton(dual_hamilton(conj_b, p), conj_t)
