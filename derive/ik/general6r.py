@@ -49,7 +49,7 @@ from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import find_artifact, memo, step, store_artifacts, task
-from derive.errors import DeriveError
+from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import MERGE_TOL
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
@@ -298,7 +298,21 @@ def plan(robot, progress: bool = True) -> Plan:
     artifact ``general6r`` (JSON) in the user cache; made within :func:`derive.cache.task` with
     progress lines. DeriveError when the robot is not a 6R or both directions degenerate."""
     robot = load_robot(robot)
-    return memo("general6r-plan", robot.id, lambda: _plan(robot, progress))
+    out = memo("general6r-plan", robot.id, lambda: _plan_or_error(robot, progress))
+    if isinstance(out, DeriveError):
+        raise out
+    return out
+
+
+def _plan_or_error(robot, progress):
+    """The plan, or the DeriveError saying why there is none (kept, so the derivation is not
+    tried again in this process)."""
+    try:
+        return _plan(robot, progress)
+    except DeriveError as exc:
+        if isinstance(exc, BudgetError):
+            raise
+        return exc
 
 
 def _plan(robot, progress):
@@ -534,8 +548,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
     scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
     mx = mx / np.where(scale_m > 0, scale_m, 1.0) + _NUDGE * np.eye(12)
-    v = _solve_safe(mx, np.broadcast_to(_START, (len(ip), 12)))
-    v = np.where(np.isfinite(v), v, 0.0).reshape(-1, 4, 3)
+    v = _null_vectors(mx)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
@@ -564,6 +577,27 @@ def _solve_chunk(robot, pl: Plan, poses):
         qc = -qc[:, ::-1]
     qc = wrap_angle(qc)
     return _collect(robot, pl, poses, ip, qc, n, degen)
+
+
+def _null_vectors(m):
+    """(k, 4, 3): the null vector of each nearly singular (k, 12, 12): one step of inverse
+    iteration (a batched solve), and the SVD's last right singular vector where that solve
+    fails (an exactly singular pivot) or leaves a residual |M v| > 1e-8 |M| |v|."""
+    v = np.zeros((len(m), 12))
+    try:
+        with np.errstate(all="ignore"):
+            v = np.linalg.solve(m, np.broadcast_to(_START, (len(m), 12))[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        if len(m) > 1:
+            h = len(m) // 2
+            return np.concatenate([_null_vectors(m[:h]), _null_vectors(m[h:])])
+    with np.errstate(all="ignore"):
+        v = v / np.linalg.norm(v, axis=1, keepdims=True)
+        res = np.linalg.norm(np.einsum("kij,kj->ki", m, v), axis=1)
+    bad = ~(res <= 1e-8 * np.abs(m).max(axis=(1, 2)))
+    if np.any(bad):
+        v[bad] = np.linalg.svd(m[bad])[2][:, -1]
+    return v.reshape(-1, 4, 3)
 
 
 def _inv_safe(a):
