@@ -201,18 +201,26 @@ def derive_elimination(c, label="general 6R") -> Elimination:
     l_r = h[:3, :3] * lv
     p_r = h[:3, :3] * pv + h[:3, 3]
 
-    def products(lvec, pvec):
-        pp = (pvec.T * pvec)[0]
-        pl = (pvec.T * lvec)[0]
-        return [*lvec, *pvec, pp, pl, *pvec.cross(lvec), *(pp * lvec - 2 * pl * pvec)]
+    lgens = (s[2], co[2], s[3], co[3], s[4], co[4])
+    rgens = (s[0], co[0], s[1], co[1], *pose)
+
+    def products(lvec, pvec, gens):
+        """The 14 left sides as sympy Polys (multiplied as Polys: much faster than expanding
+        the products of expressions)."""
+        lv_, pv_ = [sp.Poly(sp.expand(e), *gens) for e in lvec], [sp.Poly(sp.expand(e), *gens) for e in pvec]
+        pp = sum((a * a for a in pv_[1:]), pv_[0] * pv_[0])
+        pl = sum((a * b for a, b in zip(pv_[1:], lv_[1:])), pv_[0] * lv_[0])
+        cross = [pv_[1] * lv_[2] - pv_[2] * lv_[1], pv_[2] * lv_[0] - pv_[0] * lv_[2],
+                 pv_[0] * lv_[1] - pv_[1] * lv_[0]]
+        return [*lv_, *pv_, pp, pl, *cross, *(pp * a - 2 * pl * b for a, b in zip(lv_, pv_))]
 
     step("the 14 equations (positions, directions and the Lagrange products)")
-    left_eqs, right_eqs = products(l_l, p_l), products(l_r, p_r)
+    left_eqs, right_eqs = products(l_l, p_l, lgens), products(l_r, p_r, rgens)
 
     def reduced(expr, gens, trig_pairs):
         """{exponent tuple: float} of expr with s_i^2 replaced by 1 - c_i^2."""
         terms = {}
-        for mon, coef in sp.Poly(sp.expand(expr), *gens).terms():
+        for mon, coef in expr.terms():
             stack = [(list(mon), float(coef))]
             while stack:
                 e, v = stack.pop()
@@ -234,8 +242,6 @@ def derive_elimination(c, label="general 6R") -> Elimination:
     pl = np.zeros((14, 3, 9))
     r0 = np.zeros((14, len(_POSE_MONOMIALS)))
     qm = np.zeros((14, 8, len(_POSE_MONOMIALS)))
-    lgens = (s[2], co[2], s[3], co[3], s[4], co[4])
-    rgens = (s[0], co[0], s[1], co[1], *pose)
     drop = 1e-11
 
     def trig_slot(e0, e1):
