@@ -63,9 +63,8 @@ ACCEPT = 1e-10
 #: polish brings it onto the pose. Generous, so that a double root split by rounding (about the
 #: square root of rounding, 1e-8) is never lost.
 REAL_TOL = 1e-3
-#: Newton iterations on every candidate, and the extra ones for candidates not yet converged.
-NEWTON_STEPS = 2
-NEWTON_EXTRA = 30
+#: Newton iterations at most per candidate (most need one or two).
+NEWTON_MAX = 30
 #: A solution is singular (flag) when the Jacobian's smallest singular value over its largest is
 #: below this.
 SINGULAR_TOL = 1e-8
@@ -458,10 +457,10 @@ class General6RSolutions:
 
 
 MAX_SOLUTIONS = 16
-#: Inverse iteration for the null vector: a fixed start vector and a shift of 1e-14 (relative to
+#: Inverse iteration for the null vector: a fixed start vector and a shift of 1e-11 (relative to
 #: the matrix's largest entry) that keeps the solve finite at an exact eigenvalue.
 _START = np.random.default_rng(12).standard_normal(12)
-_NUDGE = 1e-14
+_NUDGE = 1e-11
 
 
 def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
@@ -578,7 +577,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     frames, _ = _chain_frames(c, qc)
     r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
     qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc = _newton(c, qc, target[ip], NEWTON_STEPS)
+    qc = _newton(c, qc, target[ip])
     if pl.reverse:
         qc = -qc[:, ::-1]
     qc = wrap_angle(qc)
@@ -588,7 +587,8 @@ def _solve_chunk(robot, pl: Plan, poses):
 def _null_vectors(m):
     """(k, 4, 3): the null vector of each nearly singular (k, 12, 12): one step of inverse
     iteration (a batched solve), and the SVD's last right singular vector where that solve
-    fails (an exactly singular pivot) or leaves a residual |M v| > 1e-8 |M| |v|."""
+    fails (an exactly singular pivot) or leaves a residual |M v| > 1e-6 |M| |v| (x3 then is the
+    real part of a complex pair, or a double root: the SVD gives the best start for Newton)."""
     v = np.zeros((len(m), 12))
     try:
         with np.errstate(all="ignore"):
@@ -600,7 +600,7 @@ def _null_vectors(m):
     with np.errstate(all="ignore"):
         v = v / np.linalg.norm(v, axis=1, keepdims=True)
         res = np.linalg.norm(np.einsum("kij,kj->ki", m, v), axis=1)
-    bad = ~(res <= 1e-8 * np.abs(m).max(axis=(1, 2)))
+    bad = ~(res <= 1e-6 * np.abs(m).max(axis=(1, 2)))
     if np.any(bad):
         v[bad] = np.linalg.svd(m[bad])[2][:, -1]
     return v.reshape(-1, 4, 3)
@@ -646,38 +646,27 @@ def _errors(c, q, target):
     return err, jac
 
 
-def _newton(c, q, target, steps):
-    """Damped Newton steps on the product-form FK (geometric Jacobian); candidates not yet on
-    the pose get NEWTON_EXTRA more."""
-    for it in range(steps + NEWTON_EXTRA):
-        if it == steps:
-            err, _ = _errors(c, q, target)
-            todo = np.nonzero(np.max(np.abs(err), axis=1) > 1e-13)[0]
-            if len(todo) == 0:
-                break
-            q[todo] = _newton_sub(c, q[todo], target[todo], NEWTON_EXTRA)
+def _newton(c, q, target, steps=None):
+    """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
+    error (scaled lengths and rad) is below 1e-13 or NEWTON_MAX steps are done."""
+    q = q.copy()
+    idx = np.arange(len(q))
+    for _ in range(NEWTON_MAX):
+        err, jac = _errors(c, q[idx], target[idx])
+        todo = np.max(np.abs(err), axis=1) > 1e-13
+        idx, err, jac = idx[todo], err[todo], jac[todo]
+        if len(idx) == 0:
             break
-        q = _step(c, q, target)
+        jt = np.swapaxes(jac, 1, 2)
+        a = jt @ jac
+        lam = 1e-14 * (np.trace(a, axis1=1, axis2=2) + 1e-30)
+        a = a + lam[:, None, None] * np.eye(6)
+        dq_ = _solve_safe(a, np.einsum("mij,mj->mi", jt, err))
+        big = np.max(np.abs(dq_), axis=1, keepdims=True)
+        dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
+        new = q[idx] + dq_
+        q[idx] = np.where(np.isfinite(new), new, q[idx])
     return q
-
-
-def _newton_sub(c, q, target, steps):
-    for _ in range(steps):
-        q = _step(c, q, target)
-    return q
-
-
-def _step(c, q, target):
-    err, jac = _errors(c, q, target)
-    jt = np.swapaxes(jac, 1, 2)
-    a = jt @ jac
-    lam = 1e-14 * (np.trace(a, axis1=1, axis2=2) + 1e-30)
-    a = a + lam[:, None, None] * np.eye(6)
-    dq_ = _solve_safe(a, np.einsum("mij,mj->mi", jt, err))
-    big = np.max(np.abs(dq_), axis=1, keepdims=True)
-    dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
-    out = q + dq_
-    return np.where(np.isfinite(out), out, q)
 
 
 def _collect(robot, pl, poses, ip, qc, n, degen):
@@ -694,7 +683,10 @@ def _collect(robot, pl, poses, ip, qc, n, degen):
         return q, counts, sing, degen
     # singular flag: the Jacobian's relative smallest singular value
     c = pl.c
-    _, jac = _errors(c, qc, _chain_frames(c, qc)[1])
+    frames, end = _chain_frames(c, qc)
+    axes = frames[:, :, :3, 2]
+    jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
+    jac = jac.transpose(0, 2, 1)
     ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)     # squared singular values, ascending
     is_sing = ev[:, 0] < SINGULAR_TOL ** 2 * ev[:, -1]
     order = np.lexsort((qc[:, 0], ip))
