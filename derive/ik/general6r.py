@@ -291,6 +291,7 @@ class Plan:
     offsets: np.ndarray     # (3,) d4, d5 and the first d3
     d3: np.ndarray          # (K,) candidate offsets of q3
     notes: tuple
+    cut: dict | None = None  # the loop cut at another joint (see _check_cut), or None
 
 
 def _seeded(robot_id: str) -> np.random.Generator:
@@ -344,6 +345,16 @@ def _plan(robot, progress):
                 break
             why.append(f"{'reversed' if reverse else 'forward'} chain: {info}")
         if data is None:
+            for e in (2, 1):
+                step(f"the loop cut at joint {e} (the pose between the two eliminated joints)")
+                ok, info, extra = _check_cut(c, e)
+                step(f"cut at joint {e}: {info}")
+                if ok:
+                    data = {"format": FORMAT, "reverse": False, "cut": extra, "rank_q": 8,
+                            "notes": why + [f"cut at joint {e}: {info}"]}
+                    break
+                why.append(f"cut at joint {e}: {info}")
+        if data is None:
             raise DeriveError(f"{robot.name}: the general 6R elimination degenerates in both directions "
                               f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
         store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(data))},
@@ -356,6 +367,13 @@ def info_rank(info: str) -> int:
 
 
 def _plan_from(robot, c, scale, data):
+    if data.get("cut"):
+        rng = _seeded(robot.id)
+        offsets = rng.uniform(-np.pi, np.pi, 3)
+        empty = Elimination(pl=np.zeros((14, 3, 9)), r0=np.zeros((14, 0)), q=np.zeros((14, 8, 0)), monomials=())
+        return Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8, mix=np.eye(6),
+                    offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]), notes=tuple(data["notes"]),
+                    cut=data["cut"])
     elim = Elimination(pl=np.array(data["pl"]), r0=np.array(data["r0"]).reshape(14, -1),
                        q=np.array(data["q"]).reshape(14, 8, -1),
                        monomials=tuple(tuple(m) for m in data["monomials"]))
@@ -365,7 +383,7 @@ def _plan_from(robot, c, scale, data):
     offsets = rng.uniform(-np.pi, np.pi, 3)
     d3 = offsets[2] + np.array([0.0, 2.0, 4.0])
     return Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
-                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]))
+                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None)
 
 
 def _check_generic(robot, cc, elim):
@@ -476,7 +494,8 @@ def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
     degen = np.zeros(n, dtype=bool)
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
-        q[s:e], counts[s:e], sing[s:e], degen[s:e] = _solve_chunk(robot, pl, poses[s:e])
+        q[s:e], counts[s:e], sing[s:e], degen[s:e] = (_solve_chunk_cut if pl.cut else _solve_chunk)(
+            robot, pl, poses[s:e])
     reason = ["" if k else "unreachable: no real root of the eliminant reproduces the pose" for k in counts]
     return General6RSolutions(q=q, counts=counts, singular=sing, degenerate=degen, reason=reason)
 
@@ -626,6 +645,186 @@ def _solve_safe(a, b):
             return np.linalg.lstsq(a[0], b[0], rcond=None)[0][None]
         h = len(a) // 2           # find the singular ones by halves: the rest stay batched
         return np.concatenate([_solve_safe(a[:h], b[:h]), _solve_safe(a[h:], b[h:])])
+
+
+# --------------------------------------------------------------------------- #
+# The loop cut at another joint (arms whose standard elimination degenerates)
+# --------------------------------------------------------------------------- #
+# The loop Rz(q1) K1 Rz(q2) K2 ... Rz(q6) K6 = I with K_j = C_{j+1} (j = 1..5) and the pose link
+# K6 = C7 T^-1 C1. Cut at joint e: G_k = Rz(q_k) K_k, G_e ... G_{e+5} = I, so with the z line of
+# joint e, G_{e+4} G_{e+5} [z] = (G_{e+1} G_{e+2} G_{e+3})^-1 K_e^-1 [z]: the same 14 equations,
+# the pair (e+4, e+5) eliminated linearly (it holds the pose link for e = 1, 2), the triple
+# (e+1, e+2, e+3) constant. Both sides are multilinear in (s, c, 1) of their joints; their
+# coefficients are fitted exactly from 3 sample angles per joint (the fit is checked at random
+# angles), the pair's per pose.
+_SAMPLES = np.array([0.0, 2.0, 4.0])
+_BS = np.stack([np.sin(_SAMPLES), np.cos(_SAMPLES), np.ones(3)], 1)       # (sample, (s, c, 1))
+
+
+def _line_eqs(m):
+    """The 14 equations' left sides for transforms m (..., 4, 4) applied to the z line."""
+    l, p = m[..., :3, 2], m[..., :3, 3]
+    pp = np.sum(p * p, -1)[..., None]
+    pl = np.sum(p * l, -1)[..., None]
+    return np.concatenate([l, p, pp, pl, np.cross(p, l), pp * l - 2 * pl * p], -1)
+
+
+def _cut_joints(e):
+    j = [((e - 1 + k) % 6) + 1 for k in range(1, 6)]
+    return j[:3], j[3:]                   # the constant triple, the pair
+
+
+def _links(c, target=None):
+    """K_1..K_5 (constant) and K_6 (pose link, (n, 4, 4) when target is given)."""
+    k = {j: c[j] for j in range(1, 6)}
+    if target is not None:
+        k[6] = c[6] @ np.linalg.inv(target) @ c[0]
+    return k
+
+
+def _triple_coefs(c, e):
+    """(14, 27) coefficients of the triple side, (s, c, 1) of the three joints in order."""
+    (a, b, d), _ = _cut_joints(e)
+    k = _links(c)
+    combos = np.array(list(itertools.product(_SAMPLES, repeat=3)))
+    g = [(_rz(combos[:, i]) @ k[j]) for i, j in enumerate((a, b, d))]
+    m = np.linalg.inv(k[e] @ g[0] @ g[1] @ g[2])
+    vals = _line_eqs(m)                                     # (27, 14)
+    return np.linalg.solve(np.kron(np.kron(_BS, _BS), _BS), vals).T
+
+
+def _pair_coefs(c, e, target):
+    """(n, 14, 9) coefficients of the pair side per pose."""
+    _, (a, b) = _cut_joints(e)
+    k = _links(c, target)
+    out = []
+    for t0, t1 in itertools.product(_SAMPLES, repeat=2):
+        ga = _rz(np.full(len(target), t0)) @ (k[a] if np.ndim(k[a]) == 3 else np.broadcast_to(k[a], (len(target), 4, 4)))
+        gb = _rz(np.full(len(target), t1)) @ (k[b] if np.ndim(k[b]) == 3 else np.broadcast_to(k[b], (len(target), 4, 4)))
+        out.append(_line_eqs(ga @ gb))
+    vals = np.stack(out, 1)                                  # (n, 9, 14)
+    return np.swapaxes(np.linalg.solve(np.kron(_BS, _BS), vals), 1, 2)
+
+
+def _check_cut(c, e):
+    """Whether the cut at joint e works on random configurations: the fit is exact, the
+    equations hold, Q has rank 8 and the 12 x 12 pencil is regular for one eigen-variable."""
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-np.pi, np.pi, (6, 6))
+    _, target = _chain_frames(c, q)
+    y = _triple_coefs(c, e)
+    x = _pair_coefs(c, e, target)
+    (a, b, d), (f, h) = _cut_joints(e)
+    tr = lambda j: np.stack([np.sin(q[:, j - 1]), np.cos(q[:, j - 1]), np.ones(6)], 1)
+    ym = np.einsum("na,nb,nc->nabc", tr(a), tr(b), tr(d)).reshape(6, 27)
+    xm = np.einsum("na,nb->nab", tr(f), tr(h)).reshape(6, 9)
+    resid = np.abs(ym @ y.T - np.einsum("nek,nk->ne", x, xm)).max()
+    if not resid < 1e-9:
+        return False, f"the equations miss the configurations by {resid:.1e}", None
+    qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+    null = np.swapaxes(qq[:, :, 8:], 1, 2)
+    yy = np.broadcast_to(y, (6, 14, 27)).copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    ten = (null @ yy).reshape(6, 6, 3, 3, 3)
+    best = None
+    for ev in range(3):
+        t = np.moveaxis(ten, 2 + ev, 2)
+        th = rng.uniform(-np.pi, np.pi, 6)
+        sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
+        sv = np.linalg.svd(_twelve(sig @ _t45(0.3, -0.7)), compute_uv=False)
+        worst = float(np.min(sv[:, -1] / sv[:, 0]))
+        if worst > RANK_TOL and (best is None or worst > best[1]):
+            best = (ev, worst)
+    if best is None:
+        return False, "the 12 x 12 pencil is singular for every q of every joint of the triple", None
+    return True, (f"triple {(a, b, d)}, eigen-variable q{(a, b, d)[best[0]]}, pencil regular (smallest "
+                  f"relative singular value {best[1]:.1e})"), {"e": e, "ev": best[0], "y": y.tolist()}
+
+
+def _solve_chunk_cut(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c = pl.c
+    e, ev = pl.cut["e"], pl.cut["ev"]
+    y = np.array(pl.cut["y"])
+    triple, (f, h) = _cut_joints(e)
+    x = _pair_coefs(c, e, target)                           # (n, 14, 9)
+    qx = x[:, :, :8]
+    qq, rr = np.linalg.qr(qx, mode="complete")
+    diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
+    degen = diag.min(axis=1) < RANK_TOL * diag.max(axis=1)
+    null = np.swapaxes(qq[:, :, 8:], 1, 2)
+    yy = np.broadcast_to(y, (n, 14, 27)).copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    order = [ev] + [i for i in range(3) if i != ev]         # eigen joint, then the vector's two
+    ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
+    sig = (ten.reshape(n, 6, 3, 9) @ _t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
+    mats = _twelve(sig)
+    best_cond = np.full(n, np.inf)
+    best = np.zeros(n, dtype=int)
+    lead_inv = np.zeros((n, 12, 12))
+    mk = np.zeros((n, 3, 12, 12))
+    todo = np.arange(n)
+    for k, d3 in enumerate(pl.d3):
+        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])
+        lead = cand[:, 2]
+        inv = _inv_safe(lead)
+        with np.errstate(all="ignore"):
+            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
+        cond = np.where(np.isfinite(cond), cond, np.inf)
+        better = cond < best_cond[todo]
+        idx = todo[better]
+        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        todo = todo[~(best_cond[todo] < GOOD_COND)]
+        if len(todo) == 0:
+            break
+    degen |= ~(best_cond < LEADING_COND)
+    d3 = pl.d3[best]
+    comp = np.zeros((n, 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
+    comp = np.where(np.isfinite(comp), comp, 0.0)
+    lam = np.linalg.eigvals(comp)
+    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    ip, ie = np.nonzero(real)
+    x3 = lam[ip, ie].real
+    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
+    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
+    mx = mx / np.where(scale_m > 0, scale_m, 1.0) + _NUDGE * np.eye(12)
+    v = _null_vectors(mx)
+    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
+    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
+    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
+    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
+    vals = {order[0]: d3[ip] + 2 * np.arctan(x3),
+            order[1]: pl.offsets[0] + 2 * np.arctan2(num4, den4),
+            order[2]: pl.offsets[1] + 2 * np.arctan2(num5, den5)}
+    qt = [vals[i] for i in range(3)]                         # the triple's joints in order
+    tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
+    ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
+    rhs = np.einsum("mek,mk->me", yy[ip], ym)
+    yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    r8 = rr[ip, :8]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
+    x2 = _solve_safe(r8, yv)
+    qc = np.zeros((len(ip), 6))
+    for j, t in zip(triple, qt):
+        qc[:, j - 1] = t
+    qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
+    qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
+    # joint e from the rest: Rz(q_e) = (C1 Rz1 .. C_e)^-1 T (C_{e+1} Rz_{e+1} .. C7)^-1
+    frames, _ = _chain_frames(c, qc)
+    after = np.broadcast_to(c[6], (len(ip), 4, 4))
+    rz = _rz(qc)
+    for j in range(6, e, -1):                               # joints 6 .. e+1
+        after = c[j - 1] @ rz[:, j - 1] @ after
+    rel = np.linalg.inv(frames[:, e - 1]) @ target[ip] @ np.linalg.inv(after)
+    qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
+    qc = wrap_angle(_newton(c, qc, target[ip]))
+    return _collect(robot, pl, poses, ip, qc, n, degen)
 
 
 def _errors(c, q, target):
