@@ -6,7 +6,7 @@ poses, in the same run: time per pose and the distribution of solution counts, p
 Arms: the library's general-6r (ssik: ``Manipulator.from_dh`` on its DH numbers, ssik's default
 path; its first solve of a new arm derives for minutes, then its cache keeps it) and the Fanuc
 CRX-10iA as ssik.prebuilt bakes it (ssik: the prebuilt module's Python and native solve; ours
-reports why the elimination does not apply). Needs ssik (pip install ssik).
+through the loop cut at joint 2). Needs ssik (pip install ssik).
 """
 
 from __future__ import annotations

@@ -175,18 +175,44 @@ def crx_description():
                "tool": {"translation": m._JOINT_T_RIGHTS[5][:3, 3].tolist()}}
 
 
-def test_crx_geometry_degenerate_elimination_is_reported(tmp_path):
+@pytest.fixture(scope="module")
+def crx(tmp_path_factory):
     import yaml
     m, desc = crx_description()
-    path = tmp_path / "ssik-crx-geometry.yaml"
+    path = tmp_path_factory.mktemp("crx") / "ssik-crx-geometry.yaml"
     path.write_text(yaml.safe_dump(desc))
-    robot = derive.load_robot(str(path))
+    return m, derive.load_robot(str(path))
+
+
+def test_crx_geometry_is_ssik_arm_and_needs_the_cut(crx):
+    m, robot = crx
     q = np.random.default_rng(5).uniform(-1.5, 1.5, (5, 6))
     for qq in q:        # the transcription is ssik's arm
         assert np.abs(reference.fk_matrix(robot, qq) - m.fk(qq)).max() < 1e-12
-    # CRX: axes 2 and 3 parallel, 1-2, 4-5 and 5-6 intersecting: the 12 x 12 pencil has rank 10
-    # for every q3 in both directions, so the eliminant vanishes identically
-    with pytest.raises(DeriveError, match="degenerates in both directions.*singular for every q3"):
-        general6r.plan(robot, progress=False)
-    with pytest.raises(DeriveError, match="no closed-form IK.*general 6R"):
-        reference.ik(robot, reference.fk(robot, q[0]))
+    assert classify(robot).cls == "general"
+    # CRX: axes 2 and 3 parallel, 1-2, 4-5 and 5-6 intersecting: the standard cut's 12 x 12
+    # pencil has rank 10 for every q3 in both directions; the cut at joint 2 is regular
+    notes = " ".join(general6r.plan(robot, progress=False).notes)
+    assert "singular for every q3" in notes and "cut at joint 2: triple (3, 4, 5)" in notes
+
+
+def test_crx_all_solutions_contain_the_generating_one_and_ssik(crx):
+    m, robot = crx
+    rng = np.random.default_rng(20261206)
+    q = rng.uniform(robot.limits[:, 0], robot.limits[:, 1], (300, 6))
+    res = general6r.solve(robot, reference.fk(robot, q))
+    assert res.counts.max() <= 16
+    for i in range(len(q)):
+        sols = res.q[i, :res.counts[i]]
+        assert np.all(np.isfinite(sols))
+        assert np.abs(reference.fk_matrix(robot, sols) - reference.fk_matrix(robot, q[i])).max() < 1e-10
+        assert _contains(sols, q[i]), i
+    total = 0
+    for i in range(100):        # ssik's general solver (Raghavan-Roth + Manocha-Canny, its C++ path)
+        for s in m.solve(reference.fk_matrix(robot, q[i]), native=True):
+            total += 1
+            assert _contains(res.q[i, :res.counts[i]], np.asarray(s.q, float)), (i, s.q)
+    assert total >= 400
+    dist = np.bincount(res.counts, minlength=17)
+    print("CRX-10iA solution counts (number of poses with 0..16 solutions):", dist.tolist())
+    assert dist[12:].sum() > 0                                   # more than a Pieper arm's 8

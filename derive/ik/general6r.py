@@ -34,7 +34,10 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
 
 A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
 geometry) is tried in reverse order (the IK of T^-1 for the reversed chain, where q4 is the
-eigen-variable); when both degenerate, :func:`plan` raises DeriveError saying so.
+eigen-variable), then with the loop cut at joint 2 or 1 (:func:`_check_cut`: the pair of joints
+eliminated linearly holds the pose link, the triple's coefficients are constant; this solves the
+Fanuc CRX-10iA, whose standard pencil has rank 10 for every q3); when all degenerate,
+:func:`plan` raises DeriveError saying so.
 """
 
 from __future__ import annotations
