@@ -216,3 +216,16 @@ def test_crx_all_solutions_contain_the_generating_one_and_ssik(crx):
     dist = np.bincount(res.counts, minlength=17)
     print("CRX-10iA solution counts (number of poses with 0..16 solutions):", dist.tolist())
     assert dist[12:].sum() > 0                                   # more than a Pieper arm's 8
+
+
+def test_crx_root_shared_by_several_solutions(crx):
+    """At this symmetric pose four solutions share q3 (a 4-fold eigenvalue with a 4-dimensional
+    eigenspace): each gets its own monomial vector (the shift structure), so the generating
+    configuration is found; the single null vector of the simple-root path mixed them."""
+    _, robot = crx
+    q = np.array([0.0, math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, -math.pi / 2])
+    res = general6r.solve(robot, reference.fk(robot, q[None]))
+    sols = res.q[0, :res.counts[0]]
+    assert _contains(sols, q)
+    assert np.sum(np.abs(wrap_angle(sols[:, 2] - q[2])) < 1e-6) >= 4
+    assert np.abs(reference.fk_matrix(robot, sols) - reference.fk_matrix(robot, q)).max() < 1e-10

@@ -572,10 +572,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     x3 = lam[ip, ie].real
     # the null vector of M(x3) (the monomials x4^i x5^j) by one step of inverse iteration from a
     # fixed vector: M(x3) is singular to rounding, so its solution is the null vector
-    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
-    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
-    mx = mx / np.where(scale_m > 0, scale_m, 1.0) + _NUDGE * np.eye(12)
-    v = _null_vectors(mx)
+    v = _monomial_vectors(mk, ip, x3)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
@@ -604,6 +601,62 @@ def _solve_chunk(robot, pl: Plan, poses):
         qc = -qc[:, ::-1]
     qc = wrap_angle(qc)
     return _collect(robot, pl, poses, ip, qc, n, degen)
+
+
+#: Rows of the 12 monomials x4^i x5^j (index 3 i + j) and their shifts by x4 and by x5.
+_BASE4 = [3 * i + j for i in range(3) for j in range(3)]
+_SHIFT4 = [3 * (i + 1) + j for i in range(3) for j in range(3)]
+_BASE5 = [3 * i + j for i in range(4) for j in range(2)]
+_SHIFT5 = [3 * i + j + 1 for i in range(4) for j in range(2)]
+#: Eigenvalues x3 of one pose closer than this (relative to 1 + |x3|) are one multiple root.
+CLUSTER_TOL = 1e-6
+
+
+def _monomial_vectors(mk, ip, x3):
+    """(k, 4, 3): for each candidate x3 the monomial vector (x4^i x5^j) in the null space of
+    M(x3). A simple root: :func:`_null_vectors`. A multiple root shared by several solutions
+    (the same q3, a null space of dimension d > 1, as at symmetric poses of the CRX): the d
+    monomial vectors in the null space V are found by the shift structure of the monomials
+    (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
+    (Stetter's eigenvector method)."""
+    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
+    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
+    mx = mx / np.where(scale_m > 0, scale_m, 1.0)
+    v = _null_vectors(mx + _NUDGE * np.eye(12))
+    if len(ip) < 2:
+        return v
+    order = np.lexsort((x3, ip))
+    ips, xs = ip[order], x3[order]
+    near = (ips[1:] == ips[:-1]) & (np.abs(xs[1:] - xs[:-1]) <= CLUSTER_TOL * (1 + np.abs(xs[1:])))
+    if not np.any(near):
+        return v
+    # clusters: runs of "near"; their heads' singular values in one batch
+    starts = np.nonzero(near & ~np.r_[False, near[:-1]])[0]
+    ends = starts.copy()
+    for i, st in enumerate(starts):
+        e = st
+        while e < len(near) and near[e]:
+            e += 1
+        ends[i] = e
+    heads = order[starts]
+    _, sv, vt = np.linalg.svd(mx[heads])
+    dims = np.minimum(ends - starts + 1, np.maximum(1, np.sum(sv < 1e-7 * sv[:, :1], axis=1)))
+    for st, en, d, vth in zip(starts, ends, dims, vt):
+        if d < 2:
+            continue
+        members = order[st:en + 1]
+        basis = vth[-d:].T                                   # (12, d)
+        with np.errstate(all="ignore"):
+            a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
+                 + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
+            _, cvec = np.linalg.eig(a)
+            vecs = (basis @ cvec).T                          # (d, 12), complex in general
+            # a real monomial vector times a complex scale: rotate each onto the real axis
+            big = vecs[np.arange(d), np.argmax(np.abs(vecs), axis=1)]
+            vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
+        if np.all(np.isfinite(vecs)):
+            v[members[:d]] = vecs.reshape(d, 4, 3)
+    return v
 
 
 def _null_vectors(m):
@@ -736,12 +789,29 @@ def _check_cut(c, e):
         sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
         sv = np.linalg.svd(_twelve(sig @ _t45(0.3, -0.7)), compute_uv=False)
         worst = float(np.min(sv[:, -1] / sv[:, 0]))
-        if worst > RANK_TOL and (best is None or worst > best[1]):
-            best = (ev, worst)
+        if not worst > RANK_TOL:
+            continue
+        # prefer the eigen-variable whose real roots are simple: a root shared by two solutions
+        # (the same q of this joint) needs the slower multiple-root path
+        mats = _twelve(t.reshape(6, 6, 3, 9).transpose(0, 2, 1, 3) @ _t45(0.3, -0.7))
+        mk = np.einsum("ak,naij->nkij", _half(0.5), mats)
+        inv = _inv_safe(mk[:, 2])
+        comp = np.zeros((6, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        lam = np.linalg.eigvals(np.where(np.isfinite(comp), comp, 0.0))
+        shared = 0
+        for row in lam:
+            xr = np.sort(row[np.abs(row.imag) < REAL_TOL * (1 + np.abs(row) ** 2)].real)
+            shared += int(np.sum(np.abs(np.diff(xr)) <= CLUSTER_TOL * (1 + np.abs(xr[1:]))))
+        if best is None or (shared, -worst) < (best[2], -best[1]):
+            best = (ev, worst, shared)
     if best is None:
         return False, "the 12 x 12 pencil is singular for every q of every joint of the triple", None
     return True, (f"triple {(a, b, d)}, eigen-variable q{(a, b, d)[best[0]]}, pencil regular (smallest "
-                  f"relative singular value {best[1]:.1e})"), {"e": e, "ev": best[0], "y": y.tolist()}
+                  f"relative singular value {best[1]:.1e}), {best[2]} shared roots on 6 random poses"), \
+        {"e": e, "ev": best[0], "y": y.tolist()}
 
 
 def _solve_chunk_cut(robot, pl: Plan, poses):
@@ -793,10 +863,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
-    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
-    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
-    mx = mx / np.where(scale_m > 0, scale_m, 1.0) + _NUDGE * np.eye(12)
-    v = _null_vectors(mx)
+    v = _monomial_vectors(mk, ip, x3)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
