@@ -23,7 +23,7 @@ from derive.algebra import dualquat, quaternion
 from derive.apps.path import path
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError, RobotFileError, UnknownRobotError
-from derive.ik.closed_form import classify
+from derive.ik.nearclass import classify
 from derive.kinematics import pose
 from derive.model.robot import Robot, list_robots, load_robot
 

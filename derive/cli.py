@@ -47,7 +47,9 @@ from derive.cache import find_artifact, shipped_index
 from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
-from derive.ik.closed_form import classify, spherical_class
+from derive.ik import nearclass
+from derive.ik.closed_form import spherical_class
+from derive.ik.nearclass import classify
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
 from derive.ik.srs import arm_angle, ik_joint
@@ -274,12 +276,16 @@ def _robot_row(name: str) -> dict:
     closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else "")
     kind = redundant_kind(r) if not closed else None
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
+    # a near-class arm (only where the description has near misses or names a nominal: fast)
+    near = (not closed and not kind and (r.nominal or c.near_misses) and reference._near(r))
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
+                    f"nominal {nearclass.nominal_class(r)} + Newton polish (numpy reference)" if near else
                     f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
     has_ik = bool(closed or kind)          # the seven-joint arms' kernels solve IK with the free parameter
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
-            "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else None),
+            "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else
+                                         f"nominal {nearclass.nominal_class(r)} + polish" if near else None),
             "free_parameter": FREE_NAMES[kind] if kind else None,
             "ik": ik,
             "kernels": ("FK+IK" if has_ik else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else "")
@@ -317,7 +323,9 @@ def cmd_robots(args) -> int:
         print(line)
     print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
-          "--seed Q; SRS also with joint 3 given: --free V --free-joint 3); kernels and CasADi "
+          "--seed Q; SRS also with joint 3 given: --free V --free-joint 3), nominal X + Newton polish = "
+          "a near-class arm solved by its nominal robot's closed form and Newton steps on its own FK; "
+          "kernels and CasADi "
           "functions: shipped in the package, cached (derived earlier), or derived on first use and cached")
     return EXIT_OK
 
@@ -399,6 +407,8 @@ def cmd_ik(args) -> int:
     deg = args.deg
     head = {"robot": robot.name, "target": {"given": target, **_pose_dict(pose, deg)},
             "joints": _joint_meta(robot, deg)}
+    if reference._near(robot):
+        return _ik_near(robot, args, pose, q, head)
     if redundant_kind(robot) is not None:
         return _ik_redundant(robot, args, pose, q, head)
     if args.free is not None or args.sweep is not None or args.free_joint is not None:
@@ -446,6 +456,52 @@ def cmd_ik(args) -> int:
         return EXIT_OK
     print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
     print(f"{len(rows)} solution(s) ({what}):")
+    for line in _table(robot, [([str(i + 1)], s, note) for i, (s, note, _) in enumerate(rows)], deg,
+                       [("#", "", 3)]):
+        print(line)
+    return EXIT_OK
+
+
+def _ik_near(robot, args, pose, q, head) -> int:
+    """ik of a near-class arm (no exact class, a nominal robot of one): the nominal's closed form +
+    Newton polish (derive.reference.ik), residual and iterations per solution. Seven joints:
+    --free V with --free-joint 3 (SRS class) or --free V = q7 (Panda class). --seed: the solution
+    nearest to the seed inside the joint limits."""
+    deg = args.deg
+    if args.sweep is not None:
+        raise InputError(f"ik: --sweep is not available for {robot.name} (a near-class arm: solved "
+                         "with a joint given, --free V" + (" --free-joint 3)" if robot.dof == 7 else ")"))
+    free = free_name = None
+    if robot.dof == 7:
+        if args.free is None:
+            raise InputError(f"ik: {robot.name} has 7 joints: give --free V, the value of the joint held "
+                             f"({'--free-joint 3' if nearclass.nominal_class(robot) == 'SRS' else 'q7'})")
+        free = math.radians(args.free) if deg else float(args.free)
+        free_name = f"q{args.free_joint}" if args.free_joint is not None else None
+    elif args.free is not None or args.free_joint is not None:
+        raise InputError(f"ik: --free and --free-joint are for seven-joint arms; {robot.name} has {robot.dof}")
+    seed = None if args.seed is None else _joints_in(robot, args.seed, "--seed", deg)
+    within = args.within_limits or seed is not None
+    sols = reference.ik(robot, pose, q_ref=q, within_limits=within, sort_by=seed, free=free,
+                        free_name=free_name)
+    if seed is not None:
+        sols = sols[:1]
+    line = nearclass.describe(robot)
+    rows = [(s, f"residual {r:.1e}, {int(k)} Newton step(s)" + (", singular" if g else ""),
+             {"singular": bool(g), "residual": float(r), "iterations": int(k)})
+            for s, g, r, k in zip(sols, sols.singular, sols.residual, sols.iterations)]
+    head = {**head, "solved_by": line, "polish": sols.polish}
+    if not rows:
+        return _no_solution(robot, args, head, sols.reason or "no solution")
+    what = ("nearest to the seed, within the joint limits" if seed is not None else
+            "nominal closed form + Newton polish" + (", inside the joint limits" if within else ""))
+    if args.json:
+        _print_json({**head, "count": len(rows), "selection": what, "reason": "",
+                     "solutions": [{"q": _jlist(_joints_out(robot, s, deg)), **extra} for s, _, extra in rows]})
+        return EXIT_OK
+    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+    print(f"class: {geometric_classify(robot).cls}; {line}")
+    print(f"{len(rows)} solution(s) ({what}; {sols.polish}):")
     for line in _table(robot, [([str(i + 1)], s, note) for i, (s, note, _) in enumerate(rows)], deg,
                        [("#", "", 3)]):
         print(line)

@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from derive.errors import InputError, as_finite_array
-from derive.ik import closed_form, redundant, select
+from derive.ik import closed_form, nearclass, redundant, select, srs
 from derive.ik.closed_form import IKSolutions
 from derive.ik.redundant import RedundantIKSolutions, Sweep, free_parameter
 from derive.kinematics.fk import (
@@ -38,13 +38,43 @@ __all__ = ["fk", "fk_matrix", "fk_pair", "frame_poses", "joint_positions", "pose
            "RedundantIKSolutions", "Sweep"]
 
 
+def _near(robot) -> bool:
+    """No exact class with a closed form, but a nominal robot of one
+    (:func:`derive.ik.nearclass.nominal`)."""
+    return nearclass.exact_class(robot) is None and nearclass.nominal(robot) is not None
+
+
+def _srs_q3(robot, pose, free, q_ref, within_limits, sort_by) -> IKSolutions:
+    """One pose of an SRS arm with joint 3 given (:func:`derive.ik.srs.ik_joint`)."""
+    P, single = as_pose_batch(pose)
+    if not single:
+        raise InputError("pose: ik() takes one pose; use ik_batch() for several")
+    qr = None if q_ref is None else as_finite_array(q_ref, "q_ref", last_dim=7).reshape(1, 7)
+    r = srs.ik_joint(robot, P, 3, redundant.free_values(free, 1), q_ref=qr)
+    k = int(r.count[0])
+    sols, sing = r.q[0, :k], r.singular[0, :k]
+    reason = str(r.reason[0])
+    if within_limits:
+        q, cnt, _, sg = select.within_limits(sols[None], np.array([k]), robot.limits, robot.revolute,
+                                             singular=sing[None])
+        sols, sing = q[0, :cnt[0]], sg[0, :cnt[0]]
+        if len(sols) == 0 and not reason:
+            reason = f"no solution inside the joint limits ({k} outside)"
+    if sort_by is not None and len(sols):
+        order = select.sort_order(sols, as_finite_array(sort_by, "sort_by", last_dim=7), robot.revolute,
+                                  windings=within_limits)
+        sols, sing = sols[order], sing[order]
+    return IKSolutions(sols.reshape(-1, 7), sing, reason)
+
+
 def _no_free(robot) -> InputError:
     return InputError(f"free: {robot.name} has {robot.dof} joint variables and no free parameter; "
                       "free= is for the seven-joint arms of the Franka Panda class (q7) and the "
                       "SRS class (the arm angle psi)")
 
 
-def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, free=None) -> IKSolutions:
+def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, free=None,
+       free_name=None) -> IKSolutions:
     """Every closed-form IK solution of one pose (a unit dual quaternion (8,) or a 4x4 matrix
     of the robot's end frame), as :class:`IKSolutions` (k, dof) with ``.singular`` and
     ``.reason`` (why there is none).
@@ -56,8 +86,20 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
     a :class:`RedundantIKSolutions` with ``.branch`` and ``.free`` too
     (:func:`derive.ik.redundant.ik`). ``q_ref``: the joints a singular set leaves free are
     taken from it; ``within_limits``: only solutions inside the joint limits, every 2 pi
-    winding; ``sort_by``: sorted by distance to this configuration."""
+    winding; ``sort_by``: sorted by distance to this configuration. ``free_name="q3"``: for the
+    SRS class, ``free`` is the value of joint 3 instead of the arm angle
+    (:func:`derive.ik.srs.ik_joint`).
+
+    Near-class arms (no exact class, a nominal robot of one within the tolerances of
+    :func:`derive.ik.nearclass.nominal`): the nominal's closed form and a Newton polish on the
+    arm's own FK (:func:`derive.ik.nearclass.ik`); the result also has ``.residual`` and
+    ``.iterations`` per solution and ``.polish``. Seven-joint near-class arms are solved with a
+    joint given: joint 3 (``free_name="q3"``) for the SRS class, joint 7 for the Panda class."""
     robot = load_robot(robot)
+    if _near(robot):
+        return nearclass.ik(robot, pose, q_ref, within_limits, sort_by, free=free, free_name=free_name)
+    if free_name == "q3" and redundant.redundant_kind(robot) == "srs":
+        return _srs_q3(robot, pose, free, q_ref, within_limits, sort_by)
     if redundant.redundant_kind(robot) is not None:
         if free is None:
             raise InputError("free: " + redundant.missing_free_message(robot))
@@ -67,7 +109,7 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
     return closed_form.ik(robot, pose, q_ref=q_ref, within_limits=within_limits, sort_by=sort_by)
 
 
-def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False):
+def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False, free_name=None):
     """Closed-form IK of n poses (n, 8) or (n, 4, 4): (solutions (n, 8, dof) NaN-padded, valid
     rows first, counts (n,)).
 
@@ -76,8 +118,22 @@ def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False):
     Seven-joint arms: ``free`` is required, q7 (Panda class) or the arm angle psi (SRS class),
     a number or one per pose (rad); ``details``: (solutions, counts, branch (n, 8), singular
     (n, 8)) as the kernels' ``details=True`` (:func:`derive.ik.redundant.branch_labels` says
-    what the branch bits choose)."""
+    what the branch bits choose). ``free_name="q3"``: SRS class with joint 3 given.
+    Near-class arms: :func:`derive.ik.nearclass.ik_batch` (nominal closed form + Newton polish;
+    its result also has residual and iterations per solution)."""
     robot = load_robot(robot)
+    if _near(robot):
+        if details:
+            raise InputError("details: a near-class arm has no branch ids; "
+                             "derive.ik.nearclass.ik_batch gives residual and iterations per solution")
+        r = nearclass.ik_batch(robot, poses, q_ref, free=free, free_name=free_name)
+        return r.q, r.counts
+    if free_name == "q3" and redundant.redundant_kind(robot) == "srs":
+        P, _ = as_pose_batch(poses)
+        r = srs.ik_joint(robot, P, 3, redundant.free_values(free, len(P)),
+                         q_ref=None if q_ref is None else np.broadcast_to(
+                             as_finite_array(q_ref, "q_ref", last_dim=7).reshape(-1, 7), (len(P), 7)))
+        return (r.q, r.count, r.branch, r.singular) if details else (r.q, r.count)
     if redundant.redundant_kind(robot) is not None:
         if free is None:
             raise InputError("free: " + redundant.missing_free_message(robot))

@@ -29,7 +29,7 @@ def test_robots_lists_library(capsys):
     assert rows["ur5"][start:].startswith("UR ")
     assert rows["irb120"][start:].startswith("OPW ")
     assert rows["seed-arm"][start:].startswith("no: refine")
-    assert rows["ur5-calibrated"][start:].startswith("no: refine, seeded by ur5")
+    assert rows["ur5-calibrated"][start:].startswith("nominal UR + Newton polish")   # issue 30 item 3
     kstart = header.index("kernels")
     assert rows["ur5"][kstart:].startswith("FK+IK, shipped")
     assert rows["seed-arm"][kstart:].startswith("FK, on demand")

@@ -154,7 +154,10 @@ def test_robots_table_says_what_ships(capsys):
             assert row["casadi"].endswith(", shipped") == ("casadi/fk" in roles), name
             assert (", ik," in row["casadi"]) == ("casadi/ik" in roles), name
         else:
-            assert row["kernels"].startswith("FK+IK") == _has_closed_form_ik(robot), name
+            # a near-class arm (ur5-calibrated): the numpy reference solves it; its kernels' IK
+            # (the polish in C) comes with the emitted-kernel side of issue 30 item 3
+            assert row["kernels"].startswith("FK+IK") == (_has_closed_form_ik(robot)
+                                                         and not reference._near(robot)), name
             assert not row["kernels"].endswith("shipped") and not row["casadi"].endswith("shipped"), name
 
 

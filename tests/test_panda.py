@@ -173,7 +173,7 @@ def test_round_trip_10k_configurations(name):
     assert not np.any(res.singular)
     # the generating configuration lies within the limits, so it is among within_limits' solutions
     # (its per-pose loop is slow: the first 1000 poses)
-    part = P.PandaSolutions(*(f[:1000] for f in res))
+    part = res.rows(slice(0, 1000))
     ql, cl, bl, _ = P.within_limits(robot, part)
     lim = robot.limits
     inside = np.all((ql >= lim[:, 0] - 1e-12) & (ql <= lim[:, 1] + 1e-12), axis=-1)

@@ -18,7 +18,8 @@ from sympy.printing.pycode import PythonCodePrinter
 from derive._version import __version__
 from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
-from derive.codegen.formats import FILES, KERNEL_FORMAT  # defined there for the loader
+from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key  # defined there for the loader
+from derive.codegen.polish import held_joint, nominal_program, polish_context
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
@@ -135,7 +136,9 @@ def _arg(printer, a, column):
     return printer.doprint(a.xreplace({s: sp.Symbol(column(int(s.name[1:]))) for s in qs}))
 
 
-def _context(robot, command: str, free: str | None = None) -> dict:
+def _context(robot, command: str, free: str | None = None, nominal=None) -> dict:
+    """The templates' context; ``nominal`` (a :class:`derive.ik.nearclass.Nominal`): the IK is the
+    nominal robot's program polished on the robot's own FK (:mod:`derive.codegen.polish`)."""
     k = fk_kernel(robot)
     py, c = _Py(), _C()
     trig = []
@@ -172,8 +175,30 @@ def _context(robot, command: str, free: str | None = None) -> dict:
         "n_sincos_padded": -(-k.n_sincos // 4) * 4,
         "limits": limits,
         "always_winding": all(lim["revolute"] and lim["full_turn"] for lim in limits),
-        **_ik_context(robot, free),
+        **_ik_context(robot, free, nominal),
+        "polish": None if nominal is None else _polish_context(robot, nominal, free),
     }
+
+
+def _polish_context(robot, nominal, free=None) -> dict:
+    """:func:`derive.codegen.polish.polish_context` with this module's printers, each let line
+    marked ``used`` when the C code reads it (no unused variable under -Wall -Werror)."""
+    hold = held_joint(nominal_program(robot, nominal, free))
+    ctx = polish_context(robot, nominal, {"py": _Py(), "cc": _C()}, hold)
+    used: set = set()
+    for e in [*ctx["R"], *ctx["t"]]:
+        used.update(_IDENT.findall(e["cc"]))
+    for col in ctx["cols"]:
+        for e in col["z"] + ([] if col["prismatic"] else col["c"]):
+            used.update(_IDENT.findall(e["cc"]))
+    for d in reversed(ctx["lines"]):
+        if d["kind"] == "let":
+            d["used"] = d["name"] in used
+            if d["used"]:
+                used.update(_IDENT.findall(d["cc"]))
+        else:
+            d["use_s"], d["use_c"] = d["s"] in used, d["c"] in used
+    return ctx
 
 
 def _mark_used_c(trig, temps, outs) -> None:
@@ -210,14 +235,18 @@ def _limit_context(robot) -> list:
             for (lo, hi), rev in zip(robot.limits.tolist(), robot.revolute.tolist())]
 
 
-def _ik_context(robot, free: str | None = None) -> dict:
+def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
     """The IK program's lines printed for each language ("ik" is None when the robot has none);
-    ``free`` as :func:`derive.ik.program.ik_program`."""
+    ``free`` as :func:`derive.ik.program.ik_program`; ``nominal``: the program of
+    :func:`derive.codegen.polish.nominal_program` (a DeriveError when it has none)."""
 
-    try:
-        prog = ik_program(robot, free)
-    except DeriveError as exc:
-        return {"ik": None, "ik_missing": str(exc)}
+    if nominal is not None:
+        prog = nominal_program(robot, nominal, free)
+    else:
+        try:
+            prog = ik_program(robot, free)
+        except DeriveError as exc:
+            return {"ik": None, "ik_missing": str(exc)}
     # the branching program is printed for the Python kernels; the C kernels run the flat one
     printers = {"py": _Py(), "np": _Np()}
 
@@ -257,7 +286,9 @@ def _ik_context(robot, free: str | None = None) -> dict:
     first: dict = {}
     same_as = [[0] * robot.dof for _ in range(prog.branches)]
     for d in flat:
-        if d["kind"] == "solution":
+        if nominal is not None and d["kind"] == "solution":   # polished: no two leaves share a value
+            same_as[d["leaf"]] = [d["leaf"]] * robot.dof
+        elif d["kind"] == "solution":
             for j, e in enumerate(d["q"]):
                 same_as[d["leaf"]][j] = first.setdefault((j, e), d["leaf"])
     near, dups = _duplicate_tests(same_as, prog.branches, robot.dof)
@@ -558,26 +589,30 @@ def write_ikfast(robot, out_dir, command: str | None = None) -> list:
     return [out / name]
 
 
-def render_kernels(robot, command: str | None = None, free: str | None = None) -> dict:
+def render_kernels(robot, command: str | None = None, free: str | None = None, nominal=None) -> dict:
     """{role: (file name, text)} of every kernel file of one robot (roles as in :data:`FILES`);
     ``free``: a 7-joint arm's free parameter where its class offers a choice (the IK functions
-    then take that one, :func:`derive.ik.program.ik_program`)."""
+    then take that one, :func:`derive.ik.program.ik_program`); ``nominal``: a near-class arm's
+    :class:`derive.ik.nearclass.Nominal`, whose closed form the IK runs and polishes on the
+    robot's own FK (:mod:`derive.codegen.polish`)."""
     robot = load_robot(robot)
     command = command or (f"dq-derive kernels {robot.name}" if free is None else
                           f"derive.kernels({robot.name!r}, free={free!r})")
-    ctx = _context(robot, command, free)
+    ctx = _context(robot, command, free, nominal)
     env = template_environment()
     return {role: (name.format(id=ctx["id"]), env.get_template(tpl).render(ctx))
             for role, (tpl, name) in FILES.items()}
 
 
-def kernel_manifest(robot, free: str | None = None) -> dict:
+def kernel_manifest(robot, free: str | None = None, nominal=None) -> dict:
     """What a kernel folder's manifest records besides its files: the robot's identity and
     name, the identifier stem of its functions, the IK's branch labels and, for a 7-joint arm,
-    the name of the free parameter its IK functions take (``free``: "psi", "q3" or "q7")."""
+    the name of the free parameter its IK functions take (``free``: "psi", "q3" or "q7"); for
+    near-class kernels (``nominal``) the nominal robot, its identity and the relation's key
+    (:func:`derive.codegen.polish.nominal_key`)."""
     robot = load_robot(robot)
     try:
-        prog = ik_program(robot, free)
+        prog = ik_program(robot, free) if nominal is None else nominal_program(robot, nominal, free)
     except DeriveError:
         prog = None
     out = {"id": robot.id, "robot": robot.name, "prefix": _prefix(robot, free),
@@ -585,25 +620,29 @@ def kernel_manifest(robot, free: str | None = None) -> dict:
            "branch_labels": list(prog.branch_labels) if prog else []}
     if prog is not None and prog.free:
         out["free"] = prog.free            # the IK functions take the free parameter fv
+    if nominal is not None:
+        out["nominal"] = {"robot": nominal.robot.name, "id": nominal.robot.id, "key": nominal_key(nominal),
+                          "deviation": float(nominal.deviation), "how": nominal.how}
     return out
 
 
-def write_kernels(robot, out_dir, command: str | None = None, force: bool = False) -> list:
+def write_kernels(robot, out_dir, command: str | None = None, force: bool = False, nominal=None) -> list:
     """Write the kernel files and the CMake package of the C kernels (:func:`render_cmake`) into
     out_dir/<robot name>/ and record them in its manifest (a folder of another robot is refused
-    unless ``force``: :func:`derive.cache.claim_folder`)."""
+    unless ``force``: :func:`derive.cache.claim_folder`); ``nominal``: near-class kernels
+    (:func:`render_kernels`)."""
     robot = load_robot(robot)
     out = Path(out_dir) / robot.name
     claim_folder(out, robot.id, robot.name, force)
     with task(robot.name):
         step("rendering the FK/IK kernels")
-        files = render_kernels(robot, command)
+        files = render_kernels(robot, command, nominal=nominal)
         files.update(render_cmake(robot, command))
     out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in files.values():
         (out / name).write_text(text, encoding="utf-8")
         written.append(out / name)
-    written.append(write_manifest(out, {**kernel_manifest(robot),
+    written.append(write_manifest(out, {**kernel_manifest(robot, nominal=nominal),
                                         "files": {role: name for role, (name, _) in files.items()}}))
     return written

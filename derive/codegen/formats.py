@@ -5,6 +5,7 @@ sympy nor jinja2, so loading shipped or cached kernels does not either (docs/arc
 
 from __future__ import annotations
 
+import hashlib
 from importlib import resources
 from pathlib import Path
 
@@ -31,3 +32,14 @@ def template_source(name: str) -> str:
     if TEMPLATE_DIR.is_dir():
         return (TEMPLATE_DIR / name).read_text(encoding="utf-8")
     return resources.files("derive").joinpath("templates", name).read_text(encoding="utf-8")
+
+
+def nominal_key(nominal) -> str:
+    """12 hex digits identifying a near-class arm's nominal robot and relation
+    (:class:`derive.ik.nearclass.Nominal`: the nominal's identity, B, T, the signs and the offsets,
+    each number to 17 significant digits): part of the cache key and of the manifest of the kernels
+    polished from it (:mod:`derive.codegen.polish`)."""
+    parts = [nominal.robot.id]
+    for arr in (nominal.base, nominal.tool, nominal.signs, nominal.offsets):
+        parts.append(",".join(f"{float(x):.17g}" for x in list(getattr(arr, "ravel", lambda: arr)())))
+    return hashlib.sha256("|".join(parts).encode()).hexdigest()[:12]

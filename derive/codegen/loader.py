@@ -68,7 +68,7 @@ from derive.cache import (
 # first use through its attributes (derive/codegen/__init__.py), only when kernels are derived
 # or an extension is built, so loading shipped or cached kernels does not import them
 import derive.codegen as codegen
-from derive.codegen.formats import FILES, KERNEL_FORMAT, template_source
+from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key, template_source
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik import redundant
@@ -151,7 +151,8 @@ def _machine_key() -> str:
 KERNEL_ROLES = tuple(FILES)
 
 
-def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) -> tuple[Path, dict]:
+def kernel_folder(robot, free: str | None = None, rebuild: str | None = None,
+                  nominal=None) -> tuple[Path, dict]:
     """(folder, manifest) of the kernel sources of a robot: the shipped ``generated/<robot>/``
     folder of its identity, else the user cache's (its files verified against the manifest's
     checksums; one that fails is reported on stderr and derived again), else they are derived
@@ -163,12 +164,17 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) ->
     class, :func:`derive.ik.redundant.free_choice`), kept in the user cache beside the default ones, in a folder and
     under a manifest ``id`` of "<identity>-<free>"; their functions are named <robot>_<free>_*.
     ``rebuild``: why the kernels found before did not load; they are derived again whatever the
-    folders hold."""
+    folders hold. ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal`; the
+    kernels that solve its closed form and polish (:mod:`derive.codegen.polish`) are kept in the
+    user cache under "<identity>-n<key>", the key naming the nominal robot and the relation
+    (:func:`derive.codegen.formats.nominal_key`)."""
     robot = load_robot(robot)
-    free = free_choice(robot, free)
+    free = free_choice(robot if nominal is None else nominal.robot, free)
     key = robot.id if free is None else f"{robot.id}-{free}"
+    if nominal is not None:
+        key = f"{key}-n{nominal_key(nominal)}"
     if rebuild is None:
-        shipped = shipped_index().get(robot.id) if free is None else None
+        shipped = shipped_index().get(robot.id) if free is None and nominal is None else None
         found = _find_kernels(key, free, shipped, report=True)
         if found is not None:
             return found
@@ -183,8 +189,8 @@ def kernel_folder(robot, free: str | None = None, rebuild: str | None = None) ->
                 found = _find_kernels(key, free, None, report=False)
                 if found is not None:      # another process derived them while this one waited
                     return found
-        files = _derive_kernels(robot, key, free, rebuild)
-        folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free))
+        files = _derive_kernels(robot, key, free, rebuild, nominal)
+        folder = store_artifacts(key, files, codegen.emit.kernel_manifest(robot, free, nominal))
     return folder, read_manifest(folder)
 
 
@@ -211,13 +217,13 @@ def _find_kernels(key: str, free, shipped, report: bool):
     return None
 
 
-def _derive_kernels(robot, key: str, free, rebuild: str | None) -> dict:
+def _derive_kernels(robot, key: str, free, rebuild: str | None, nominal=None) -> dict:
     if rebuild:
         notice(f"{rebuild}: deriving the kernels of {key} again")
     with task(robot.name):
         step(f"deriving the kernels of {key} again" if rebuild else
              f"no kernels of identity {key} in generated/ or the user cache: deriving them")
-        files = codegen.emit.render_kernels(robot, free=free)
+        files = codegen.emit.render_kernels(robot, free=free, nominal=nominal)
         step("kernel sources rendered")
     return files
 
@@ -404,17 +410,19 @@ def _rows(f, q: np.ndarray, width: int) -> np.ndarray:
 class Kernels:
     """The kernels of one robot for one backend."""
 
-    def __init__(self, robot, backend: str, free: str | None = None):
+    def __init__(self, robot, backend: str, free: str | None = None, nominal=None):
         self.robot = load_robot(robot)
         self.backend = backend
         self.dof = self.robot.dof
+        #: the near-class arm's nominal robot and relation whose closed form the IK polishes, or None
+        self.nominal = nominal
         if backend not in BACKENDS:
             raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
-        folder, manifest = kernel_folder(self.robot, free)
+        folder, manifest = kernel_folder(self.robot, free, nominal=nominal)
         try:
             self._load(folder, manifest)
         except KernelLoadError as exc:     # a kernel file that does not load: derived again, once
-            folder, manifest = kernel_folder(self.robot, free, rebuild=str(exc))
+            folder, manifest = kernel_folder(self.robot, free, rebuild=str(exc), nominal=nominal)
             self._load(folder, manifest)
 
     def _load(self, folder, manifest):
@@ -736,7 +744,7 @@ class Kernels:
                                  f"(one seed, or one per pose), got {seeds.shape}")
             seeds = np.broadcast_to(seeds, (len(sols), self.dof))
             res = select.nearest(sols, counts, seeds, self.robot.limits, self.robot.revolute, branch, sing, tol)
-        if np.any(res.singular):
+        if np.any(res.singular) and self.nominal is None:     # (near-class: the polished solution stands)
             seeds = np.broadcast_to(np.asarray(q_seed, dtype=float), res.q.shape)   # checked above
             at = np.nonzero(res.singular)[0]
             poses = np.broadcast_to(self._tool_free(P)[0], (len(res.q), 8))[at]
@@ -753,13 +761,54 @@ class Kernels:
                                                                "branch", "singular")))
         return res
 
+    def ik_polish(self, P, free=None):
+        """Near-class kernels (``nominal=``): the solutions with their polish, (solutions (n, 8,
+        dof) NaN-padded, counts (n,), residual (n, 8), iterations (n, 8)): per solution its
+        residual, the larger of the position error (m) and the rotation angle (rad) between the
+        kernels' FK of it and the pose, and the Newton steps it took (NaN and -1 in the padding).
+        ``free``: the given joint value of kernels that hold one (a 7-joint arm, ``free="q3"``)."""
+        if self.nominal is None:
+            raise DeriveError(f"{self.robot.name}: ik_polish is for near-class kernels "
+                              "(derive.kernels(robot, backend, nominal=...))")
+        self._check_free(free)
+        poses, single = self._tool_free(P)
+        n = poses.shape[0]
+        fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
+        extra = () if fv is None else (fv,)
+        if self.backend == "python":
+            sols = np.full((n, 8, self.dof), np.nan)
+            counts = np.zeros(n, dtype=np.int64)
+            res, its = np.full((n, 8), np.nan), np.full((n, 8), -1, dtype=np.int64)
+            for i, row in enumerate(poses.tolist()):
+                found = self._mod.ik_polish(row, *[float(x[i]) for x in extra])
+                counts[i] = len(found)
+                for k, (q, r, it) in enumerate(found):
+                    sols[i, k], res[i, k], its[i, k] = q, r, it
+        elif self.backend == "numpy":
+            sols, counts, res, its = self._mod.ik_polish(poses, *extra)
+        else:
+            self._load_ctypes()
+            if not hasattr(self, "_ik_polish"):
+                g = getattr(self._lib, f"{self._ident}_ik_batch_polish")
+                g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * (8 if self.free else 7)
+                g.restype = None
+                self._ik_polish = g
+            sols, res = np.empty((n, 8, self.dof)), np.empty((n, 8))
+            c, it = np.empty(n, dtype=np.intc), np.empty((n, 8), dtype=np.intc)
+            self._ik_polish(n, poses.ctypes.data, *[x.ctypes.data for x in extra], sols.ctypes.data,
+                            c.ctypes.data, None, None, res.ctypes.data, it.ctypes.data)
+            counts, its = c.astype(np.int64), it.astype(np.int64)
+        if single:
+            return sols[0], int(counts[0]), res[0], its[0]
+        return sols, counts, res, its
+
     @property
     def branch_labels(self) -> list:
         """The closed-form steps whose roots the bits of a branch index choose, most significant first."""
         return list(self._manifest.get("branch_labels", [])) if self.has_ik else []
 
 
-def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
+def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None) -> Kernels:
     """The generated kernels of ``robot`` (a library name, a description file under any name,
     or a :class:`~derive.model.robot.Robot`) for ``backend`` ("python", "numpy", "c"), loaded
     from the artifacts of its identity (see :func:`kernel_folder`); once per process.
@@ -768,10 +817,16 @@ def kernels(robot, backend: str = "numpy", free: str | None = None) -> Kernels:
     choice (:data:`derive.ik.redundant.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
     psi by default and joint 3's value with ``free="q3"`` (derived into the user cache on first
     use, about 15 s; ``ik_sweep`` and ``nearest`` search over psi: use the default kernels for
-    them; CasADi: ``functions(robot)["ik_q3"]``)."""
+    them; CasADi: ``functions(robot)["ik_q3"]``).
+
+    ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal` (its exact nominal robot
+    and the relation FK(q) ~= B FK_nominal(s q + o) T): the IK runs the nominal's closed form and
+    polishes every candidate by Newton steps on the robot's own FK (:mod:`derive.codegen.polish`;
+    :meth:`Kernels.ik_polish` gives the residuals); derived into the user cache on first use."""
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
-    free = free_choice(r, free)
-    key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free)
-    return memo("kernels", key, lambda: Kernels(r, backend, free))
+    free = free_choice(r if nominal is None else nominal.robot, free)
+    key = (r.id, backend, tuple(c_flags()) if backend == "c" else (), free,
+           None if nominal is None else nominal_key(nominal))
+    return memo("kernels", key, lambda: Kernels(r, backend, free, nominal))

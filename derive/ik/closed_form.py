@@ -19,9 +19,10 @@ the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik.e
 5. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
 6. theta2 from C.12, C.14 (4.39-4.41); theta4 = (t2+t3+t4) - t2 - t3 (C.1, C.3, 4.44).
 
-Every candidate is checked by the reference forward kinematics; candidates that do not
-reproduce the pose are dropped, near-duplicates (closer than :data:`MERGE_TOL` in every
-joint, modulo 2 pi) are merged. All angles are wrapped to (-pi, pi].
+Every candidate goes through the finish step of all classes (:mod:`derive.ik.finish`): checked
+by the reference forward kinematics, candidates that do not reproduce the pose dropped,
+near-duplicates (closer than :data:`MERGE_TOL` in every joint, modulo 2 pi) merged. All angles
+are wrapped to (-pi, pi].
 """
 
 from __future__ import annotations
@@ -37,10 +38,11 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import general6r, panda, select, spherical, srs
+from derive.ik import classes, general6r, panda, spherical, srs
+from derive.ik.finish import finish, select_one
 from derive.ik.spherical import SWGeometry, sw_geometry
-from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
-from derive.kinematics.fk import _pose_error, fk
+from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
+from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
 from derive.kinematics.pose import as_pose_batch
 from derive.kinematics.relate import RELATE_TOL, Relation, relate
 from derive.model.classify import Classification
@@ -86,12 +88,12 @@ def _ur_geometry(robot) -> URGeometry:
     chain = numeric_chain(robot)
     axes, links = chain.axes, chain.links
     ok = (chain.n == 6 and all(t == "revolute" for t in chain.types)
-          and np.allclose(chain.start, 0.0, atol=1e-12)
-          and all(np.allclose(a, w, atol=1e-12) for a, w in zip(axes, UR_AXES)))
+          and np.allclose(chain.start, 0.0, atol=UR_LINK_TOL)
+          and all(np.allclose(a, w, atol=UR_AXIS_TOL) for a, w in zip(axes, UR_AXES)))
     if ok:
         d1, a2, (a3, md4), md5, md6 = links[0][2], links[1][0], links[2][:2], links[3][2], links[4][1]
         shape = [(0, 0, d1), (a2, 0, 0), (a3, md4, 0), (0, 0, md5), (0, md6, 0), (0, 0, 0)]
-        ok = all(np.allclose(l, s, atol=1e-12) for l, s in zip(links, shape))
+        ok = all(np.allclose(l, s, atol=UR_LINK_TOL) for l, s in zip(links, shape))
     if not ok:
         raise DeriveError(f"{robot.name}: closed-form IK is implemented for the UR family "
                           "(axes z, -y, -y, -y, -z, -y in thesis form); this chain differs")
@@ -209,22 +211,17 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     return out, singular, code
 
 
-def _residuals(robot, poses_rep, cand):
-    return _pose_error(fk(robot, cand), poses_rep)
-
-
 def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
           chunk: int = 20000):
     """Checked, merged solutions: (q (n,8,6) NaN-padded, counts (n,), singular (n,8), reasons list).
 
     ``geo``: a :class:`URGeometry` (candidates from :func:`solve_batch`; ``q_free`` the
     reference theta6 of the wrist singularity) or a :class:`derive.ik.spherical.SWGeometry`
-    (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4)."""
-    if isinstance(geo, SWGeometry):
-        batch, why = spherical.solve_batch, (spherical.REASON_LATERAL, spherical.REASON_REACH)
-    else:
-        batch, why = solve_batch, (REASON_WRIST_NEAR_AXIS, REASON_ARM_REACH)
-    q6_ref = q_free
+    (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4).
+    The candidates go through the finish step (:func:`derive.ik.finish.finish`: FK check, merge,
+    compaction)."""
+    cls = classes.find("spherical" if isinstance(geo, SWGeometry) else "ur")
+    batch, why = cls.candidates, cls.reasons
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
     sing_all = np.zeros((n, 8), dtype=bool)
@@ -232,36 +229,37 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
     reasons = [REASON_OK] * n
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
-        cand, sing, code = batch(geo, poses[s:e], None if q6_ref is None else q6_ref[s:e])
-        m = e - s
-        flat = cand.reshape(-1, 6)
-        valid = ~np.isnan(flat[:, 0])
-        ok = np.zeros(m * 8, dtype=bool)
-        if np.any(valid):
-            rep = np.repeat(poses[s:e], 8, axis=0)[valid]
-            dpos, drot = _residuals(robot, rep, flat[valid])
-            ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
-        ok = ok.reshape(m, 8)
-        cand = np.where(ok[..., None], cand, np.nan)
-        # merge near-duplicates: keep the first of every group
-        diff = np.abs(wrap_angle(cand[:, :, None, :] - cand[:, None, :, :]))
-        close = np.all(diff < MERGE_TOL, axis=-1)
-        earlier = np.tril(np.ones((8, 8), dtype=bool), -1)
-        dup = np.any(close & earlier[None], axis=-1)
-        keep = ok & ~dup
-        order = np.argsort(~keep, axis=1, kind="stable")
-        cand = np.take_along_axis(cand, order[..., None], axis=1)
-        keep_sorted = np.take_along_axis(keep, order, axis=1)
-        sing = np.take_along_axis(sing, order, axis=1)
-        cand[~keep_sorted] = np.nan
-        q_all[s:e] = cand
-        sing_all[s:e] = sing & keep_sorted
-        counts[s:e] = keep_sorted.sum(axis=1)
+        cand, sing, code = batch(geo, poses[s:e], None if q_free is None else q_free[s:e])
+        q_all[s:e], counts[s:e], _, sing_all[s:e], _ = finish(robot, poses[s:e], cand, sing)
         for k in np.nonzero(counts[s:e] == 0)[0]:
             codes = code[k]
             reasons[s + k] = (why[0] if np.all(codes == 1) else
                               why[1] if np.all(codes > 0) else REASON_NO_CANDIDATE)
     return q_all, counts, sing_all, reasons
+
+
+def _ur_class():
+    """The UR family as a member of the class registry (:mod:`derive.ik.classes`)."""
+    def candidates(geo, poses, free=None):
+        return solve_batch(geo, poses, free)
+
+    return classes.IKClass(
+        name="ur", title="UR family (thesis section 4.3.5)", dof=6,
+        detect=classes.quiet_detect(ur_geometry), candidates=candidates,
+        steps=(("theta1", "sp4-type: y5 cos t1 - x5 sin t1 = -d4 (W.6), two roots"),
+               ("theta5", "the rotation: cos t5 = A22, |sin t5| = hypot(A12, A32), two signs"),
+               ("theta6", "the rotation: row 2 of Rz(t1)^T R; free at sin t5 = 0"),
+               ("theta2 + theta3 + theta4", "the rotation, once theta6 is fixed"),
+               ("theta3", "sp3-type: the cosine law in the arm plane (C.19, C.21), two roots"),
+               ("theta2, theta4", "sp1-type: the arm plane (C.12, C.14), then the sum")),
+        branch_labels=("theta1 root (+ / -)", "theta5 sign (+ / -)", "theta3 sign (+ / -)"),
+        singular_sets=("wrist, sin t5 = 0: theta6 free (from q_ref, else chosen for reach), marked singular",
+                       "shoulder: the two theta1 roots meet (merged)",
+                       "elbow stretched or folded, sin t3 = 0: the two theta3 roots meet (merged)"),
+        reasons=(REASON_WRIST_NEAR_AXIS, REASON_ARM_REACH), free_joint=5)
+
+
+classes.register(_ur_class())
 
 
 # --------------------------------------------------------------------------- #
@@ -357,7 +355,9 @@ def _find_relation(robot, tol: float = RELATE_TOL) -> Relation | None:
 def classify(robot) -> Classification:
     """The kinematic class of a robot (:func:`derive.model.classify.classify`), with the closed
     form of dq-derive as it applies: in the robot's own frames, or through a library robot it
-    is related to (then ``closed_form_through`` names it with the base and tool transforms)."""
+    is related to (then ``closed_form_through`` names it with the base and tool transforms).
+    Near-class arms (the nominal's closed form + Newton polish) are added by
+    :func:`derive.ik.nearclass.classify`, which is ``derive.classify``."""
     robot = load_robot(robot)
     c = geometric_classify(robot)
     if c.closed_form:
@@ -370,8 +370,8 @@ def classify(robot) -> Classification:
                 "Shimizu et al. 2008)")
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             f"closed-form IK {what}: up to 8 solutions per value, derive.reference.ik(robot, pose, "
-            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference; no "
-            "generated kernels yet)"])
+            "free=v), ik_sweep over the feasible range, nearest for a seed (numpy reference, and "
+            "the generated kernels: derive.kernels(robot, 'c').ik(poses, free=v))"])
     geo = spherical_class(robot)
     if geo is not None:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
@@ -400,17 +400,15 @@ def has_closed_form(robot) -> bool:
 
 
 def _solve_related(robot, poses, q_ref):
-    """:func:`solve` on the robot (UR family or spherical wrist), or on the library robot it is
+    """:func:`solve` on the robot (the 6R class :func:`derive.ik.classes.detect` finds: UR family
+    or spherical wrist), or on the library robot it is
     related to (poses moved into that robot's frames, B^-1 P T^-1, and the solutions' joint
     directions mapped back). ``q_ref`` (n, 6) or None: reference configurations whose free joint
     (theta6 of the UR, q4 of the spherical wrist) is used at the wrist singularity."""
-    geo = spherical_class(robot)
-    if geo is not None:
-        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, 3])
-    try:
-        return solve(robot, ur_geometry(robot), poses, None if q_ref is None else q_ref[:, 5])
-    except DeriveError as exc:
-        first = exc
+    hit = classes.detect(robot, dof=6)
+    if hit is not None:
+        cls, geo = hit
+        return solve(robot, geo, poses, None if q_ref is None else q_ref[:, cls.free_joint])
     rel = closed_form_relation(robot)
     if rel is None:
         # no special class: the general 6R elimination (derive.ik.general6r), up to 16 solutions
@@ -420,6 +418,10 @@ def _solve_related(robot, poses, q_ref):
             general = str(exc).split(": ", 1)[-1]
         else:
             return res.q, res.counts, res.singular, res.reason
+        try:
+            ur_geometry(robot)
+        except DeriveError as exc:
+            first = exc
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
                           "UR family, the spherical-wrist (OPW) class and the general 6R, and this "
                           f"chain is in none ({str(first).split(': ', 1)[-1]}; "
@@ -514,16 +516,6 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None) -> IK
         qr = as_finite_array(q_ref, "q_ref", last_dim=robot.dof).reshape(1, robot.dof)
     q, counts, singular, reasons = _solve_related(robot, poses, qr)
     k = int(counts[0])
-    sols, sing = q[0, :k], singular[0, :k]
-    reason = reasons[0]
-    if within_limits:
-        q, cnt, _, sg = select.within_limits(sols[None], np.array([len(sols)]), robot.limits, robot.revolute,
-                                      singular=sing[None])
-        sols, sing = q[0, :cnt[0]], sg[0, :cnt[0]]
-        if len(sols) == 0 and not reason:
-            reason = f"no solution inside the joint limits ({k} outside)"
-    if sort_by is not None and len(sols):
-        ref = as_finite_array(sort_by, "sort_by", last_dim=robot.dof)
-        order = select.sort_order(sols, ref, robot.revolute, windings=within_limits)
-        sols, sing = sols[order], sing[order]
+    sols, sing, _, reason = select_one(robot, q[0, :k], singular[0, :k], np.full(k, -1), reasons[0],
+                                       within_limits, sort_by)
     return IKSolutions(sols.reshape(-1, robot.dof), sing, reason)

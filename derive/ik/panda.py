@@ -73,7 +73,7 @@ The wrist centre on axis 1 (O6 on the z axis) is not singular here: q1 comes fro
 orientation of frame 3 (step 6), not from the position of O6 as in He & Liu's q1 step.
 
 Every candidate is checked by the reference FK (:func:`derive.kinematics.fk.fk`) and dropped
-beyond :data:`~derive.ik.tolerances.ACCEPT_TOL`; near-duplicates (:data:`MERGE_TOL` in every joint)
+beyond :data:`~derive.ik.tolerances.ACCEPT_POSITION` (m) / :data:`~derive.ik.tolerances.ACCEPT_ANGLE` (rad); near-duplicates (:data:`MERGE_TOL` in every joint)
 are merged. Returned angles q1..q6 are wrapped to (-pi, pi]; q7 is the given value.
 """
 
@@ -81,7 +81,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -92,42 +91,25 @@ from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
-from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL
+from derive.ik.finish import Solutions, empty, finish
+from derive.ik.euler import zyz
+from derive.ik.tolerances import (CLASS_DIRECTION, CLASS_DISTANCE, DOUBLE_ROOT,
+                                  FREE_JOINT_DISTANCE, MAP_ANGLE, MAP_POSITION, REACH_TOL,
+                                  W4_NOISE)
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot, robot_from_dict
 
-#: Geometric properties of the class must hold within this (rad for directions, m for lengths).
-CLASS_TOL = 1e-10
-#: FK_robot = B FK_canonical T must hold within this (m, rad) on random configurations.
-MAP_TOL = 1e-10
-#: A free joint (q5 at X = 0, q6 at S on axis 6, q1 at sin q2 = 0) is declared below this (m, or
-#: |sin q2|).
-SINGULAR_TOL = 1e-11
-
 PARAMETERS = ("d1", "d3", "a3", "a4", "d5", "a6", "d7")
 
 TWO_PI = 2.0 * math.pi
 
-#: |cos| within this of 1 in the elbow (eq. E2) or wrist (eq. W2) step is a double root: the two
-#: roots are made equal (acos of rounding noise would split them by up to ~1e-7, and the joints
-#: after them by ~100 times more, too far apart to merge).
-DOUBLE_ROOT = 1e-13
-
 #: The most (pose, q7) pairs :func:`ik_sweep` solves in one call (as derive.ik.redundant.MAX_SWEEP).
 MAX_SWEEP = 10 ** 6
 
-#: Rounding of X^2 - vz^2 per metre of |X| (m): about 2 |X| |dvz|, and vz of a pose made by FK
-#: is off by up to ~5e-15 m (measured: 3e-15 on the Panda at q5 = pi/2); below DOUBLE_ROOT X^2 +
-#: W4_NOISE |X| the two q6 roots are one (eq. W4, :func:`wrist6`), which moves the pose by at
-#: most (DOUBLE_ROOT |X| + W4_NOISE) / 2, about 5e-14 m.
-W4_NOISE = 1e-13
-
 #: Number of candidate branches (2 elbow x 2 wrist x 2 shoulder).
 BRANCHES = 8
-_PAIR_I, _PAIR_J = np.triu_indices(BRANCHES, 1)
-_LATER = np.eye(BRANCHES, dtype=np.int8)[_PAIR_J]           # (28, 8): pair -> its later branch
 
 REASON_OK = ""
 REASON_ELBOW = ("unreachable: the distance from the shoulder to the point O6 (fixed by the pose "
@@ -168,20 +150,8 @@ class PandaGeometry:
                        dq.conj_quaternion(self.tool)[None])
 
 
-class PandaSolutions(NamedTuple):
-    """Solutions of :func:`ik_q7`, per pose i:
-
-    ``q`` (n, 8, 7): the solutions, rows ``0 .. counts[i] - 1`` finite, the rest NaN;
-    ``counts`` (n,); ``branches`` (n, 8): the branch id 4 i4 + 2 i6 + i2 of each solution
-    (module docstring), -1 in the padding; ``singular`` (n, 8): the solution has a free joint
-    (q1, q5 or q6) set from ``q_ref``; ``reasons``: a list of n strings, "" where there is a
-    solution, else why not."""
-
-    q: np.ndarray
-    counts: np.ndarray
-    branches: np.ndarray
-    singular: np.ndarray
-    reasons: list
+#: The former result type of :func:`ik_q7`, now the one result type of all classes.
+PandaSolutions = Solutions
 
 
 def canonical_description(values: dict, name: str = "panda-class") -> dict:
@@ -235,8 +205,8 @@ def _panda_geometry(robot) -> PandaGeometry:
         fail("the path to the end is not 7 revolute joints driven by q1 .. q7 in order")
     h = chain.axes / np.linalg.norm(chain.axes, axis=1, keepdims=True)
     pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:7]
-    tol = CLASS_TOL
-    if abs(h[0] @ h[1]) > tol:
+    tol = CLASS_DISTANCE
+    if abs(h[0] @ h[1]) > CLASS_DIRECTION:
         fail("axis 2 is not perpendicular to axis 1")
     # canonical base frame: z = axis 1, y = axis 2 (as the joints turn), origin on axis 1 at the
     # foot of the robot's base origin
@@ -247,7 +217,7 @@ def _panda_geometry(robot) -> PandaGeometry:
     loc_h = h @ frame
     loc_p = (pts - origin) @ frame
     for i in range(2, 7):
-        if np.abs(loc_h[i] - _AXES[i]).max() > tol:
+        if np.abs(loc_h[i] - _AXES[i]).max() > CLASS_DIRECTION:
             fail(f"at the zero pose axis {i + 1} is {np.round(loc_h[i], 6).tolist()} in the frame "
                  f"of axes 1 and 2 (x = y2 x z1, y = y2, z = z1); the class has {_AXES[i].tolist()}"
                  " (Franka's zero pose, no joint offsets or reversed joints)")
@@ -291,7 +261,7 @@ def _panda_geometry(robot) -> PandaGeometry:
     via = dq._mul(dq._mul(np.broadcast_to(base, (32, 8)), fk(canon, q)), np.broadcast_to(tool, (32, 8)))
     dp, dr = _pose_error(fk(robot, q), via)
     err = float(max(dp.max(), dr.max()))
-    if not err <= MAP_TOL:
+    if not (dp.max() <= MAP_POSITION and dr.max() <= MAP_ANGLE):
         fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
     lim = robot.limits[6]
     return PandaGeometry(name, **vals, base=base, tool=tool, q7_limits=(float(lim[0]), float(lim[1])),
@@ -352,9 +322,9 @@ def wrist6(v, x, z, q6_free):
     (q5 = +-pi/2, the second term the rounding of vz): the pose changes only to second order
     there, by |X| c5^2 / 2 < (DOUBLE_ROOT |X| + W4_NOISE) / 2."""
     rho = np.hypot(v[:, 0], v[:, 1])
-    free = rho < SINGULAR_TOL
+    free = rho < FREE_JOINT_DISTANCE
     c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
-    bad = np.where(free, np.abs(z) > SINGULAR_TOL, np.abs(c) > 1.0 + REACH_TOL)
+    bad = np.where(free, np.abs(z) > FREE_JOINT_DISTANCE, np.abs(c) > 1.0 + REACH_TOL)
     x2 = x * x
     e = x2 - v[:, 2] * v[:, 2]
     e = np.where(e <= DOUBLE_ROOT * x2 + W4_NOISE * np.abs(x), 0.0, e)
@@ -366,9 +336,9 @@ def wrist6(v, x, z, q6_free):
 
 
 def wrist5(v, x, q6, q5_free):
-    """Step 5 (eq. W3): q5 from X c5 = vx c6 - vy s6, X s5 = vz; where |X| < SINGULAR_TOL
+    """Step 5 (eq. W3): q5 from X c5 = vx c6 - vy s6, X s5 = vz; where |X| < FREE_JOINT_DISTANCE
     (S on axis 5) q5 is free: ``q5_free``. Returns q5 (n,) and the singular flag (n,)."""
-    free = np.abs(x) < SINGULAR_TOL
+    free = np.abs(x) < FREE_JOINT_DISTANCE
     sg = np.where(x < 0, -1.0, 1.0)
     q5 = np.arctan2(sg * v[:, 2], sg * (v[:, 0] * np.cos(q6) - v[:, 1] * np.sin(q6)))
     return np.where(free, q5_free, q5), free
@@ -381,19 +351,10 @@ def frame3(r6, q4, q5, q6):
 
 
 def shoulder(m, sign2, q1_free):
-    """Step 6, eq. S2: R3 = Rz(q1) Ry(q2) Rz(q3) (ZYZ) with sin q2 of sign ``sign2``; where
-    |sin q2| < SINGULAR_TOL q1 is ``q1_free`` and q3 takes the rest. Returns q1, q2, q3, singular."""
-    s2abs = np.hypot(m[:, 0, 2], m[:, 1, 2])
-    free = s2abs < SINGULAR_TOL
-    q2 = np.where(free, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), np.arctan2(sign2 * s2abs, m[:, 2, 2]))
-    q1 = np.where(free, q1_free, np.arctan2(sign2 * m[:, 1, 2], sign2 * m[:, 0, 2]))
-    # Rz(q3) = Ry(q2)^T Rz(q1)^T R3: exact also where q1 was chosen
-    c1, s1, c2, s2 = np.cos(q1), np.sin(q1), np.cos(q2), np.sin(q2)
-    # rows 1, 2 of Rz(q1)^T R3, then row 1 of Ry(q2)^T applied: x-row = c2 (row1) - s2 (row3)
-    row_x = c2[:, None] * (c1[:, None] * m[:, 0] + s1[:, None] * m[:, 1]) - s2[:, None] * m[:, 2]
-    row_y = -s1[:, None] * m[:, 0] + c1[:, None] * m[:, 1]
-    q3 = np.arctan2(row_y[:, 0], row_x[:, 0])
-    return q1, q2, q3, free
+    """Step 6, eq. S2: R3 = Rz(q1) Ry(q2) Rz(q3), the ZYZ decomposition with sin q2 of sign
+    ``sign2`` (:func:`derive.ik.euler.zyz`); where |sin q2| < WRIST_SINGULAR q1 is ``q1_free`` and
+    q3 takes the rest. Returns q1, q2, q3, singular."""
+    return zyz(m, sign2, q1_free)
 
 
 def candidates(geo: PandaGeometry, poses: np.ndarray, q7: np.ndarray, q_free: np.ndarray):
@@ -479,9 +440,12 @@ def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 2000
     (7,) or (n, 7): its q1, q5, q6 are used where that joint is free (singular sets; default 0).
     Up to 8 solutions per pose, not filtered by joint limits (:func:`within_limits`), q1..q6
     wrapped to (-pi, pi]. ``check``: keep only candidates whose reference FK reproduces the
-    pose within ACCEPT_TOL (most of the run time; without it every branch that the steps
-    reach is returned, for callers that check themselves). Returns :class:`PandaSolutions`
-    (q (n, 8, 7), counts, branches, singular, reasons); one pose (8,) gives n = 1.
+    pose within ACCEPT_POSITION / ACCEPT_ANGLE (most of the run time; without it every branch that the steps
+    reach is returned, for callers that check themselves). The candidates go through the finish
+    step of all classes (:func:`derive.ik.finish.finish`). Returns
+    :class:`derive.ik.finish.Solutions` (q (n, 8, 7), counts, branch, singular, residual,
+    reason, free = q7; the former names ``branches`` and ``reasons`` still read); one pose (8,)
+    gives n = 1.
     """
     robot = load_robot(robot)
     geo = panda_geometry(robot)
@@ -494,44 +458,18 @@ def ik_q7(robot, poses, q7, *, q_ref=None, check: bool = True, chunk: int = 2000
         if qr.ndim > 2 or (qr.ndim == 2 and qr.shape[0] not in (1, n)):
             raise InputError(f"q_ref: expected shape (7,) or ({n}, 7), got {qr.shape}")
         q_free = np.broadcast_to(qr.reshape(-1, 7), (n, 7)).astype(float)
-    q_all = np.full((n, BRANCHES, 7), np.nan)
-    br_all = np.full((n, BRANCHES), -1, dtype=np.int64)
-    sing_all = np.zeros((n, BRANCHES), dtype=bool)
-    counts = np.zeros(n, dtype=np.int64)
-    reasons = [REASON_OK] * n
+    out = empty(n, BRANCHES, 7)
     for s in range(0, n, chunk):
         e = min(n, s + chunk)
-        m = e - s
         cand, sing, code = candidates(geo, poses[s:e], q7[s:e], q_free[s:e])
-        flat = cand.reshape(-1, 7)
-        valid = ~np.isnan(flat[:, 0])
-        ok = np.zeros(m * BRANCHES, dtype=bool)
-        if not check:
-            ok = valid.copy()
-        elif np.any(valid):
-            rep = np.repeat(poses[s:e], BRANCHES, axis=0)[valid]
-            dpos, drot = _pose_error(fk(robot, flat[valid]), rep)
-            ok[valid] = (dpos < ACCEPT_TOL) & (drot < ACCEPT_TOL)
-        ok = ok.reshape(m, BRANCHES)
-        cand = np.where(ok[..., None], cand, np.nan)
-        # pairs (i < j) closer than MERGE_TOL in q1..q6 (wrapped, so |a - b| < 2 pi) modulo 2 pi
-        diff = np.abs(cand[:, _PAIR_I, :6] - cand[:, _PAIR_J, :6])
-        close = np.all(np.minimum(diff, TWO_PI - diff) < MERGE_TOL, axis=-1)
-        dup = (close.astype(np.int8) @ _LATER) > 0          # the later one of a close pair
-        keep = ok & ~dup
-        order = np.argsort(~keep, axis=1, kind="stable")
-        kept = np.take_along_axis(keep, order, axis=1)
-        cand = np.take_along_axis(cand, order[..., None], axis=1)
-        cand[~kept] = np.nan
-        q_all[s:e] = cand
-        br_all[s:e] = np.where(kept, order, -1)
-        sing_all[s:e] = np.take_along_axis(sing, order, axis=1) & kept
-        counts[s:e] = kept.sum(axis=1)
-        for k in np.nonzero(counts[s:e] == 0)[0]:
+        (out.q[s:e], out.counts[s:e], out.branch[s:e], out.singular[s:e],
+         out.residual[s:e]) = finish(robot, poses[s:e], cand, sing, check_fk=check)
+        for k in np.nonzero(out.counts[s:e] == 0)[0]:
             codes = code[k]
-            reasons[s + k] = (REASON_ELBOW if np.all(codes == _CODE_ELBOW) else
-                              REASON_WRIST if np.all(codes > 0) else REASON_NO_CANDIDATE)
-    return PandaSolutions(q_all, counts, br_all, sing_all, reasons)
+            out.reason[s + k] = (REASON_ELBOW if np.all(codes == _CODE_ELBOW) else
+                                 REASON_WRIST if np.all(codes > 0) else REASON_NO_CANDIDATE)
+    out.free = q7
+    return out
 
 
 def within_limits(robot, sols: PandaSolutions):
@@ -540,13 +478,14 @@ def within_limits(robot, sols: PandaSolutions):
     singular (n, M))."""
     robot = load_robot(robot)
     return select.within_limits(sols.q, sols.counts, robot.limits, [True] * 7,
-                                branch=sols.branches, singular=sols.singular)
+                                branch=sols.branch, singular=sols.singular)
 
 
 def ik_sweep(robot, poses, n: int, *, q_ref=None):
     """:func:`ik_q7` at ``n`` values of q7 evenly spaced over joint 7's limits (both ends
-    included; [-pi, pi) without limits). Returns (q7 values (n,), PandaSolutions with q
-    (P, n, 8, 7), counts (P, n), branches (P, n, 8), singular (P, n, 8), reasons (P lists of n))."""
+    included; [-pi, pi) without limits). Returns (q7 values (n,), :class:`derive.ik.finish.Solutions`
+    with q (P, n, 8, 7), counts (P, n), branch (P, n, 8), singular (P, n, 8), residual (P, n, 8),
+    reason (P, n), free (P, n))."""
     robot = load_robot(robot)
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise InputError(f"n: a positive number of q7 values, got {n!r}")
@@ -565,7 +504,4 @@ def ik_sweep(robot, poses, n: int, *, q_ref=None):
         qr = as_finite_array(q_ref, "q_ref", last_dim=7)
         q_ref = np.repeat(np.broadcast_to(qr.reshape(-1, 7), (p, 7)), n, axis=0)
     res = ik_q7(robot, np.repeat(poses, n, axis=0), np.tile(values, p), q_ref=q_ref)
-    reasons = [res.reasons[i * n:(i + 1) * n] for i in range(p)]
-    return values, PandaSolutions(res.q.reshape(p, n, BRANCHES, 7), res.counts.reshape(p, n),
-                                  res.branches.reshape(p, n, BRANCHES),
-                                  res.singular.reshape(p, n, BRANCHES), reasons)
+    return values, res.reshape(p, n)

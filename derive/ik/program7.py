@@ -14,7 +14,7 @@ the robot's numbers substituted, written so that it is total and needs few trans
   :data:`~derive.ik.tolerances.WRIST_SINGULAR` the first angle is free and set to 0 (flag
   ``singular_*``; the batch kernels redo such poses with the whole program), and the last angle
   is computed from the rounded first two, c = atan2(row_y . m e_x, row_x . m e_x) of
-  Ry(b)^T Rz(a)^T m (:func:`derive.ik.srs._zyz`), so the product stays exact;
+  Ry(b)^T Rz(a)^T m (:func:`derive.ik.euler.zyz`), so the product stays exact;
 * **double roots snapped**: an acos argument within STRETCH_TOL (SRS elbow) or DOUBLE_ROOT
   (Panda elbow) of +-1 is +-1, so the two roots coincide exactly and merge; the Panda's q6 roots
   merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (eq. W4 of :func:`derive.ik.panda.wrist6`);
@@ -32,22 +32,20 @@ import sympy as sp
 from derive.algebra import dualquat as dq
 from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.ik import panda, srs
+from derive.ik.euler import zyz_plus, zyz_signed
 from derive.ik.extract import _rot
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
-from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
+from derive.ik.tolerances import (AXIS_TOL, CLASS_DISTANCE, DOUBLE_ROOT, FREE_JOINT_DISTANCE,
+                                  PROGRAM_SNAP, REACH_TOL, STRETCH_TOL, W4_NOISE, WRIST_SINGULAR)
 
 #: The free parameter's input symbol in every program (a C / Python identifier).
 FV = sp.Symbol("fv", real=True)
-
-#: Entries of the fixed transforms within this of an integer are that integer (the canonical
-#: frames are signed permutations up to rounding of the description's numbers).
-SNAP = 1e-12
 
 
 def _number(x: float):
     x = float(x)
     r = round(x)
-    return sp.Integer(r) if abs(x - r) < SNAP else sp.Float(x, 17)
+    return sp.Integer(r) if abs(x - r) < PROGRAM_SNAP else sp.Float(x, 17)
 
 
 def _inputs(bld: Builder) -> tuple:
@@ -74,50 +72,6 @@ def _snap_select(bld: Builder, name: str, c, tol: float):
     """c within tol of +-1 taken as +-1 (a double root of the acos)."""
     inner = bld.select(f"{name}_lo", c <= -1 + tol, -1, c)
     return bld.select(name, c >= 1 - tol, 1, inner)
-
-
-def _zyz_plus(bld: Builder, m, stem: str, flag: str, trig: bool):
-    """Before the sign branch: the decomposition m = Rz(a) Ry(b) Rz(c) with sin b >= 0
-    (:func:`derive.ik.srs._zyz` with sign +1): |sin b| = hypot(m02, m12), the flag ``flag``
-    (below WRIST_SINGULAR: a is free and set to 0), a = atan2(m12, m02), b = atan2(|sin b|, m22),
-    c from Ry(b)^T Rz(a)^T m; with ``trig`` also the cosines and sines (ca, sa, cb, sb, cc, sc)
-    for a later product. Returns (a, b, c, the offset of a and c on the - branch (pi, or 0 on the
-    singular set), trig)."""
-    hs = bld.let(f"{stem}_hs", sp.sqrt(m[0][2] ** 2 + m[1][2] ** 2))
-    sing = bld.flag(flag, hs < WRIST_SINGULAR)
-    a = bld.select(f"{stem}_a", sing, 0, sp.atan2(m[1][2], m[0][2]))
-    b_sing = bld.select(f"{stem}_bs", m[2][2] >= 0, 0, sp.pi)
-    b = bld.select(f"{stem}_b", sing, b_sing, sp.atan2(hs, m[2][2]))
-    cb = bld.select(f"{stem}_cb", sing, sgn(m[2][2]), m[2][2])
-    off = bld.select(f"{stem}_off", sing, 0, sp.pi)
-    if not trig:
-        # Rz(c) = Ry(b)^T Rz(a)^T m, column 0 (cos c, sin c, 0), with cos a = m02 / hs, sin a =
-        # m12 / hs, sin b = hs, all times hs > 0 (atan2 does not see the scale): no division
-        ny = bld.select(f"{stem}_ny", sing, m[1][0], m[0][2] * m[1][0] - m[1][2] * m[0][0])
-        nx = bld.select(f"{stem}_nx", sing, cb * m[0][0],
-                        m[2][2] * (m[0][2] * m[0][0] + m[1][2] * m[1][0]) - hs * hs * m[2][0])
-        return a, b, bld.let(f"{stem}_c", sp.atan2(ny, nx)), off, None
-    safe = bld.select(f"{stem}_hd", sing, 1, hs)
-    ca = bld.select(f"{stem}_ca", sing, 1, m[0][2] / safe)
-    sa = bld.select(f"{stem}_sa", sing, 0, m[1][2] / safe)
-    sb = bld.select(f"{stem}_sb", sing, 0, hs)
-    # Rz(c) = Ry(b)^T Rz(a)^T m, column 0: (cos c, sin c, 0)
-    ny = bld.let(f"{stem}_ny", -sa * m[0][0] + ca * m[1][0])
-    nx = bld.let(f"{stem}_nx", cb * (ca * m[0][0] + sa * m[1][0]) - sb * m[2][0])
-    c = bld.let(f"{stem}_c", sp.atan2(ny, nx))
-    nn = bld.let(f"{stem}_nn", sp.sqrt(nx * nx + ny * ny))
-    return a, b, c, off, (ca, sa, cb, sb, bld.let(f"{stem}_cc", nx / nn), bld.let(f"{stem}_sc", ny / nn))
-
-
-def _zyz_signed(bld: Builder, plus, sign, names: tuple):
-    """After the sign branch (sign = +-1, the sign of sin b): the decomposition of that sign,
-    (a + pi, -b, c + pi) for - (the same rotation: Rz(a + pi) Ry(-b) Rz(c + pi) = Rz(a) Ry(b)
-    Rz(c), with cosines and sines negated exactly), so the atan2 are taken once; on the singular
-    set a stays 0 and both signs give the same solution (merged)."""
-    a, b, c, off, _ = plus
-    na, nb, nc = names
-    half = (1 - sign) / 2                       # 0 on the + branch, 1 on the -
-    return bld.let(na, a + half * off), bld.let(nb, sign * b), bld.let(nc, c + half * off)
 
 
 def _rz_rows(m, c, s):
@@ -177,10 +131,10 @@ def _srs_elbow(bld: Builder, geo) -> tuple:
                  - sum(rc[i][k] * tool_t[k] for k in range(3))) for i in range(3)]
     dse, dew = _number(geo.d_se), _number(geo.d_ew)
     ww = bld.let("ww", w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
-    bld.require(ww > srs.CLASS_TOL ** 2)                      # wrist centre not at the shoulder
+    bld.require(ww > CLASS_DISTANCE ** 2)                      # wrist centre not at the shoulder
     ce = bld.let("ce", (ww - dse ** 2 - dew ** 2) / (2 * dse * dew))
     bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
-    c4 = _snap_select(bld, "ct4", ce, srs.STRETCH_TOL)
+    c4 = _snap_select(bld, "ct4", ce, STRETCH_TOL)
     s4a = bld.let("st4a", sp.sqrt(pos(1 - c4 * c4)))
     t4a = bld.let("t4a", sp.atan2(s4a, c4))
     return rc, w, ww, c4, s4a, t4a
@@ -189,13 +143,13 @@ def _srs_elbow(bld: Builder, geo) -> tuple:
 def _srs_wrist(bld: Builder, rc, angles):
     """The wrist rotation R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c from the cosines and sines
     ((c1, s1), ..., (c4, s4)) of the rounded shoulder and elbow angles, and its ZYZ decomposition
-    before the sign branch (:func:`_zyz_plus`, flag ``singular_wr``)."""
+    before the sign branch (:func:`derive.ik.euler.zyz_plus`, flag ``singular_wr``)."""
     (c1, s1), (c2, s2), (c3, s3), (c4, s4) = angles
     m = _let_matrix(bld, "ma", _rz_rows(rc, c1, s1))
     m = _let_matrix(bld, "mb", _ry_rows(m, c2, s2))
     m = _let_matrix(bld, "mc", _rz_rows(m, c3, s3))
     rw = _let_matrix(bld, "rw", _ry_rows(m, c4, s4))
-    return _zyz_plus(bld, rw, "wr", "singular_wr", False)
+    return zyz_plus(bld, rw, "wr", "singular_wr", False)
 
 
 def srs_program(robot) -> IKProgram:
@@ -226,7 +180,7 @@ def srs_program(robot) -> IKProgram:
     rpsi = _let_matrix(bld, "rq", [[(cp if i == j else 0) + sp_ * skew[i][j] + (1 - cp) * x[i] * x[j]
                                     for j in range(3)] for i in range(3)])
     rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
-    axis = rho > srs.AXIS_TOL
+    axis = rho > AXIS_TOL
     rho_d = bld.select("rho_d", axis, rho, 1)
     ca0 = bld.select("ca0", axis, w[0] / rho_d, 1)
     sa0 = bld.select("sa0", axis, w[1] / rho_d, 0)
@@ -244,7 +198,7 @@ def srs_program(robot) -> IKProgram:
     r0 = [[ca0 * cbe, -sa0, ca0 * sbe], [sa0 * cbe, ca0, sa0 * sbe], [-sbe, 0, cbe]]
     rs = _let_matrix(bld, "rs", [[sum(rpsi[i][k] * r0[k][j] for k in range(3)) for j in range(3)]
                                  for i in range(3)])
-    sh = _zyz_plus(bld, rs, "sh", "singular_sh", True)
+    sh = zyz_plus(bld, rs, "sh", "singular_sh", True)
     c1, s1, c2, s2, c3, s3 = sh[4]
     # 4. R_w = Ry(-t4) Rz(-t3) Ry(-t2) Rz(-t1) R_c, from the rounded shoulder angles
     wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4, s4)))
@@ -252,7 +206,7 @@ def srs_program(robot) -> IKProgram:
                                s4a < WRIST_SINGULAR))
     # 5. the shoulder's and the wrist's signs
     g2 = bld.branch("sg2", "shoulder GC2 = sign of sin q2 (+ / -)")
-    t1, t2, t3 = _zyz_signed(bld, sh, g2, ("t1", "t2", "t3"))
+    t1, t2, t3 = zyz_signed(bld, sh, g2, ("t1", "t2", "t3"))
     return _srs_end(bld, geo, wr, (t1, t2, t3, t4), [
         ("R_psi", "Rodrigues", ["rotation by psi about W/|W|"]),
         ("theta1, theta2, theta3", "ZYZ of R_psi R0", ["R0 = Rz(a) Ry(b - phi), the reference plane"])],
@@ -268,7 +222,7 @@ def _srs_end(bld: Builder, geo, wr, shoulder: tuple, shoulder_steps: list, **doc
     the wrist decomposition ``wr``, the solution q = s theta from the shoulder and elbow angles
     ``shoulder`` (t1, t2, t3, t4), and the step list with the programs' own shoulder steps."""
     g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
-    t5, t6, t7 = _zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
+    t5, t6, t7 = zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
     thetas = (*shoulder, t5, t6, t7)
     bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
     steps = [
@@ -306,7 +260,7 @@ def srs_joint3_program(robot) -> IKProgram:
     t3 = bld.let("t3", int(geo.signs[2]) * FV)
     c3, s3 = sp.cos(t3), sp.sin(t3)
     rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
-    on_axis = bld.flag("singular_sh", rho < srs.AXIS_TOL)
+    on_axis = bld.flag("singular_sh", rho < AXIS_TOL)
     aw = bld.select("aw", on_axis, 0, sp.atan2(w[1], w[0]))
     # 1. the elbow root
     g4 = bld.branch("sg1", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
@@ -318,7 +272,7 @@ def srs_joint3_program(robot) -> IKProgram:
     bld.require(r > 0)
     cz = bld.let("cz", w[2] / bld.select("ru_d", r > 0, r, 1))
     bld.require(sp.Abs(cz) <= 1 + REACH_TOL)
-    czs = _snap_select(bld, "czs", cz, srs.STRETCH_TOL)
+    czs = _snap_select(bld, "czs", cz, STRETCH_TOL)
     acz = bld.let("acz", sp.atan2(sp.sqrt(pos(1 - czs * czs)), czs))
     phi = bld.let("phi", sp.atan2(ux, vz))
     # 2. the root of the shoulder subproblem
@@ -382,14 +336,14 @@ def panda_program(robot) -> IKProgram:
     k = (vv[0] ** 2 + vv[1] ** 2 + vv[2] ** 2 - v["a3"] ** 2 - v["d3"] ** 2 - v["a4"] ** 2 - v["d5"] ** 2) / 2
     ce = bld.let("ce", k / rab)
     bld.require(sp.Abs(ce) <= 1 + REACH_TOL)
-    cang = _snap_select(bld, "ca4", ce, panda.DOUBLE_ROOT)
+    cang = _snap_select(bld, "ca4", ce, DOUBLE_ROOT)
     sang = bld.let("sa4", sp.sqrt(pos(1 - cang * cang)))
     cphi, sphi = _number(float(a / rab)), _number(float(b / rab))
     phi = _number(float(sp.atan2(b, a)))
     ang = bld.let("an4", sp.atan2(sang, cang))
     # q6 data that does not depend on the elbow: S on axis 6 when hypot(vx, vy) = 0
     rho6 = bld.let("rho6", sp.sqrt(vv[0] ** 2 + vv[1] ** 2))
-    free6 = bld.flag("singular_q6", rho6 < panda.SINGULAR_TOL)
+    free6 = bld.flag("singular_q6", rho6 < FREE_JOINT_DISTANCE)
     rho6d = bld.select("rho6_d", free6, 1, rho6)
     cps, sps = bld.let("cps6", vv[1] / rho6d), bld.let("sps6", vv[0] / rho6d)
     psi6 = bld.let("ps6", sp.atan2(vv[0], vv[1]))
@@ -402,12 +356,12 @@ def panda_program(robot) -> IKProgram:
     # 4. q6 (eq. W2): vx s6 + vy c6 = Z
     c6a = bld.let("ce6", zz / rho6d)
     bld.require(sp.And(sp.Abs(c6a) <= 1 + REACH_TOL,
-                       sp.Or(sp.Not(free6), sp.Abs(zz) <= panda.SINGULAR_TOL)))
+                       sp.Or(sp.Not(free6), sp.Abs(zz) <= FREE_JOINT_DISTANCE)))
     # the root's sine from eq. W4, (X c5)^2 = X^2 - vz^2 (derive.ik.panda.wrist6): accurate where
     # X is small; the roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
     x2 = bld.let("x2e", xx * xx)
     e6 = bld.let("e6", x2 - vv[2] * vv[2])
-    e6s = bld.select("e6s", e6 <= panda.DOUBLE_ROOT * x2 + panda.W4_NOISE * sp.Abs(xx), 0, e6)
+    e6s = bld.select("e6s", e6 <= DOUBLE_ROOT * x2 + W4_NOISE * sp.Abs(xx), 0, e6)
     r6s = bld.let("r6s", sp.sqrt(e6s))
     n6 = bld.let("n6", sp.sqrt(e6s + zz * zz))
     n6d = bld.select("n6d", n6 <= 0, 1, n6)
@@ -419,7 +373,7 @@ def panda_program(robot) -> IKProgram:
     c6 = bld.select("cq6", free6, 1, cps * cang6 - g6 * sps * sang6)
     s6 = bld.select("sq6", free6, 0, sps * cang6 + g6 * cps * sang6)
     # q5 (eq. W3): X c5 = vx c6 - vy s6, X s5 = vz
-    free5 = bld.flag("singular_q5", sp.Abs(xx) < panda.SINGULAR_TOL)
+    free5 = bld.flag("singular_q5", sp.Abs(xx) < FREE_JOINT_DISTANCE)
     sx = bld.let("sgx", sgn(xx))
     u5 = bld.let("u5", sx * (vv[0] * c6 - vv[1] * s6))
     w5 = bld.let("w5", sx * vv[2])
@@ -432,10 +386,10 @@ def panda_program(robot) -> IKProgram:
     m = _let_matrix(bld, "rb", _ry_cols(m, c5, s5))
     m = _rx_minus_half_pi(_rz_cols(m, c4, s4))
     r3 = _let_matrix(bld, "r3", m)
-    sh = _zyz_plus(bld, r3, "sh", "singular_q1", False)
+    sh = zyz_plus(bld, r3, "sh", "singular_q1", False)
     bld.flag("singular", sp.Or(bld.known_symbol("singular_q1"), free5, free6))
     g2 = bld.branch("sg3", "shoulder sign of sin q2 (+ / -)")
-    q1, q2, q3 = _zyz_signed(bld, sh, g2, ("q1", "q2", "q3"))
+    q1, q2, q3 = zyz_signed(bld, sh, g2, ("q1", "q2", "q3"))
     bld.ops.append(Op("solution", args=(q1, q2, q3, q4, q5, q6, FV), depth=bld.depth))
     steps = [
         ("pose in the canonical chain's frames", "B^-1 P T^-1", [f"Panda class, relation mismatch {geo.error:.1g}"]),

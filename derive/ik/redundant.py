@@ -63,24 +63,19 @@ import numpy as np
 
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
-from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import panda, select, srs
+from derive.ik import classes, finish, panda, select, srs
 from derive.ik.closed_form import IKSolutions
-from derive.ik.tolerances import ACCEPT_TOL
+from derive.ik.tolerances import FREE_TOL, TIE
 from derive.kinematics.pose import as_pose_batch
 from derive.model.robot import load_robot
 
 TWO_PI = 2.0 * math.pi
 #: Branches per value of the free parameter (both classes).
 BRANCHES = 8
-#: The refinement of nearest stops when the bracket of the free parameter is narrower than this (rad).
-FREE_TOL = 1e-9
 #: Values of the free parameter over its range in the first scan (nearest, step 1).
 SCAN = 32
-#: Largest-move values closer than this count as equal (the summed move decides).
-TIE = 1e-13
 #: Offsets (rad) from the seed's free value tried first, both signs: near a singular set the
 #: solutions turn fast with the free parameter, so the seed's own value alone can be far off.
 _OFFSETS = np.array([1e-4, 3e-4, 1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3])
@@ -115,19 +110,9 @@ NAMES = {"panda": "q7", "srs": "psi"}
 CLASS_NAMES = {"panda": "Franka Panda class", "srs": "SRS class (arm angle)"}
 
 
-class Solutions(NamedTuple):
-    """All solutions of n poses at given values of the free parameter: ``q`` (n, 8, 7) NaN-padded
-    (valid rows first), ``counts`` (n,), ``branch`` (n, 8) branch ids (-1 in the padding),
-    ``singular`` (n, 8) (a joint the singular set leaves free was taken from ``q_ref``, else 0),
-    ``reason`` (list of n str: why a pose has no solution, "" where it has one) and ``free``
-    (n,) the value of the free parameter used."""
-
-    q: np.ndarray
-    counts: np.ndarray
-    branch: np.ndarray
-    singular: np.ndarray
-    reason: list
-    free: np.ndarray
+#: The result of :func:`solve`: the one result type of all classes
+#: (:class:`derive.ik.finish.Solutions`; ``free`` the value of the free parameter used).
+Solutions = finish.Solutions
 
 
 class Sweep(NamedTuple):
@@ -173,11 +158,9 @@ def redundant_kind(robot) -> str | None:
 
 
 def _find_kind(robot) -> str | None:
-    if panda.is_panda_class(robot):
-        return "panda"
-    if srs.is_srs(robot):
-        return "srs"
-    return None
+    """The 7R class of :func:`derive.ik.classes.detect` (the Panda class before SRS)."""
+    hit = classes.detect(robot, dof=7)
+    return None if hit is None else hit[0].name
 
 
 def _kind(robot) -> str:
@@ -279,12 +262,8 @@ def solve(robot, poses, free, q_ref=None) -> Solutions:
     f = free_values(free, n)
     qr = _q_ref(q_ref, n)
     if kind == "panda":
-        r = panda.ik_q7(robot, P, f, q_ref=qr)
-        return Solutions(r.q, r.counts.astype(np.int64), r.branches.astype(np.int64), r.singular,
-                         list(r.reasons), f)
-    r = srs.ik_psi(robot, P, f, q_ref=qr)
-    return Solutions(r.q, r.count.astype(np.int64), r.branch.astype(np.int64), r.singular,
-                     [str(x) for x in r.reason], f)
+        return panda.ik_q7(robot, P, f, q_ref=qr)
+    return srs.ik_psi(robot, P, f, q_ref=qr)
 
 
 def ik_batch(robot, poses, free, q_ref=None, details: bool = False):
@@ -305,17 +284,8 @@ def ik(robot, pose, free, q_ref=None, within_limits: bool = False, sort_by=None)
     f = free_values(free, 1)
     r = solve(robot, P, f, q_ref)
     k = int(r.counts[0])
-    sols, sing, br, reason = r.q[0, :k], r.singular[0, :k], r.branch[0, :k], r.reason[0]
-    if within_limits:
-        q, cnt, b, sg = select.within_limits(sols[None], np.array([k]), robot.limits, [True] * 7,
-                                             branch=br[None], singular=sing[None])
-        sols, br, sing = q[0, :cnt[0]], b[0, :cnt[0]], sg[0, :cnt[0]]
-        if len(sols) == 0 and not reason:
-            reason = f"no solution inside the joint limits ({k} outside)"
-    if sort_by is not None and len(sols):
-        ref = as_finite_array(sort_by, "sort_by", last_dim=7)
-        order = select.sort_order(sols, ref, [True] * 7, windings=within_limits)
-        sols, sing, br = sols[order], sing[order], br[order]
+    sols, sing, br, reason = finish.select_one(robot, r.q[0, :k], r.singular[0, :k], r.branch[0, :k],
+                                               r.reason[0], within_limits, sort_by)
     return RedundantIKSolutions(sols.reshape(-1, 7), sing, reason, br, f[0])
 
 
@@ -440,32 +410,13 @@ class _Problem:
         cand, sing, _ = srs._solve_psi(self.geo, self.rc[rows], self.w[rows], f, self.seeds[rows])
         return cand, sing
 
-    def residual(self, rows, q):
-        """Position (m) and rotation (Frobenius norm of the difference of rotation matrices,
-        about sqrt 2 x the angle) errors of configurations q (len(rows), 7) against the poses,
-        in the canonical frame of the class (its own FK, cheaper than the reference FK)."""
-        if self.kind == "panda":
-            r, p = panda.canonical_fk(self.geo, q)
-            rc, w = self.r7[rows], self.p[rows]
-        else:
-            r, p = srs._canonical_fk(self.geo, q * self.geo.signs)
-            rc, w = self.rc[rows], self.w[rows]
-        return np.linalg.norm(p - w, axis=-1), np.linalg.norm(r - rc, axis=(-2, -1))
-
     def moves(self, rows, cand):
         """Per candidate: the winding nearest to the seed inside the limits (NaN if none), and
         the largest, summed and summed squared joint moves (inf if none); the first two are the
         rule of select.nearest."""
         s = self.seeds[rows][:, None, :]
-        w = s + wrap_angle(cand - s)
-        opts = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
-        inside = ((opts >= self.lo[:, None] - select.LIMIT_SLACK)
-                  & (opts <= self.hi[:, None] + select.LIMIT_SLACK))
-        d = np.where(inside, np.abs(opts - s[..., None]), np.inf)
-        pick = np.argmin(d, axis=-1)
-        best = np.take_along_axis(opts, pick[..., None], axis=-1)[..., 0]
-        ok = np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0] & np.isfinite(best)
-        best = np.where(ok, best, np.nan)
+        best = select.nearest_windings(cand, s, self.lo, self.hi)
+        ok = np.isfinite(best)
         move = np.where(ok, np.abs(best - s), np.inf)
         return best, move.max(axis=-1), move.sum(axis=-1), (move * move).sum(axis=-1)
 
@@ -625,8 +576,8 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
         k = np.arange(len(at))
         cand, sing = prob.candidates(at, best_f[at])
         best, mx, tot, _ = prob.moves(at, cand[k, branch[at]][:, None])
-        dp, dr = prob.residual(at, np.nan_to_num(best[:, 0]))
-        ok = np.isfinite(mx[:, 0]) & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
+        good, _ = finish.check(robot, P[at], np.nan_to_num(best[:, :1]))
+        ok = np.isfinite(mx[:, 0]) & good[:, 0]
         if solver is not None:          # the kernels set a free joint to 0, not the seed's
             ok &= ~sing[k, branch[at]]
         q[at[ok]] = best[ok, 0]

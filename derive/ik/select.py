@@ -25,9 +25,9 @@ import numpy as np
 
 from derive.algebra.angles import wrap_angle
 from derive.errors import InputError
+from derive.ik.tolerances import LIMIT_SLACK
 
 TWO_PI = 2.0 * np.pi
-LIMIT_SLACK = 1e-12
 #: nearest compares moves as rint(move * MOVE_SCALE): in steps of 1e-9 (rad or m)
 MOVE_SCALE = 1e9
 
@@ -166,6 +166,34 @@ def sort_order(sols, ref, revolute, windings: bool) -> np.ndarray:
     return np.argsort(np.linalg.norm(diff, axis=1), kind="stable")
 
 
+def nearest_windings(sols, seeds, lo, hi) -> np.ndarray:
+    """The one nearest-winding rule (:func:`nearest`, :func:`derive.ik.redundant.nearest`; the C
+    extension's nearest_winding does the same): per joint of ``sols`` (..., dof), of the values
+    w = seed + wrap(q - seed) and w -+ 2 pi the one nearest to ``seeds`` (broadcast) inside
+    [lo - LIMIT_SLACK, hi + LIMIT_SLACK]; NaN where none is inside (or q is NaN)."""
+    w = seeds + wrap_angle(sols - seeds)
+    cands = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
+    inside = (cands >= lo[:, None] - LIMIT_SLACK) & (cands <= hi[:, None] + LIMIT_SLACK)
+    d = np.where(inside, np.abs(cands - np.asarray(seeds)[..., None]), np.inf)
+    pick = np.argmin(d, axis=-1)
+    best = np.take_along_axis(cands, pick[..., None], axis=-1)[..., 0]
+    return np.where(np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0], best, np.nan)
+
+
+def inside_limits(q, limits) -> np.ndarray:
+    """(...,) bool: every joint of q (..., dof) has a winding q + 2 pi k inside its limits
+    (LIMIT_SLACK); a joint without finite lower limit is taken as it is; NaN rows are False.
+    (The test of one configuration; :func:`within_limits` expands the windings.)"""
+    limits = np.asarray(limits, dtype=float)
+    lo, hi = limits[:, 0], limits[:, 1]
+    with np.errstate(invalid="ignore"):
+        k = np.ceil((lo - LIMIT_SLACK - q) / TWO_PI)
+        k = np.where(np.isfinite(lo), k, 0.0)
+        qq = q + TWO_PI * k
+        ok = (qq >= lo - LIMIT_SLACK) & (qq <= hi + LIMIT_SLACK)
+    return np.all(ok, -1)
+
+
 @dataclass(frozen=True)
 class Nearest:
     """Per pose: ``q`` (n, dof) the chosen solution (NaN where none), ``found`` (n,) whether one
@@ -197,16 +225,7 @@ def nearest(sols, counts, seeds, limits, revolute, branch=None, singular=None, t
     lo, hi = _limits(limits, dof)
     revolute = np.asarray(revolute, dtype=bool)
     seeds = np.broadcast_to(np.asarray(seeds, dtype=float), (n, dof))
-    # per joint: w = seed + wrap(q - seed), the nearest winding, and w -+ 2 pi; the nearest of them
-    # inside the limits (the C extension's nearest_winding does the same)
-    s = seeds[:, None, :]
-    w = s + wrap_angle(sols - s)
-    cands = np.stack([w - TWO_PI, w, w + TWO_PI], axis=-1)
-    inside = (cands >= lo[:, None] - LIMIT_SLACK) & (cands <= hi[:, None] + LIMIT_SLACK)
-    d = np.where(inside, np.abs(cands - s[..., None]), np.inf)
-    pick = np.argmin(d, axis=-1)
-    best = np.take_along_axis(cands, pick[..., None], axis=-1)[..., 0]
-    best = np.where(np.take_along_axis(inside, pick[..., None], axis=-1)[..., 0], best, np.nan)
+    best = nearest_windings(sols, seeds[:, None, :], lo, hi)
     plain = np.where((sols >= lo - LIMIT_SLACK) & (sols <= hi + LIMIT_SLACK), sols, np.nan)
     best = np.where(revolute[None, None, :], best, plain)
     move = np.abs(best - seeds[:, None, :])

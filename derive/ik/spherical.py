@@ -51,15 +51,12 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
+from derive.ik.euler import zyz
+from derive.ik.tolerances import (CLASS_DIRECTION, CLASS_DISTANCE, MAP_ANGLE, MAP_POSITION,
+                                  OFFSET_SNAP, REACH_TOL)
 from derive.kinematics.fk import _pose_error, fk
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot, robot_from_dict
-
-#: Geometric properties of the class must hold within this (rad for angles, m for distances).
-CLASS_TOL = 1e-10
-#: The relation FK_robot = B FK_canonical(s q + o) T must hold within this (m, rad).
-MAP_TOL = 1e-10
 
 #: Parameter names of the canonical chain, in the OPW paper's order.
 PARAMETERS = ("a1", "a2", "b", "c1", "c2", "c3", "c4")
@@ -179,7 +176,7 @@ def _rz(t):
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _snap(x: float, step: float, tol: float = 1e-12) -> float:
+def _snap(x: float, step: float, tol: float = OFFSET_SNAP) -> float:
     k = round(x / step)
     return k * step if abs(x - k * step) <= tol else x
 
@@ -198,13 +195,13 @@ def _sw_geometry(robot) -> SWGeometry:
         fail("the path to the end has a prismatic joint or not 6 joints")
     h = np.array([_unit(a) for a in chain.axes])
     pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:6]
-    tol = CLASS_TOL
-    if abs(h[0] @ h[1]) > tol:
+    tol = CLASS_DISTANCE
+    if abs(h[0] @ h[1]) > CLASS_DIRECTION:
         fail("axis 1 is not perpendicular to axis 2")
-    if np.linalg.norm(np.cross(h[1], h[2])) > tol:
+    if np.linalg.norm(np.cross(h[1], h[2])) > CLASS_DIRECTION:
         fail("axes 2 and 3 are not parallel")
     for i, j in ((2, 3), (3, 4), (4, 5)):
-        if abs(h[i] @ h[j]) > tol:
+        if abs(h[i] @ h[j]) > CLASS_DIRECTION:
             fail(f"axis {j + 1} is not perpendicular to axis {i + 1}")
     # wrist centre: the point of axis 5 nearest to axis 4 (they must meet), on axis 6 too
     if _line_distance(pts[3], h[3], pts[4], h[4]) > tol or _line_distance(pts[4], h[4], pts[5], h[5]) > tol \
@@ -286,7 +283,7 @@ def _sw_geometry(robot) -> SWGeometry:
                   np.broadcast_to(tool, (24, 8)))
     dp, dr = _pose_error(ref, via)
     err = float(max(dp.max(), dr.max()))
-    if not err <= MAP_TOL:
+    if not (dp.max() <= MAP_POSITION and dr.max() <= MAP_ANGLE):
         fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
     return SWGeometry(name, **vals, base=base, tool=tool, signs=signs, offsets=offsets, error=err)
 
@@ -313,7 +310,7 @@ def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = 
        where |sin t5| < WRIST_SINGULAR only t4 + t6 (t5 = 0) or t4 - t6 (t5 = pi) is
        determined: t4 is taken from ``q4_ref`` (robot joint values) or as the robot's q4 = 0,
        and t6 from the rest of the rotation, Rz(t6) = Ry(t5)^T Rz(t4)^T M; such solutions are
-       marked singular.
+       marked singular (the decomposition: :func:`derive.ik.euler.zyz`).
 
     Unreachable branches are NaN unless ``keep_unreachable`` (square roots clipped to 0).
     """
@@ -350,13 +347,8 @@ def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = 
             v = k * np.sin(gamma)
             t2 = np.arctan2(u * x - v * z, u * z + v * x)
             m = np.swapaxes(rot_z(t1) @ rot_y(t2 + t3), -1, -2) @ r
-            s5abs = np.hypot(m[:, 0, 2], m[:, 1, 2])
-            sing = s5abs < WRIST_SINGULAR
             for i5, sg5 in enumerate((1.0, -1.0)):
-                t5 = np.where(sing, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), np.arctan2(sg5 * s5abs, m[:, 2, 2]))
-                t4 = np.where(sing, t4_free, np.arctan2(sg5 * m[:, 1, 2], sg5 * m[:, 0, 2]))
-                rest = np.swapaxes(rot_z(t4) @ rot_y(t5), -1, -2) @ m
-                t6 = np.arctan2(rest[:, 1, 0], rest[:, 0, 0])
+                t4, t5, t6, sing = zyz(m, sg5, t4_free)
                 kk = 4 * i1 + 2 * i3 + i5
                 theta = np.stack([t1, t2, t3, t4, t5, t6], -1)
                 out[:, kk] = geo.from_canonical(theta)

@@ -83,26 +83,22 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik.tolerances import ACCEPT_TOL, MERGE_TOL, REACH_TOL, WRIST_SINGULAR
+from derive.ik.euler import zyz, zyz_matrix
+from derive.ik import select
+from derive.ik.finish import Solutions, finish, rotation_angle
+from derive.ik.tolerances import (ARC_MERGE, AXIS_TOL, CLASS_DIRECTION, CLASS_DISTANCE,
+                                  MAP_ANGLE, MAP_POSITION, REACH_TOL, STRETCH_TOL,
+                                  TRIG_DEGENERATE, WRIST_SINGULAR)
 from derive.kinematics.fk import _pose_error, fk
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
-
-#: Geometric properties of the class must hold within this (rad for angles, m for distances).
-CLASS_TOL = 1e-10
-#: The relation FK_robot = B (R, W) T must hold within this (m, rad).
-MAP_TOL = 1e-10
-#: |cos t4| within this of 1 is the elbow's full stretch (or full fold).
-STRETCH_TOL = 1e-14
-#: The wrist centre counts as on axis 1 when it is closer than this to it (m).
-AXIS_TOL = 1e-12
 
 REASON_REACH = ("unreachable: the shoulder-wrist distance is outside [|d_se - d_ew|, d_se + d_ew]")
 REASON_FOLDED = ("the wrist centre is at the shoulder point (d_se = d_ew, elbow folded): the "
                  "shoulder rotation is free in three dimensions; no arm angle")
 REASON_JOINT = ("unreachable with the given joint value: the shoulder cannot carry the forearm "
                 "onto the shoulder-wrist line")
-REASON_ACCEPT = "no candidate reproduces the pose within ACCEPT_TOL"
+REASON_ACCEPT = "no candidate reproduces the pose within ACCEPT_POSITION / ACCEPT_ANGLE"
 
 #: Shoulder, elbow and wrist signs (GC2, GC4, GC6) of branch k = 4 i2 + 2 i4 + i6.
 BRANCH_SIGNS = np.array([[1 - 2 * ((k >> 2) & 1), 1 - 2 * ((k >> 1) & 1), 1 - 2 * (k & 1)]
@@ -127,17 +123,9 @@ class SRSGeometry:
     error: float            # largest mismatch of the relation on the check configurations
 
 
-class SRSSolutions(NamedTuple):
-    """All solutions of n poses: ``q`` (n, 8, 7) NaN-padded (valid rows first, in branch
-    order), ``count`` (n,), ``branch`` (n, 8) branch ids (-1 for padding), ``singular`` (n, 8)
-    (the row lies on a singular set: a joint was taken from q_ref or set to 0), ``reason`` (n,)
-    why a pose has no solution ('' when it has)."""
-
-    q: np.ndarray
-    count: np.ndarray
-    branch: np.ndarray
-    singular: np.ndarray
-    reason: np.ndarray
+#: The former result type of :func:`ik_psi` and :func:`ik_joint`, now the one result type of all
+#: classes (``count`` still reads as ``counts``).
+SRSSolutions = Solutions
 
 
 class SRSSweep(NamedTuple):
@@ -202,12 +190,12 @@ def _srs_geometry(robot) -> SRSGeometry:
         fail("the path to the end has a prismatic joint or not 7 joints")
     h = np.array([_unit(a) for a in chain.axes])
     pts = chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:7]
-    tol = CLASS_TOL
+    tol, dtol = CLASS_DISTANCE, CLASS_DIRECTION
     for i, j in ((0, 1), (4, 5)):
-        if abs(h[i] @ h[j]) > tol:
+        if abs(h[i] @ h[j]) > dtol:
             fail(f"axis {j + 1} is not perpendicular to axis {i + 1}")
     for i in (3, 5):
-        if np.linalg.norm(np.cross(h[1], h[i])) > tol:
+        if np.linalg.norm(np.cross(h[1], h[i])) > dtol:
             fail(f"axis {i + 1} is not parallel to axis 2 at the zero pose")
     s = _nearest_on(pts[1], h[1], pts[0], h[0])          # shoulder: axis 2 meets axis 1
     w = _nearest_on(pts[5], h[5], pts[4], h[4])          # wrist centre: axis 6 meets axis 5
@@ -215,9 +203,9 @@ def _srs_geometry(robot) -> SRSGeometry:
         fail("shoulder and wrist centre coincide")
     u = _unit(w - s)
     for i, p in ((0, s), (2, s), (4, w), (6, w)):
-        if np.linalg.norm(np.cross(h[i], u)) > tol or _off_line(pts[i], p, u) > tol:
+        if np.linalg.norm(np.cross(h[i], u)) > dtol or _off_line(pts[i], p, u) > tol:
             fail(f"axis {i + 1} does not lie on the shoulder-wrist line at the zero pose")
-    if abs(h[1] @ u) > tol or abs(h[3] @ u) > tol or abs(h[5] @ u) > tol:
+    if abs(h[1] @ u) > dtol or abs(h[3] @ u) > dtol or abs(h[5] @ u) > dtol:
         fail("axes 2, 4, 6 are not perpendicular to the shoulder-wrist line at the zero pose")
     if _off_line(s, pts[1], h[1]) > tol or _off_line(w, pts[5], h[5]) > tol:
         fail("axes 2 and 6 do not cross the shoulder-wrist line")
@@ -246,7 +234,7 @@ def _srs_geometry(robot) -> SRSGeometry:
                      s + (frame @ (p + r @ t_tr)[..., None])[..., 0])
     dp, dr = _pose_error(fk(robot, q), via)
     err = float(max(dp.max(), dr.max()))
-    if not err <= MAP_TOL:
+    if not (dp.max() <= MAP_POSITION and dr.max() <= MAP_ANGLE):
         fail(f"the canonical chain reproduces its FK only to {err:.3g} (m, rad)")
     return SRSGeometry(robot.name, geo.d_bs, d_se, d_ew, geo.d_wf, frame, s, t_rot, t_tr,
                        signs, lim, err)
@@ -255,22 +243,6 @@ def _srs_geometry(robot) -> SRSGeometry:
 # --------------------------------------------------------------------------- #
 # Rotations (batches)
 # --------------------------------------------------------------------------- #
-def _zyz_matrix(a, b, c):
-    """Rz(a) Ry(b) Rz(c), written out."""
-    ca, sa, cb, sb, cc, sc = np.cos(a), np.sin(a), np.cos(b), np.sin(b), np.cos(c), np.sin(c)
-    m = np.empty(np.shape(a) + (3, 3))
-    m[..., 0, 0] = ca * cb * cc - sa * sc
-    m[..., 0, 1] = -ca * cb * sc - sa * cc
-    m[..., 0, 2] = ca * sb
-    m[..., 1, 0] = sa * cb * cc + ca * sc
-    m[..., 1, 1] = -sa * cb * sc + ca * cc
-    m[..., 1, 2] = sa * sb
-    m[..., 2, 0] = -sb * cc
-    m[..., 2, 1] = sb * sc
-    m[..., 2, 2] = cb
-    return m
-
-
 def _skew(x):
     z = np.zeros_like(x[..., 0])
     return np.stack([np.stack([z, -x[..., 2], x[..., 1]], -1),
@@ -291,9 +263,9 @@ def _forearm(geo: SRSGeometry, t4):
 def _canonical_fk(geo: SRSGeometry, theta):
     """(R, W) of the canonical chain for angles theta (..., 7): the module docstring's product."""
     t = [theta[..., i] for i in range(7)]
-    rs = _zyz_matrix(t[0], t[1], t[2])
+    rs = zyz_matrix(t[0], t[1], t[2])
     w = (rs @ _forearm(geo, t[3])[..., None])[..., 0]
-    r = rs @ rot_y(t[3]) @ _zyz_matrix(t[4], t[5], t[6])
+    r = rs @ rot_y(t[3]) @ zyz_matrix(t[4], t[5], t[6])
     return r, w
 
 
@@ -380,24 +352,6 @@ def arm_angle_matrices(w, r0):
     return a, b, c
 
 
-def _zyz(m, sign, free):
-    """ZYZ Euler angles of m = Rz(a) Ry(b) Rz(c) for the branch sign(sin b) = ``sign``
-    (Shimizu sec. III; Faria, GC2 / GC6): b = atan2(sign hypot(m02, m12), m22),
-    a = atan2(sign m12, sign m02), and c from Rz(c) = Ry(b)^T Rz(a)^T m (equal to
-    atan2(sign m21, -sign m20), but consistent with the rounded a and b, which keeps the
-    product exact near sin b = 0). Where |sin b| < WRIST_SINGULAR only a + c (b = 0) or a - c
-    (b = pi) is fixed: a = ``free``. Returns a, b, c, singular."""
-    sb = np.hypot(m[..., 0, 2], m[..., 1, 2])
-    sing = sb < WRIST_SINGULAR
-    b = np.where(sing, np.where(m[..., 2, 2] >= 0, 0.0, np.pi), np.arctan2(sign * sb, m[..., 2, 2]))
-    a = np.where(sing, free, np.arctan2(sign * m[..., 1, 2], sign * m[..., 0, 2]))
-    ca, sa = np.cos(a), np.sin(a)
-    # rows 1 and 0 of Ry(b)^T Rz(a)^T, applied to column 0 of m
-    c = np.arctan2(ca * m[..., 1, 0] - sa * m[..., 0, 0],
-                   np.cos(b) * (ca * m[..., 0, 0] + sa * m[..., 1, 0]) - np.sin(b) * m[..., 2, 0])
-    return a, b, c, np.broadcast_to(sing, np.shape(c))
-
-
 def _free_angles(geo: SRSGeometry, q_ref, n):
     """Canonical t1 and t5 used where the shoulder / wrist is aligned: s q_ref, else 0."""
     if q_ref is None:
@@ -414,7 +368,7 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     singular = np.zeros((n, 8), dtype=bool)
     reason = np.full(n, "", dtype=object)
     c4 = elbow_cosine(geo, w)
-    folded = np.linalg.norm(w, axis=-1) < CLASS_TOL
+    folded = np.linalg.norm(w, axis=-1) < CLASS_DISTANCE
     bad = np.abs(c4) > 1.0 + REACH_TOL
     reason[bad] = REASON_REACH
     reason[folded] = REASON_FOLDED
@@ -431,11 +385,11 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     a_s, b_s, c_s = arm_angle_matrices(w[:, None], r0)
     rs = (a_s * np.sin(psi)[:, None, None, None] + b_s * np.cos(psi)[:, None, None, None]
           + c_s)                                                 # step 3: R_s(psi), (m, 2, 3, 3)
-    t1, t2, t3, sing_s = _zyz(rs[:, :, None], sign, free1[:, None, None])     # step 4, (m, 2, 2)
+    t1, t2, t3, sing_s = zyz(rs[:, :, None], sign, free1[:, None, None])     # step 4, (m, 2, 2)
     # step 5: the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R (from the rounded
     # shoulder angles, so that the wrist absorbs their rounding)
-    rw = _t(_zyz_matrix(t1, t2, t3) @ rot_y(t4)[:, :, None]) @ rc[:, None, None]
-    t5, t6, t7, sing_w = _zyz(rw[:, :, :, None], sign, free5[:, None, None, None])  # step 6
+    rw = _t(zyz_matrix(t1, t2, t3) @ rot_y(t4)[:, :, None]) @ rc[:, None, None]
+    t5, t6, t7, sing_w = zyz(rw[:, :, :, None], sign, free5[:, None, None, None])  # step 6
     shape = t5.shape                                             # (m, 2, 2, 2): i4, i2, i6
     theta = np.stack([np.broadcast_to(t[..., None], shape) for t in (t1, t2, t3)]
                      + [np.broadcast_to(t4[:, :, None, None], shape), t5, t6, t7], -1)
@@ -449,36 +403,21 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     return out, singular, reason
 
 
-def _finish(geo: SRSGeometry, rc, w, cand, singular, reason) -> SRSSolutions:
-    """Check every candidate by the canonical FK (ACCEPT_TOL), drop a branch that repeats the
-    branch with one sign flipped to + (within MERGE_TOL: the coinciding branches of the
-    singular sets), and compact."""
-    finite = np.all(np.isfinite(cand), -1)
-    r, p = _canonical_fk(geo, np.where(finite[..., None], cand, 0.0) * geo.signs)
-    dp = np.linalg.norm(p - w[:, None], axis=-1)
-    dr = np.linalg.norm(r - rc[:, None], axis=(-2, -1))   # Frobenius, ~ rotation angle * sqrt 2
-    good = finite & (dp <= ACCEPT_TOL) & (dr <= ACCEPT_TOL)
-    # branches coincide on a singular set by one sign: compare k with k - bit for each bit of k
-    dup = np.zeros_like(good)
-    for bit in (4, 2, 1):
-        hi = np.array([k for k in range(8) if k & bit])
-        d = np.abs(wrap_angle(cand[:, hi] - cand[:, hi - bit]))
-        dup[:, hi] |= np.all(d < MERGE_TOL, -1) & good[:, hi - bit]
-    keep = good & ~dup
-    order = np.argsort(~keep, axis=1, kind="stable")
-    q = np.take_along_axis(cand, order[..., None], 1)
-    kept = np.take_along_axis(keep, order, 1)
-    q[~kept] = np.nan
-    branch = np.where(kept, order, -1)
-    sing = np.take_along_axis(singular, order, 1) & kept
-    count = kept.sum(1)
-    reason = reason.copy()
-    reason[(count == 0) & (reason == "")] = REASON_ACCEPT
-    return SRSSolutions(q, count, branch, sing, reason)
+def _finish(robot, geo, rc, w, poses, cand, singular, reason, free) -> Solutions:
+    """The finish step of all classes (:func:`derive.ik.finish.finish`: the FK check with its one
+    metric, here by the canonical chain against (R_c, W); the merge of branches that coincide on
+    a singular set; compaction), with the reasons."""
+    def errors(q):
+        r, p = _canonical_fk(geo, q * geo.signs)
+        return np.linalg.norm(p - w[:, None], axis=-1), rotation_angle(rc[:, None], r)
+
+    out = Solutions(*finish(robot, poses, cand, singular, errors=errors), reason.copy(), free)
+    out.reason[(out.counts == 0) & (out.reason == "")] = REASON_ACCEPT
+    return out
 
 
-def _single(res, single: bool):
-    return type(res)(*(x[0] for x in res)) if single else res
+def _single(res: Solutions, single: bool) -> Solutions:
+    return res.rows(0) if single else res
 
 
 # --------------------------------------------------------------------------- #
@@ -494,7 +433,8 @@ def ik_psi(robot, poses, psi, *, q_ref=None) -> SRSSolutions:
     (:func:`_zyz`). ``q_ref`` (7,) or (n, 7) supplies q1 (shoulder aligned) and q5 (wrist
     aligned) on the singular sets, else they are 0. Joint values are wrapped to (-pi, pi];
     limits are not applied (see :func:`psi_intervals`, :func:`within_limits`). Returns
-    :class:`SRSSolutions` (one pose: its rows without the leading axis)."""
+    :class:`derive.ik.finish.Solutions` (one pose: its rows without the leading axis)."""
+    robot = load_robot(robot)
     geo = srs_geometry(robot)
     P, single = _poses(poses)
     n = len(P)
@@ -502,7 +442,7 @@ def ik_psi(robot, poses, psi, *, q_ref=None) -> SRSSolutions:
     qr = _q_ref(q_ref, n)
     rc, w = _into_canonical(geo, P)
     cand, singular, reason = _solve_psi(geo, rc, w, psi, qr)
-    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+    return _single(_finish(robot, geo, rc, w, P, cand, singular, reason, psi), single)
 
 
 def arm_angle(robot, q) -> np.ndarray:
@@ -516,11 +456,11 @@ def arm_angle(robot, q) -> np.ndarray:
     if arr.ndim > 2:
         raise InputError(f"q: expected shape (7,) or (n, 7), got {arr.shape}")
     theta = arr.reshape(-1, 7) * geo.signs
-    rs = _zyz_matrix(theta[:, 0], theta[:, 1], theta[:, 2])
+    rs = zyz_matrix(theta[:, 0], theta[:, 1], theta[:, 2])
     w = (rs @ _forearm(geo, theta[:, 3])[..., None])[..., 0]
     norm = np.linalg.norm(w, axis=-1)
-    if np.any(norm < CLASS_TOL):
-        raise InputError(f"q: row {int(np.argmax(norm < CLASS_TOL))} has its wrist centre at the "
+    if np.any(norm < CLASS_DISTANCE):
+        raise InputError(f"q: row {int(np.argmax(norm < CLASS_DISTANCE))} has its wrist centre at the "
                          "shoulder point; the arm angle is undefined there")
     x = w / norm[:, None]
     r0 = reference_shoulder(geo, w, theta[:, 3])
@@ -532,19 +472,13 @@ def arm_angle(robot, q) -> np.ndarray:
 
 def within_limits(robot, q) -> np.ndarray:
     """(...,) bool: every joint of q (..., 7) has a winding q + 2 pi k within its limits
-    (1e-12 rad slack); NaN rows are False."""
+    (LIMIT_SLACK); NaN rows are False."""
     geo = srs_geometry(robot)
     return _within(geo.limits, np.asarray(q, dtype=float))
 
 
 def _within(limits, q):
-    lo, hi = limits[:, 0], limits[:, 1]
-    with np.errstate(invalid="ignore"):
-        k = np.ceil((lo - 1e-12 - q) / (2 * math.pi))
-        k = np.where(np.isfinite(lo), k, 0.0)
-        qq = q + 2 * math.pi * k
-        ok = (qq >= lo - 1e-12) & (qq <= hi + 1e-12)
-    return np.all(ok, -1)
+    return select.inside_limits(q, limits)
 
 
 # --------------------------------------------------------------------------- #
@@ -588,7 +522,7 @@ def ik_joint(robot, poses, joint: int, value, *, q_ref=None) -> SRSSolutions:
     cand = np.where(bad[:, None, None], np.nan, wrap_angle(theta * geo.signs))
     singular = singular & ~bad[:, None]
     reason[~np.any(reach, 1) & (reason == "")] = REASON_JOINT
-    return _single(_finish(geo, rc, w, cand, singular, reason), single)
+    return _single(_finish(robot, geo, rc, w, P, cand, singular, reason, val), single)
 
 
 def _reverse(geo: SRSGeometry, rc, w):
@@ -656,9 +590,9 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
                 t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
                 sing_s = stretched
             t1b, t3b = np.broadcast_to(t1, (n,)), np.broadcast_to(t3, (n,))
-            rw = _t(_zyz_matrix(t1b, t2, t3b) @ rot_y(t4)) @ rc
+            rw = _t(zyz_matrix(t1b, t2, t3b) @ rot_y(t4)) @ rc
             for i6, g6 in enumerate((1.0, -1.0)):
-                t5, t6, t7, sing_w = _zyz(rw, g6, free5)
+                t5, t6, t7, sing_w = zyz(rw, g6, free5)
                 k = 4 * i + 2 * i4 + i6
                 th = np.stack([t1b, t2, t3b, t4, t5, t6, t7], -1)
                 theta[reach, k] = th[reach]
@@ -674,7 +608,7 @@ def _trig_roots(a, b, c):
     """(..., 2) roots psi in [-pi, pi] of a sin psi + b cos psi + c = 0 (arrays of one shape):
     with r = hypot(a, b), r cos(psi - atan2(a, b)) = -c; NaN where there is none."""
     r = np.hypot(a, b)
-    ok = (r >= 1e-14) & (np.abs(c) <= r)
+    ok = (r >= TRIG_DEGENERATE) & (np.abs(c) <= r)
     base = np.arctan2(a, b)
     d = np.arccos(np.clip(-c / np.where(ok, r, 1.0), -1.0, 1.0))
     roots = np.stack([base + d, base - d], -1)
@@ -693,7 +627,7 @@ def _breakpoints(geo: SRSGeometry, rc, w) -> np.ndarray:
     intervals")."""
     m = len(w)
     c4 = elbow_cosine(geo, w)
-    ok = (np.abs(c4) <= 1.0 + REACH_TOL) & (np.linalg.norm(w, axis=-1) >= CLASS_TOL)
+    ok = (np.abs(c4) <= 1.0 + REACH_TOL) & (np.linalg.norm(w, axis=-1) >= CLASS_DISTANCE)
     t4abs = elbow_angle(np.where(ok, c4, 1.0))
     wk = np.where(ok[:, None], w, 1.0)
     tangent = (((0, 1, 2), (0, 0, 2), 0), ((0, 2, 1), (0, 2, 0), 2),
@@ -725,10 +659,10 @@ def _breakpoints(geo: SRSGeometry, rc, w) -> np.ndarray:
 
 
 def _arcs(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The arcs between consecutive distinct breakpoints (closer than 1e-13 count as one):
+    """The arcs between consecutive distinct breakpoints (closer than ARC_MERGE count as one):
     lower and upper ends (m, K - 1) in [-pi, pi], NaN past a pose's last arc."""
     s = np.sort(np.clip(pts, -math.pi, math.pi), 1)             # NaN sort last
-    keep = np.concatenate([np.isfinite(s[:, :1]), np.diff(s, axis=1) > 1e-13], 1)
+    keep = np.concatenate([np.isfinite(s[:, :1]), np.diff(s, axis=1) > ARC_MERGE], 1)
     s = np.sort(np.where(keep, s, np.nan), 1)
     return s[:, :-1], s[:, 1:]
 
@@ -772,7 +706,7 @@ def psi_intervals(robot, pose) -> list[np.ndarray]:
         iv = []
         for i in np.flatnonzero(feasible[0, :, k]):
             a, b = float(lo[0, i]), float(hi[0, i])
-            if iv and abs(iv[-1][1] - a) <= 1e-13:
+            if iv and abs(iv[-1][1] - a) <= ARC_MERGE:
                 iv[-1][1] = b
             else:
                 iv.append([a, b])

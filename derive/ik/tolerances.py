@@ -1,15 +1,95 @@
-"""Tolerances shared by the closed-form IK solvers (UR family and spherical wrist), their IK
-programs and the generated kernels."""
+"""The one tolerance module of the IK layer (derive.ik): the closed-form solvers (UR family,
+spherical wrist, SRS, Panda), their finish step (:mod:`derive.ik.finish`), the IK programs and
+the generated kernels, and the subproblem library.
 
-#: |sin| of the wrist angle below this is the wrist singularity (one wrist joint free)
+Every constant states its unit and the one quantity it is compared with. Two constants with the
+same value but different units (a length and an angle) are two constants. docs/ik.md has the
+table ("Tolerances").
+"""
+
+# --- Class detection: the robot's axes at the zero pose, in its own frames.
+
+#: Directions of unit joint axes: |h_i . h_j| of two axes that must be perpendicular, |h_i x h_j|
+#: of two that must be parallel, the largest component difference of an axis from the class's
+#: direction (dimensionless; about the angle in rad). Spherical wrist, SRS, Panda.
+CLASS_DIRECTION = 1e-10
+#: Positions: the distance (m) between axis lines that must meet, of a point from a line it must
+#: lie on, of a coordinate from the class's value. Spherical wrist, SRS, Panda.
+CLASS_DISTANCE = 1e-10
+#: The UR layout (derive.ik.closed_form): each component of a unit axis in thesis form against
+#: the UR axes (dimensionless).
+UR_AXIS_TOL = 1e-12
+#: The UR layout: each component of a link vector (m) against the UR shape (zeros where the UR
+#: has none) and of the chain's start point.
+UR_LINK_TOL = 1e-12
+#: The relation FK_robot(q) = B FK_canonical(s q + o) T, checked on random configurations: the
+#: largest position error (m).
+MAP_POSITION = 1e-10
+#: ... and the largest rotation angle (rad) of the same check.
+MAP_ANGLE = 1e-10
+#: Joint offsets of the spherical-wrist relation within this (rad) of a multiple of pi/12 are
+#: that multiple.
+OFFSET_SNAP = 1e-12
+#: Entries of the fixed transforms written into the 7R IK programs (derive.ik.program7) within
+#: this of an integer are that integer (dimensionless rotation entries and metres alike: the
+#: canonical frames are signed permutations up to the rounding of the description's numbers).
+PROGRAM_SNAP = 1e-12
+
+# --- Solving.
+
+#: |sin| of the middle angle of a rotation decomposition (the UR's t5, the spherical wrist's t5,
+#: the ZYZ decompositions of SRS and Panda, :mod:`derive.ik.euler`) below this is a singularity:
+#: the first angle is free (dimensionless). Also |sin t4| of the SRS elbow, marked singular.
 WRIST_SINGULAR = 1e-11
-#: Candidates whose FK misses the pose by more than this (m or rad) are dropped.
-ACCEPT_TOL = 1e-8
-#: Solutions closer than this in every joint (mod 2 pi) are one solution: such pairs only arise
-#: within about 1e-7 of a singular set, where a double root splits by rounding (sqrt of noise).
-MERGE_TOL = 1e-6
-#: Slack on |cos| <= 1 and on the discriminant before a branch counts as unreachable.
+#: A Panda joint is free when a point is this close (m) to its axis: |X| (the shoulder on axis
+#: 5, q5 free), hypot(vx, vy) (the shoulder on axis 6, q6 free; then |Z| must be within it too).
+FREE_JOINT_DISTANCE = 1e-11
+#: The SRS wrist centre counts as on axis 1 when it is closer than this to it (m); the reference
+#: plane then uses the canonical x axis.
+AXIS_TOL = 1e-12
+#: Slack on |cos| <= 1 and on a discriminant before a branch counts as unreachable (relative:
+#: the cosines are ratios, the discriminants compared with max(1, c^2)).
 REACH_TOL = 1e-10
+#: SRS elbow: cos t4 within this of +-1 is +-1 (dimensionless), so the two elbow branches
+#: coincide exactly at the stretch (a rounding of 1e-16 would split them by 1e-8 rad).
+STRETCH_TOL = 1e-14
+#: Panda elbow (eq. E2) and q6 roots (eq. W4): a cosine within this of +-1 is +-1
+#: (dimensionless), and the q6 roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|. It
+#: is larger than STRETCH_TOL because the Panda's cosine K / hypot(A, B) is a difference of four
+#: squared lengths: its rounding is about 1e-14 where the SRS's is about 1e-16. The two are kept
+#: apart because the generated kernels use them (changing one changes the emitted programs).
+DOUBLE_ROOT = 1e-13
+#: Rounding of X^2 - vz^2 per metre of |X| (m), eq. W4 of the Panda: vz of a pose made by FK is
+#: off by up to ~5e-15 m (measured 3e-15 on the Panda at q5 = pi/2).
+W4_NOISE = 1e-13
+
+# --- The finish step (derive.ik.finish): checking and merging candidates.
+
+#: A candidate is kept when the FK of the robot's own model reproduces the pose within this
+#: position error (m) ...
+ACCEPT_POSITION = 1e-8
+#: ... and within this rotation angle (rad): 2 atan2(|vec(r)|, |w(r)|) of the relative rotation.
+ACCEPT_ANGLE = 1e-8
+#: Solutions closer than this (rad; m for a prismatic joint) in every joint, each difference
+#: wrapped to (-pi, pi], are one solution: such pairs only arise within about 1e-7 of a singular
+#: set, where a double root splits by rounding (sqrt of noise). The later one is dropped.
+MERGE_TOL = 1e-6
+#: Joint limits are closed intervals with this slack (rad, m for a prismatic joint).
+LIMIT_SLACK = 1e-12
+
+# --- The SRS arm angle and the 7R nearest search (derive.ik.srs, derive.ik.redundant).
+
+#: a sin psi + b cos psi + c = 0 has no isolated roots when hypot(a, b) is below this (the
+#: coefficients are entries of rotation matrices: dimensionless).
+TRIG_DEGENERATE = 1e-14
+#: Breakpoints of the feasible arm angles closer than this (rad) are one.
+ARC_MERGE = 1e-13
+#: The 7R nearest search: largest-move values closer than this (rad) count as equal (the summed
+#: move decides).
+TIE = 1e-13
+#: The 7R nearest search stops refining when the bracket of the free parameter is narrower than
+#: this (rad).
+FREE_TOL = 1e-9
 
 # --- Subproblem library (derive/ik/subproblems). Each constant names its unit and the one
 # --- quantity it is compared with.
@@ -37,3 +117,42 @@ SP_RANK_TOL = 1e-9
 #: square root of rounding). The candidate is still kept only if its residual is within
 #: SP_EXACT_TOL.
 SP_ROOT_MODULUS = 1e-6
+
+# --- Near-class arms (derive/ik/nearclass): the nominal robot and the Newton polish. Each
+# --- constant names its unit and the one quantity it is compared with.
+
+#: Axes projected onto the class (route "projection" of :func:`derive.ik.nearclass.nominal`):
+#: the angle (rad) between a joint axis at the zero pose, in the nominal's canonical frame, and
+#: the nearest coordinate axis. At or below it the axis is made that coordinate axis (a URDF's
+#: 1.570796325 twists: 2e-9 rad; a DH file's ``alpha: 1.5708``: 3.7e-6 rad).
+NEAR_AXIS_TOL = 1e-3
+#: Axis points projected onto the class: the difference (m) between two coordinates of the axis
+#: points (canonical frame, one coordinate direction at a time, single-linkage clusters). At or
+#: below it they are made equal, so nearly intersecting axes intersect and nearly coincident
+#: parallel axes coincide (an iiwa14 whose axes miss by 0.44 mm).
+NEAR_POINT_TOL = 1e-3
+#: The largest mismatch of the relation FK_robot(q) ~= B FK_nominal(s q + o) T that a nominal
+#: robot may have: max over sample configurations of the position error (m) and the rotation
+#: angle (rad), each compared with it (``Nominal.deviation``). The calibrated UR5
+#: (ur5-calibrated.yaml) is 0.016 from the UR5.
+NEAR_DEVIATION_MAX = 0.03
+#: A polished solution has converged when its residual, the larger of the position error (m)
+#: and the rotation angle (rad) of FK(q) against the pose, is at or below this.
+POLISH_TOL = 1e-12
+#: Newton iterations of the polish before a candidate counts as not converged.
+POLISH_MAX_ITER = 40
+#: The largest change of one joint (rad for revolute, m for prismatic joints) in one Newton
+#: step of the polish (a trust region: larger steps are scaled down).
+POLISH_MAX_STEP = 0.3
+#: A nominal whose ``deviation`` (m, rad: the largest relation mismatch) exceeds this is carried
+#: onto the arm by a homotopy (derive.ik.nearclass.track) before the polish; below it Newton
+#: starts from the nominal's candidates directly.
+HOMOTOPY_FROM = 1e-4
+#: The homotopy parameters s (dimensionless, 0 the nominal, 1 the arm) of the tracking stages.
+HOMOTOPY_STAGES = (0.25, 0.5, 0.75)
+#: Damped Newton steps per homotopy stage (the final polish at s = 1 is POLISH_MAX_ITER).
+HOMOTOPY_STEPS = 4
+#: A seed from a branch the nominal does not reach (its square root clipped) is polished only
+#: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
+#: pose (dimensionless; the comparison is in m and rad, max of the two).
+SEED_REACH = 4.0

@@ -472,11 +472,15 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
                 "seed from that robot's closed form")
         notes.append("a calibrated arm: the nominal arm (every property within NEAR_TOL) is of "
                      "class UR, so the closed form holds for the nominal arm, and derive.refine "
-                     f"polishes its solutions to this arm; {seed}")
+                     f"polishes its solutions to this arm; {seed}; derive.classify says whether a "
+                     "nominal robot within the tolerances of derive.ik.nearclass gives "
+                     "derive.reference.ik the nominal's closed form + Newton polish")
     else:
         notes.append("a calibrated arm: the nominal arm (every property within NEAR_TOL) is of "
                      f"class {nominal_cls}; this arm has that structure only within the near "
-                     "misses listed")
+                     "misses listed; derive.classify says whether a nominal robot within the "
+                     "tolerances of derive.ik.nearclass gives derive.reference.ik the nominal's "
+                     "closed form + Newton polish")
     return notes
 
 

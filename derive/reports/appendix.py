@@ -22,7 +22,8 @@ from derive.algebra import dualquat as dq
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
 from derive.ik.closed_form import spherical_class
-from derive.ik.spherical import MAP_TOL, SWGeometry, canonical_robot
+from derive.ik.spherical import SWGeometry, canonical_robot
+from derive.ik.tolerances import MAP_POSITION
 from derive.model.robot import load_robot
 from derive.reports.latex import latex, side
 from derive.symbolic.chain import SymChain
@@ -86,7 +87,7 @@ def class_context(geo: SWGeometry, robot) -> dict:
         "joints": [{"index": i + 1, "name": n, "sign": "+1" if s > 0 else "-1",
                     "offset_deg": _num(float(np.degrees(o))), "offset_rad": _num(float(o))}
                    for i, (n, s, o) in enumerate(zip(joints, geo.signs, geo.offsets))],
-        "base": pose(geo.base), "tool": pose(geo.tool), "error": f"below {MAP_TOL:g}",
+        "base": pose(geo.base), "tool": pose(geo.tool), "error": f"below {MAP_POSITION:g}",
     }
 
 

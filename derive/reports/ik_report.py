@@ -26,7 +26,7 @@ from derive.ik import srs as srs_ik
 from derive.ik.program import spherical_forms
 from derive.ik.redundant import LABELS, free_parameter, redundant_kind, solve
 from derive.ik.spherical import canonical_robot
-from derive.ik.tolerances import ACCEPT_TOL, REACH_TOL, WRIST_SINGULAR
+from derive.ik.tolerances import ACCEPT_POSITION, DOUBLE_ROOT, REACH_TOL, STRETCH_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import fk
 from derive.model.robot import load_robot
 from derive.reports.appendix import class_context
@@ -527,7 +527,7 @@ def _srs_context(robot) -> dict:
                       r"\theta_7 = \operatorname{atan2}(\pm n_{32},\ \mp n_{31})"]},
         {"title": "The joint values",
          "text": r"Each candidate is wrapped to $(-\pi, \pi]$ and checked by the FK (dropped beyond "
-                 f"{_sci(ACCEPT_TOL)} in position or rotation); branches that coincide on a singular "
+                 f"{_sci(ACCEPT_POSITION)} in position or rotation); branches that coincide on a singular "
                  "set are returned once.",
          "formulas": [r"q_i = s_i\, \theta_i"]},
     ]
@@ -539,7 +539,7 @@ def _srs_context(robot) -> dict:
     }
     singular = [
         {"name": r"Elbow stretched or folded ($\theta_4 = 0$ or $\pi$)",
-         "text": rf"$\cos\theta_4$ within {_sci(srs_ik.STRETCH_TOL)} of $\pm 1$ is taken as $\pm 1$: "
+         "text": rf"$\cos\theta_4$ within {_sci(STRETCH_TOL)} of $\pm 1$ is taken as $\pm 1$: "
                  "the two elbow branches coincide and are returned once (the kernels flag the "
                  "solution singular, "
                  rf"$\lvert\sin\theta_4\rvert$ below {_sci(WRIST_SINGULAR)}). No joint is left free."},
@@ -658,7 +658,7 @@ def _panda_context(robot) -> dict:
                       r"q_3 = \operatorname{atan2}(\pm m_{32},\ \mp m_{31})"]},
         {"title": "The joint values",
          "text": r"$q_1$ to $q_6$ are wrapped to $(-\pi, \pi]$, $q_7$ is the given value; each "
-                 f"candidate is checked by the FK (dropped beyond {_sci(ACCEPT_TOL)} in position or "
+                 f"candidate is checked by the FK (dropped beyond {_sci(ACCEPT_POSITION)} in position or "
                  "rotation) and near-duplicates are merged.",
          "formulas": []},
     ]
@@ -672,7 +672,7 @@ def _panda_context(robot) -> dict:
     singular = [
         {"name": "Elbow stretched or folded",
          "text": r"$\lvert K \rvert = \sqrt{A^2 + B^2}$: the two $q_4$ roots coincide (an argument within "
-                 f"{_sci(panda_ik.DOUBLE_ROOT)} of $\\pm 1$ is taken as $\\pm 1$) and the pairs merge: "
+                 f"{_sci(DOUBLE_ROOT)} of $\\pm 1$ is taken as $\\pm 1$) and the pairs merge: "
                  "4 solutions."},
         {"name": r"Shoulder on axis 5 ($X = 0$)",
          "text": r"$a_3 c_4 + d_3 s_4 = -a_4$" + (f" ($q_4$ = {x0} rad)" if x0 else "")
