@@ -122,12 +122,16 @@ def _shipped() -> dict:
 
 
 def _has_closed_form_ik(robot) -> bool:
-    """Whether the numpy reference solves the robot's IK (a seven-joint arm with its free
-    parameter given): the reference's own dispatch, not the table's."""
+    """Whether the numpy reference solves the robot's IK by a special class (a seven-joint arm
+    with its free parameter given): the reference's own dispatch, not the table's. The general
+    6R elimination (derive.ik.general6r), which solves every other 6R in numpy, has no generated
+    kernels yet, so it does not count here."""
     pose = reference.fk(robot, np.full(robot.dof, 0.3))
     try:
-        reference.ik(robot, pose, free=0.3) if robot.dof == 7 else reference.ik(robot, pose)
-        return True
+        if robot.dof == 7:
+            reference.ik(robot, pose, free=0.3)
+            return True
+        return derive.ik.closed_form.has_closed_form(robot)
     except DeriveError:
         return False
 

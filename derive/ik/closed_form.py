@@ -38,7 +38,7 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import classes, panda, spherical, srs
+from derive.ik import classes, general6r, panda, spherical, srs
 from derive.ik.finish import finish, select_one
 from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
@@ -446,14 +446,21 @@ def _solve_related(robot, poses, q_ref):
         return solve(robot, geo, poses, None if q_ref is None else q_ref[:, cls.free_joint])
     rel = closed_form_relation(robot)
     if rel is None:
+        # no special class: the general 6R elimination (derive.ik.general6r), up to 16 solutions
+        try:
+            res = general6r.solve(robot, poses)
+        except DeriveError as exc:
+            general = str(exc).split(": ", 1)[-1]
+        else:
+            return res.q, res.counts, res.singular, res.reason
         try:
             ur_geometry(robot)
         except DeriveError as exc:
             first = exc
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
-                          "UR family and the spherical-wrist (OPW) class, and this chain is in "
-                          f"neither ({str(first).split(': ', 1)[-1]}; "
-                          f"{spherical_reason(robot).split(': ', 1)[-1]}); use derive.refine")
+                          "UR family, the spherical-wrist (OPW) class and the general 6R, and this "
+                          f"chain is in none ({str(first).split(': ', 1)[-1]}; "
+                          f"{spherical_reason(robot).split(': ', 1)[-1]}; {general}); use derive.refine")
     lib = load_robot(rel.other)
     q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
                                          None if q_ref is None else q_ref[:, 5] * rel.signs[5])
@@ -485,7 +492,8 @@ def spherical_reason(robot) -> str:
 
 
 def ik_batch(robot, poses, q_ref=None):
-    """Closed-form IK of n poses: (solutions (n, 8, 6) NaN-padded, counts (n,)).
+    """Closed-form IK of n poses: (solutions (n, 8, 6) NaN-padded, counts (n,)); (n, 16, 6) for
+    an arm of no special class, solved by the general 6R elimination (:mod:`derive.ik.general6r`).
 
     ``poses``: unit dual quaternions (n, 8) or matrices (n, 4, 4) of the robot's end frame.
     ``q_ref`` (n, 6) or (6,): reference configuration(s) whose theta6 is used at the wrist
@@ -504,11 +512,13 @@ def ik_batch(robot, poses, q_ref=None):
         q, counts, _, _ = _solve_related(robot, poses, qr)
         return q, counts
     # in chunks: the solver's temporaries are about 3.6 KB per pose
-    q = np.full((n, 8, robot.dof), np.nan)
+    q = None
     counts = np.zeros(n, dtype=np.int64)
     for s in range(0, n, BATCH_CHUNK):
         e = min(n, s + BATCH_CHUNK)
         cq, cc, _, _ = _solve_related(robot, poses[s:e], None if qr is None else qr[s:e])
+        if q is None:     # 8 solutions per pose for the special classes, 16 for the general 6R
+            q = np.full((n, max(8, cq.shape[1]), robot.dof), np.nan)
         q[s:e, :cq.shape[1]], counts[s:e] = cq, cc
     return q, counts
 

@@ -1,0 +1,981 @@
+"""The general 6R arm: every IK solution (up to 16) by Raghavan-Roth elimination solved as a
+Manocha-Canny eigenproblem (numpy reference).
+
+Formulation (docs/ik.md, "General 6R"). The chain is written in product form
+``FK(q) = C1 Rz(q1) C2 Rz(q2) ... C6 Rz(q6) C7`` (each C_i a constant 4x4 transform whose z axis
+is joint i's axis, built from :func:`derive.model.geometry.numeric_chain`; lengths divided by the
+arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3), eq. 2-14):
+
+* ``Rz3 C4 Rz4 C5 Rz5 C6 [e_z, 0] = H [l, p]`` with ``H = C3^-1 Rz(-q2) C2^-1 Rz(-q1) C1^-1`` and
+  (l, p) the direction and a point of joint 6's axis in the base frame (``T C7^-1``): the pose
+  enters only through these six numbers. With the two vectors (the z axis and the point) of
+  each side, the 14 equations are the 6 components plus p.p, p.l, p x l and (p.p) l - 2 (p.l) p
+  (the Lagrange products, which keep every joint's sine and cosine at degree one).
+* :func:`derive_elimination` expands them with sympy for one robot (its constants substituted,
+  (l, p) symbolic), reduces s^2 = 1 - c^2 and collects ``P(q3) X1 = Q(l, p) X2``: X1 the 9
+  monomials (s4, c4, 1) x (s5, c5, 1), X2 the 8 monomials (s1, c1, 1) x (s2, c2, 1) without 1,
+  P linear in (s3, c3, 1) (its constant column takes the pose terms free of q1, q2), the entries
+  of P and Q polynomials of degree <= 3 in (l, p).
+* At run time, per pose, q1 and q2 are eliminated numerically (Manocha and Canny 1994, IEEE
+  Trans. Robot. Autom. 10(5), section III): N, six rows spanning the left null space of Q (its
+  SVD), gives ``N P(q3) X1 = 0``, 6 x 9. Half-angle tangents of q4 and q5 (each rotated by a
+  fixed random offset, against roots at infinity) turn X1 into the 9 monomials x4^i x5^j
+  (i, j <= 2); the 6 equations and the same times x4 are 12 equations in 12 monomials
+  x4^i x5^j (i <= 3, j <= 2): ``M(x3) v = 0`` with M quadratic in x3 = tan((q3 - d3)/2), d3 a
+  random offset chosen per pose from a few so that the leading matrix is best conditioned (the
+  Moebius substitution of Manocha-Canny). det M has degree 24 (8 spurious roots at +-i).
+* ``M(x3) v = 0`` is the 24 x 24 companion eigenproblem ``[[0, I], [-M2^-1 M0, -M2^-1 M1]]``
+  (numpy.linalg.eig); real eigenvalues give q3, their eigenvectors q4 and q5 (ratios of the
+  monomials), the 14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the
+  same SVD), the remaining rotation q6.
+* Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
+  Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`ACCEPT` m and
+  rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
+
+A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
+geometry) is tried in reverse order (the IK of T^-1 for the reversed chain, where q4 is the
+eigen-variable), then with the loop cut at joint 2 or 1 (:func:`_check_cut`: the pair of joints
+eliminated linearly holds the pose link, the triple's coefficients are constant; this solves the
+Fanuc CRX-10iA, whose standard pencil has rank 10 for every q3); when all degenerate,
+:func:`plan` raises DeriveError saying so.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from derive.algebra import dualquat as dq
+from derive.algebra import quaternion as quat
+from derive.algebra.angles import wrap_angle
+from derive.cache import find_artifact, memo, step, store_artifacts, task
+from derive.errors import BudgetError, DeriveError
+from derive.ik.tolerances import MERGE_TOL
+from derive.kinematics.fk import _pose_error, fk
+from derive.kinematics.pose import as_pose_batch
+from derive.model.geometry import numeric_chain
+from derive.model.robot import load_robot
+
+#: A returned solution's FK misses the pose by at most this (m and rad), on derive's exact FK.
+ACCEPT = 1e-10
+#: An eigenvalue x3 counts as real when |Im x3| / (1 + |x3|^2) is below this (the distance of
+#: exp(i q3) from the unit circle, to first order); the candidate is kept only when Newton
+#: polish brings it onto the pose. Generous, so that a double root split by rounding (about the
+#: square root of rounding, 1e-8) is never lost.
+REAL_TOL = 1e-3
+#: Newton iterations at most per candidate (most need one or two).
+NEWTON_MAX = 30
+#: A solution is singular (flag) when the Jacobian's smallest singular value over its largest is
+#: below this.
+SINGULAR_TOL = 1e-8
+#: The leading matrix of the pencil is too ill-conditioned (flag "degenerate") beyond this
+#: 1-norm condition number for every offset tried.
+LEADING_COND = 1e12
+#: A leading matrix this well conditioned is taken without trying the other offsets of q3.
+GOOD_COND = 1e6
+#: Relative singular value below which Q (14 x 8) or the pencil is rank-deficient.
+RANK_TOL = 1e-9
+
+#: Version of the derivation's stored form (the artifact is remade when it changes).
+FORMAT = 1
+
+# the pose monomials: products of (lx, ly, lz, px, py, pz) of degree <= 3
+_POSE_MONOMIALS = [m for d in range(4) for m in itertools.combinations_with_replacement(range(6), d)]
+
+
+# --------------------------------------------------------------------------- #
+# The product form of the chain
+# --------------------------------------------------------------------------- #
+def _frame(axis, point):
+    """A 4x4 frame with z along ``axis`` and origin ``point``."""
+    z = np.asarray(axis, float) / np.linalg.norm(axis)
+    h = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
+    x = np.cross(h, z)
+    x /= np.linalg.norm(x)
+    f = np.eye(4)
+    f[:3, 0], f[:3, 1], f[:3, 2], f[:3, 3] = x, np.cross(z, x), z, point
+    return f
+
+
+def _inv(t):
+    out = np.eye(4)
+    out[:3, :3] = t[:3, :3].T
+    out[:3, 3] = -t[:3, :3].T @ t[:3, 3]
+    return out
+
+
+def chain_form(robot):
+    """(C (7, 4, 4), scale): FK(q) = C1 Rz(q1) ... C6 Rz(q6) C7 with lengths divided by scale
+    (the sum of the link lengths). Built from the axis-angle chain (product of exponentials:
+    each joint rotates about its axis through its point at the zero pose, the frame F_i puts the
+    axis on z, C_i = F_{i-1}^-1 F_i)."""
+    chain = numeric_chain(robot)
+    if chain.n != 6 or any(t != "revolute" for t in chain.types):
+        raise DeriveError(f"{chain.robot}: the general 6R solver needs six revolute joints")
+    points = chain.start + np.concatenate([np.zeros((1, 3)), np.cumsum(chain.links, axis=0)])
+    scale = float(max(np.sum(np.linalg.norm(chain.links, axis=1)) + np.linalg.norm(chain.end_translation),
+                      1e-9))
+    frames = []
+    for i in range(6):
+        # origin: the point of axis i closest to axis i-1 (shorter constants), else its own point
+        frames.append(_frame(chain.axes[i], points[i]))
+    t0 = np.eye(4)
+    t0[:3, :3] = chain.end_rotation
+    t0[:3, 3] = points[6] + chain.end_translation
+    cs = [frames[0]] + [_inv(frames[i - 1]) @ frames[i] for i in range(1, 6)] + [_inv(frames[5]) @ t0]
+    c = np.array(cs)
+    c[:, :3, 3] /= scale
+    return c, scale
+
+
+def _reverse(c):
+    """The reversed chain: T^-1 = C7^-1 Rz(-q6) C6^-1 ... Rz(-q1) C1^-1, joints q'_k = -q_{7-k}."""
+    return np.array([_inv(c[6 - k]) for k in range(7)])
+
+
+def _rz(t):
+    ct, st = np.cos(t), np.sin(t)
+    out = np.zeros(np.shape(t) + (4, 4))
+    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = ct, -st, st, ct
+    out[..., 2, 2] = out[..., 3, 3] = 1.0
+    return out
+
+
+def _chain_frames(c, q):
+    """The frames A_i = C1 Rz(q1) ... C_i (i = 1..6, before joint i's rotation) and the end
+    pose, for q (m, 6): (frames (m, 6, 4, 4), end (m, 4, 4))."""
+    m = q.shape[0]
+    a = np.broadcast_to(c[0], (m, 4, 4)).copy()
+    rz = _rz(q)
+    frames = []
+    for i in range(6):
+        if i:
+            a = a @ c[i]
+        frames.append(a)
+        a = a @ rz[:, i]
+    return np.stack(frames, 1), a @ c[6]
+
+
+# --------------------------------------------------------------------------- #
+# Derivation (sympy)
+# --------------------------------------------------------------------------- #
+@dataclass(frozen=True)
+class Elimination:
+    """The derived matrices of one chain: ``P(q3) X1 = Q X2``.
+
+    ``pl`` (14, 3, 9): the constant coefficients of (s3, c3, 1) x X1; ``r0`` (14, K): the pose
+    terms of the equations free of q1, q2 (they join P's (1, 1) column with a minus sign);
+    ``q`` (14, 8, K): Q's entries; K runs over ``monomials``, products of (lx, ly, lz, px, py,
+    pz) (indices) of degree <= 3."""
+
+    pl: np.ndarray
+    r0: np.ndarray
+    q: np.ndarray
+    monomials: tuple
+
+
+def derive_elimination(c, label="general 6R") -> Elimination:
+    """Expand the 14 Raghavan-Roth equations of the chain ``c`` (7, 4, 4) with sympy and collect
+    their coefficients (see the module docstring). Progress lines on stderr."""
+    import sympy as sp
+
+    s = sp.symbols("s1:6")
+    co = sp.symbols("c1:6")
+    pose = sp.symbols("lx ly lz px py pz")
+
+    def rz(i, sign=1):
+        si, ci = sign * s[i], co[i]
+        return sp.Matrix([[ci, -si, 0, 0], [si, ci, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+
+    def mat(t):
+        return sp.Matrix(4, 4, [sp.Float(float(v), 17) for v in t.ravel()])
+
+    cm = [mat(t) for t in c]
+    cinv = [mat(_inv(t)) for t in c]
+    step("the two sides of the loop")
+    left = rz(2) * cm[3] * rz(3) * cm[4] * rz(4) * cm[5]
+    l_l, p_l = left[:3, 2], left[:3, 3]
+    h = cinv[2] * rz(1, -1) * cinv[1] * rz(0, -1) * cinv[0]
+    lv, pv = sp.Matrix(pose[:3]), sp.Matrix(pose[3:])
+    l_r = h[:3, :3] * lv
+    p_r = h[:3, :3] * pv + h[:3, 3]
+
+    lgens = (s[2], co[2], s[3], co[3], s[4], co[4])
+    rgens = (s[0], co[0], s[1], co[1], *pose)
+
+    def products(lvec, pvec, gens):
+        """The 14 left sides as sympy Polys (multiplied as Polys: much faster than expanding
+        the products of expressions)."""
+        lv_, pv_ = [sp.Poly(sp.expand(e), *gens) for e in lvec], [sp.Poly(sp.expand(e), *gens) for e in pvec]
+        pp = sum((a * a for a in pv_[1:]), pv_[0] * pv_[0])
+        pl = sum((a * b for a, b in zip(pv_[1:], lv_[1:])), pv_[0] * lv_[0])
+        cross = [pv_[1] * lv_[2] - pv_[2] * lv_[1], pv_[2] * lv_[0] - pv_[0] * lv_[2],
+                 pv_[0] * lv_[1] - pv_[1] * lv_[0]]
+        return [*lv_, *pv_, pp, pl, *cross, *(pp * a - 2 * pl * b for a, b in zip(lv_, pv_))]
+
+    step("the 14 equations (positions, directions and the Lagrange products)")
+    left_eqs, right_eqs = products(l_l, p_l, lgens), products(l_r, p_r, rgens)
+
+    def reduced(expr, gens, trig_pairs):
+        """{exponent tuple: float} of expr with s_i^2 replaced by 1 - c_i^2."""
+        terms = {}
+        for mon, coef in expr.terms():
+            stack = [(list(mon), float(coef))]
+            while stack:
+                e, v = stack.pop()
+                k = next((si for si, _ in trig_pairs if e[si] >= 2), None)
+                if k is None:
+                    terms[tuple(e)] = terms.get(tuple(e), 0.0) + v
+                    continue
+                ci = dict(trig_pairs)[k]
+                e1 = list(e)
+                e1[k] -= 2
+                e2 = list(e1)
+                e2[ci] += 2
+                stack += [(e1, v), (e2, -v)]
+        return terms
+
+    x1_basis = [(a, b) for a in range(3) for b in range(3)]          # (s4,c4,1) x (s5,c5,1)
+    x2_basis = [(a, b) for a in range(3) for b in range(3)][:-1]     # (s1,c1,1) x (s2,c2,1), no 1
+    mon_index = {m: k for k, m in enumerate(_POSE_MONOMIALS)}
+    pl = np.zeros((14, 3, 9))
+    r0 = np.zeros((14, len(_POSE_MONOMIALS)))
+    qm = np.zeros((14, 8, len(_POSE_MONOMIALS)))
+    drop = 1e-11
+
+    def trig_slot(e0, e1):
+        """(s, c, 1) index of a monomial's exponents (e_s, e_c), or None (degree > 1)."""
+        return {(1, 0): 0, (0, 1): 1, (0, 0): 2}.get((e0, e1))
+
+    for k in range(14):
+        step(f"equation {k + 1} of 14: expand and collect")
+        for e, v in reduced(left_eqs[k], lgens, [(0, 1), (2, 3), (4, 5)]).items():
+            a, b4, b5 = trig_slot(*e[0:2]), trig_slot(*e[2:4]), trig_slot(*e[4:6])
+            if None in (a, b4, b5):
+                if abs(v) > drop:
+                    raise DeriveError(f"{label}: equation {k + 1}: a term of degree > 1 in one joint "
+                                      f"survives ({e}: {v:.3g}); the elimination does not apply")
+                continue
+            pl[k, a, x1_basis.index((b4, b5))] += v
+        for e, v in reduced(right_eqs[k], rgens, [(0, 1), (2, 3)]).items():
+            b1, b2 = trig_slot(*e[0:2]), trig_slot(*e[2:4])
+            if None in (b1, b2):
+                if abs(v) > drop:
+                    raise DeriveError(f"{label}: equation {k + 1}: a term of degree > 1 in q1 or q2 "
+                                      f"survives ({e}: {v:.3g}); the elimination does not apply")
+                continue
+            pm = tuple(sorted(i for i, n in enumerate(e[4:]) for _ in range(n)))
+            if (b1, b2) == (2, 2):
+                r0[k, mon_index[pm]] += v
+            else:
+                qm[k, x2_basis.index((b1, b2)), mon_index[pm]] += v
+    used = np.nonzero(np.any(r0 != 0, axis=0) | np.any(qm != 0, axis=(0, 1)))[0]
+    return Elimination(pl=pl, r0=r0[:, used], q=qm[:, :, used],
+                       monomials=tuple(_POSE_MONOMIALS[i] for i in used))
+
+
+# --------------------------------------------------------------------------- #
+# The plan of one robot: chain, direction, derived matrices, offsets
+# --------------------------------------------------------------------------- #
+@dataclass(frozen=True)
+class Plan:
+    """Everything :func:`solve` needs for one robot."""
+
+    robot: str
+    c: np.ndarray           # (7, 4, 4) forward chain (scaled)
+    scale: float
+    reverse: bool           # solved as the reversed chain
+    elim: Elimination
+    rank_q: int             # generic rank of Q (8 for a general arm)
+    mix: np.ndarray         # (6, 14 - rank_q): combination of Q's left null space
+    offsets: np.ndarray     # (3,) d4, d5 and the first d3
+    d3: np.ndarray          # (K,) candidate offsets of q3
+    notes: tuple
+    cut: dict | None = None  # the loop cut at another joint (see _check_cut), or None
+
+
+def _seeded(robot_id: str) -> np.random.Generator:
+    return np.random.default_rng(int(robot_id[:12], 16) if all(ch in "0123456789abcdef" for ch in robot_id[:12])
+                                 else abs(hash(robot_id)) % 2 ** 32)
+
+
+def plan(robot, progress: bool = True) -> Plan:
+    """The derivation of one robot, cached: in memory (:func:`derive.cache.memo`) and as the
+    artifact ``general6r`` (JSON) in the user cache; made within :func:`derive.cache.task` with
+    progress lines. DeriveError when the robot is not a 6R or both directions degenerate."""
+    robot = load_robot(robot)
+    out = memo("general6r-plan", robot.id, lambda: _plan_or_error(robot, progress))
+    if isinstance(out, DeriveError):
+        raise out
+    return out
+
+
+def _plan_or_error(robot, progress):
+    """The plan, or the DeriveError saying why there is none (kept, so the derivation is not
+    tried again in this process)."""
+    try:
+        return _plan(robot, progress)
+    except DeriveError as exc:
+        if isinstance(exc, BudgetError):
+            raise
+        return exc
+
+
+def _plan(robot, progress):
+    c, scale = chain_form(robot)
+    found = find_artifact(robot.id, "general6r")
+    if found is not None:
+        data = json.loads(found.read_text())
+        if data.get("format") == FORMAT:
+            return _plan_from(robot, c, scale, data)
+    with task(f"general 6R {robot.name}", progress=progress):
+        data = None
+        why = []
+        for reverse in (False, True):
+            cc = _reverse(c) if reverse else c
+            step(f"Raghavan-Roth elimination, {'reversed' if reverse else 'forward'} chain")
+            elim = derive_elimination(cc, robot.name)
+            ok, info = _check_generic(robot, cc, elim)
+            step(f"{'reversed' if reverse else 'forward'} chain: {info}")
+            if ok:
+                data = {"format": FORMAT, "reverse": reverse, "pl": elim.pl.tolist(),
+                        "r0": elim.r0.tolist(), "q": elim.q.tolist(),
+                        "monomials": [list(m) for m in elim.monomials], "rank_q": info_rank(info),
+                        "notes": why + [f"{'reversed' if reverse else 'forward'} chain: {info}"]}
+                break
+            why.append(f"{'reversed' if reverse else 'forward'} chain: {info}")
+        if data is None:
+            for e in (2, 1):
+                step(f"the loop cut at joint {e} (the pose between the two eliminated joints)")
+                ok, info, extra = _check_cut(c, e)
+                step(f"cut at joint {e}: {info}")
+                if ok:
+                    data = {"format": FORMAT, "reverse": False, "cut": extra, "rank_q": 8,
+                            "notes": why + [f"cut at joint {e}: {info}"]}
+                    break
+                why.append(f"cut at joint {e}: {info}")
+        if data is None:
+            raise DeriveError(f"{robot.name}: the general 6R elimination degenerates in both directions "
+                              f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
+        store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(data))},
+                        {"robot": robot.name})
+    return _plan_from(robot, c, scale, data)
+
+
+def info_rank(info: str) -> int:
+    return int(info.split("rank Q = ")[1].split(",")[0])
+
+
+def _plan_from(robot, c, scale, data):
+    if data.get("cut"):
+        rng = _seeded(robot.id)
+        offsets = rng.uniform(-np.pi, np.pi, 3)
+        empty = Elimination(pl=np.zeros((14, 3, 9)), r0=np.zeros((14, 0)), q=np.zeros((14, 8, 0)), monomials=())
+        return Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8, mix=np.eye(6),
+                    offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]), notes=tuple(data["notes"]),
+                    cut=data["cut"])
+    elim = Elimination(pl=np.array(data["pl"]), r0=np.array(data["r0"]).reshape(14, -1),
+                       q=np.array(data["q"]).reshape(14, 8, -1),
+                       monomials=tuple(tuple(m) for m in data["monomials"]))
+    rng = _seeded(robot.id)
+    rank_q = int(data["rank_q"])
+    mix = np.linalg.qr(rng.standard_normal((14 - rank_q, 6)))[0].T if rank_q < 8 else np.eye(6)
+    offsets = rng.uniform(-np.pi, np.pi, 3)
+    d3 = offsets[2] + np.array([0.0, 2.0, 4.0])
+    return Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
+                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None)
+
+
+def _check_generic(robot, cc, elim):
+    """Whether the elimination works on random configurations of the chain ``cc``: Q's rank
+    (the largest over the samples) and M(x3) nonsingular at the true q3 minus nothing (the
+    pencil not identically singular)."""
+    rng = np.random.default_rng(7)
+    q = rng.uniform(-np.pi, np.pi, (8, 6))
+    _, end = _chain_frames(cc, q)
+    t7 = end @ _inv(cc[6])
+    lp = np.concatenate([t7[:, :3, 2], t7[:, :3, 3]], axis=1)
+    pm = _pose_monomials(lp, elim.monomials)
+    qm = np.einsum("ekm,nm->nek", elim.q, pm)
+    sv = np.linalg.svd(qm, compute_uv=False)
+    rank = int(np.max(np.sum(sv > RANK_TOL * sv[:, :1], axis=1)))
+    if rank < 2:
+        return False, f"rank Q = {rank}, unusable"
+    # the equations must hold at the true configuration and the pencil must be regular
+    r0 = np.einsum("em,nm->ne", elim.r0, pm)
+    u = np.linalg.svd(qm, full_matrices=True)[0]
+    null = np.swapaxes(u[:, :, rank:], 1, 2)
+    p_at = (elim.pl[None, :, 0] * np.sin(q[:, 2])[:, None, None] + elim.pl[None, :, 1] * np.cos(q[:, 2])[:, None, None]
+            + elim.pl[None, :, 2])
+    p_at[:, :, 8] -= r0
+    x1 = np.einsum("na,nb->nab", np.stack([np.sin(q[:, 3]), np.cos(q[:, 3]), np.ones(8)], 1),
+                   np.stack([np.sin(q[:, 4]), np.cos(q[:, 4]), np.ones(8)], 1)).reshape(8, 9)
+    resid = np.abs(np.einsum("nij,nj->ni", null @ p_at, x1)).max()
+    if resid > 1e-8:
+        return False, f"rank Q = {rank}, the eliminated equations miss the configuration by {resid:.1e}"
+    # regular pencil: 6 x 9 rows at a random q3 have rank 6, and the 12 x 12 is nonsingular
+    mix = np.linalg.qr(np.random.default_rng(3).standard_normal((14 - rank, 6)))[0].T if rank < 8 else np.eye(6)
+    t = rng.uniform(-np.pi, np.pi, 8)
+    p_r = (elim.pl[None, :, 0] * np.sin(t)[:, None, None] + elim.pl[None, :, 1] * np.cos(t)[:, None, None]
+           + elim.pl[None, :, 2])
+    p_r[:, :, 8] -= r0
+    sig = mix @ null @ p_r
+    m12 = _twelve(sig @ _t45(0.3, -0.7))
+    sv12 = np.linalg.svd(m12, compute_uv=False)
+    worst = float(np.min(sv12[:, -1] / sv12[:, 0]))
+    if worst < RANK_TOL:
+        return False, f"rank Q = {rank}, the 12 x 12 pencil is singular for every q3 (smallest relative singular value {worst:.1e})"
+    return True, f"rank Q = {rank}, pencil regular (smallest relative singular value {worst:.1e} at random q3)"
+
+
+def _pose_monomials(lp, monomials):
+    """(n, K) values of the pose monomials at lp (n, 6)."""
+    out = np.ones((lp.shape[0], len(monomials)))
+    for k, m in enumerate(monomials):
+        for i in m:
+            out[:, k] *= lp[:, i]
+    return out
+
+
+def _half(delta):
+    """B (3, 3): (s, c, 1) (1 + x^2) of delta + 2 atan(x) = B @ (1, x, x^2)."""
+    sd, cd = np.sin(delta), np.cos(delta)
+    return np.array([[sd, 2 * cd, -sd], [cd, -2 * sd, -cd], [1.0, 0.0, 1.0]])
+
+
+def _t45(d4, d5):
+    """X1 (1 + x4^2)(1 + x5^2) = T45 @ (x4^i x5^j, index 3 i + j)."""
+    return np.kron(_half(d4), _half(d5))
+
+
+def _twelve(sig):
+    """(..., 12, 12): the 6 equations in x4^i x5^j (i, j <= 2) and the same times x4."""
+    out = np.zeros(sig.shape[:-2] + (12, 12))
+    out[..., :6, :9] = sig
+    out[..., 6:, 3:] = sig
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# Solving
+# --------------------------------------------------------------------------- #
+@dataclass
+class General6RSolutions:
+    """Solutions of n poses: ``q`` (n, 16, 6) NaN-padded (valid rows first), ``counts`` (n,),
+    ``singular`` (n, 16) (the Jacobian is rank-deficient there), ``degenerate`` (n,) (the pose
+    is special for the elimination: the leading matrix ill-conditioned for every offset, or Q of
+    lower rank than the arm's; solutions found are still checked, but some may be missing),
+    ``reason`` (list, why a pose has no solution)."""
+
+    q: np.ndarray
+    counts: np.ndarray
+    singular: np.ndarray
+    degenerate: np.ndarray
+    reason: list
+
+
+MAX_SOLUTIONS = 16
+#: Inverse iteration for the null vector: a fixed start vector and a shift of 1e-11 (relative to
+#: the matrix's largest entry) that keeps the solve finite at an exact eigenvalue.
+_START = np.random.default_rng(12).standard_normal(12)
+_NUDGE = 1e-11
+
+
+def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
+    """Every real IK solution (up to 16) of each pose, poses (n, 8) unit dual quaternions or
+    (n, 4, 4) matrices of the robot's end frame; see the module docstring."""
+    robot = load_robot(robot)
+    pl = plan(robot)
+    poses, _ = as_pose_batch(poses)
+    n = poses.shape[0]
+    q = np.full((n, MAX_SOLUTIONS, 6), np.nan)
+    counts = np.zeros(n, dtype=np.int64)
+    sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
+    degen = np.zeros(n, dtype=bool)
+    for s in range(0, n, chunk):
+        e = min(n, s + chunk)
+        q[s:e], counts[s:e], sing[s:e], degen[s:e] = (_solve_chunk_cut if pl.cut else _solve_chunk)(
+            robot, pl, poses[s:e])
+    reason = ["" if k else "unreachable: no real root of the eliminant reproduces the pose" for k in counts]
+    return General6RSolutions(q=q, counts=counts, singular=sing, degenerate=degen, reason=reason)
+
+
+def _to_matrix(poses):
+    m = np.zeros((poses.shape[0], 4, 4))
+    m[:, :3, :3] = quat._to_matrix(poses[:, :4])
+    m[:, :3, 3] = dq._translation(poses)
+    m[:, 3, 3] = 1.0
+    return m
+
+
+def _solve_chunk(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c = _reverse(pl.c) if pl.reverse else pl.c
+    if pl.reverse:
+        target = np.linalg.inv(target)
+    el = pl.elim
+    t7 = target @ _inv(c[6])
+    lp = np.concatenate([t7[:, :3, 2], t7[:, :3, 3]], axis=1)
+    pm = _pose_monomials(lp, el.monomials)
+    qm = (pm @ el.q.reshape(112, -1).T).reshape(n, 14, 8)
+    r0 = pm @ el.r0.T                                        # (n, 14)
+    # the left null space of Q (rank 8 for a general arm) and the least squares of Q X2 = b
+    # (for q1, q2 below) by one complete QR
+    qq, rr = np.linalg.qr(qm, mode="complete")               # (n, 14, 14), (n, 14, 8)
+    diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
+    rank = pl.rank_q
+    degen = diag.min(axis=1) < RANK_TOL * diag.max(axis=1) if rank == 8 else np.zeros(n, dtype=bool)
+    null = pl.mix @ np.swapaxes(qq[:, :, rank:], 1, 2)       # (n, 6, 14)
+    t45 = _t45(pl.offsets[0], pl.offsets[1])
+    pt = np.broadcast_to(el.pl @ t45, (n, 14, 3, 9)).copy()  # P (1 + x4^2)(1 + x5^2) in x4^i x5^j
+    pt[:, :, 2, :] -= r0[:, :, None] * t45[8][None, None, :]
+    sig = (null @ pt.reshape(n, 14, 27)).reshape(n, 6, 3, 9).transpose(0, 2, 1, 3)   # s3, c3, 1
+    mats = _twelve(sig)                                      # (n, 3, 12, 12)
+    pa = np.broadcast_to(el.pl, (n, 14, 3, 9)).copy()
+    pa[:, :, 2, 8] -= r0
+    # the offset of q3: the first whose leading matrix is well conditioned, else the best of
+    # those tried (the Moebius substitution against a singular leading matrix)
+    best_cond = np.full(n, np.inf)
+    best = np.zeros(n, dtype=int)
+    lead_inv = np.zeros((n, 12, 12))
+    mk = np.zeros((n, 3, 12, 12))
+    todo = np.arange(n)
+    for k, d3 in enumerate(pl.d3):
+        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])   # M0, M1, M2
+        lead = cand[:, 2]
+        inv = _inv_safe(lead)
+        with np.errstate(all="ignore"):
+            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
+        cond = np.where(np.isfinite(cond), cond, np.inf)
+        better = cond < best_cond[todo]
+        idx = todo[better]
+        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        todo = todo[~(best_cond[todo] < GOOD_COND)]
+        if len(todo) == 0:
+            break
+    degen |= ~(best_cond < LEADING_COND)
+    d3 = pl.d3[best]
+    comp = np.zeros((n, 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
+    comp = np.where(np.isfinite(comp), comp, 0.0)
+    lam = np.linalg.eigvals(comp)                            # (n, 24)
+    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    # candidates: (pose, eigenvalue)
+    ip, ie = np.nonzero(real)
+    x3 = lam[ip, ie].real
+    # the null vector of M(x3) (the monomials x4^i x5^j) by one step of inverse iteration from a
+    # fixed vector: M(x3) is singular to rounding, so its solution is the null vector
+    v = _monomial_vectors(mk, ip, x3)
+    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
+    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
+    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
+    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
+    q4 = pl.offsets[0] + 2 * np.arctan2(num4, den4)
+    q5 = pl.offsets[1] + 2 * np.arctan2(num5, den5)
+    q3 = d3[ip] + 2 * np.arctan(x3)
+    # q1, q2: least squares of Q X2 = P(q3) X1 (the SVD above)
+    p3 = (pa[ip, :, 0] * np.sin(q3)[:, None, None] + pa[ip, :, 1] * np.cos(q3)[:, None, None] + pa[ip, :, 2])
+    x1 = np.einsum("ma,mb->mab", np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
+                   np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 9)
+    rhs = np.einsum("mej,mj->me", p3, x1)
+    y = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    r8 = rr[ip, :8]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
+    x2 = _solve_safe(r8, y)
+    q1 = np.arctan2(x2[:, 2], x2[:, 5])
+    q2 = np.arctan2(x2[:, 6], x2[:, 7])
+    qc = np.stack([q1, q2, q3, q4, q5, np.zeros_like(q1)], 1)
+    frames, _ = _chain_frames(c, qc)
+    r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
+    qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
+    qc = _newton(c, qc, target[ip])
+    if pl.reverse:
+        qc = -qc[:, ::-1]
+    qc = wrap_angle(qc)
+    return _collect(robot, pl, poses, ip, qc, n, degen)
+
+
+#: Rows of the 12 monomials x4^i x5^j (index 3 i + j) and their shifts by x4 and by x5.
+_BASE4 = [3 * i + j for i in range(3) for j in range(3)]
+_SHIFT4 = [3 * (i + 1) + j for i in range(3) for j in range(3)]
+_BASE5 = [3 * i + j for i in range(4) for j in range(2)]
+_SHIFT5 = [3 * i + j + 1 for i in range(4) for j in range(2)]
+#: Eigenvalues x3 of one pose closer than this (relative to 1 + |x3|) are one multiple root.
+CLUSTER_TOL = 1e-6
+
+
+def _monomial_vectors(mk, ip, x3):
+    """(k, 4, 3): for each candidate x3 the monomial vector (x4^i x5^j) in the null space of
+    M(x3). A simple root: :func:`_null_vectors`. A multiple root shared by several solutions
+    (the same q3, a null space of dimension d > 1, as at symmetric poses of the CRX): the d
+    monomial vectors in the null space V are found by the shift structure of the monomials
+    (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
+    (Stetter's eigenvector method)."""
+    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
+    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
+    mx = mx / np.where(scale_m > 0, scale_m, 1.0)
+    v = _null_vectors(mx + _NUDGE * np.eye(12))
+    if len(ip) < 2:
+        return v
+    order = np.lexsort((x3, ip))
+    ips, xs = ip[order], x3[order]
+    near = (ips[1:] == ips[:-1]) & (np.abs(xs[1:] - xs[:-1]) <= CLUSTER_TOL * (1 + np.abs(xs[1:])))
+    if not np.any(near):
+        return v
+    # clusters: runs of "near"; their heads' singular values in one batch
+    starts = np.nonzero(near & ~np.r_[False, near[:-1]])[0]
+    ends = starts.copy()
+    for i, st in enumerate(starts):
+        e = st
+        while e < len(near) and near[e]:
+            e += 1
+        ends[i] = e
+    heads = order[starts]
+    _, sv, vt = np.linalg.svd(mx[heads])
+    dims = np.minimum(ends - starts + 1, np.maximum(1, np.sum(sv < 1e-7 * sv[:, :1], axis=1)))
+    for st, en, d, vth in zip(starts, ends, dims, vt):
+        if d < 2:
+            continue
+        members = order[st:en + 1]
+        basis = vth[-d:].T                                   # (12, d)
+        with np.errstate(all="ignore"):
+            a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
+                 + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
+            _, cvec = np.linalg.eig(a)
+            vecs = (basis @ cvec).T                          # (d, 12), complex in general
+            # a real monomial vector times a complex scale: rotate each onto the real axis
+            big = vecs[np.arange(d), np.argmax(np.abs(vecs), axis=1)]
+            vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
+        if np.all(np.isfinite(vecs)):
+            v[members[:d]] = vecs.reshape(d, 4, 3)
+    return v
+
+
+def _null_vectors(m):
+    """(k, 4, 3): the null vector of each nearly singular (k, 12, 12): one step of inverse
+    iteration (a batched solve), and the SVD's last right singular vector where that solve
+    fails (an exactly singular pivot) or leaves a residual |M v| > 1e-6 |M| |v| (x3 then is the
+    real part of a complex pair, or a double root: the SVD gives the best start for Newton)."""
+    v = np.zeros((len(m), 12))
+    try:
+        with np.errstate(all="ignore"):
+            v = np.linalg.solve(m, np.broadcast_to(_START, (len(m), 12))[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        if len(m) > 1:
+            h = len(m) // 2
+            return np.concatenate([_null_vectors(m[:h]), _null_vectors(m[h:])])
+    with np.errstate(all="ignore"):
+        v = v / np.linalg.norm(v, axis=1, keepdims=True)
+        res = np.linalg.norm(np.einsum("kij,kj->ki", m, v), axis=1)
+    bad = ~(res <= 1e-6 * np.abs(m).max(axis=(1, 2)))
+    if np.any(bad):
+        v[bad] = np.linalg.svd(m[bad])[2][:, -1]
+    return v.reshape(-1, 4, 3)
+
+
+def _inv_safe(a):
+    """Batched inverse; an exactly singular matrix gives its pseudo-inverse (never raises)."""
+    try:
+        return np.linalg.inv(a)
+    except np.linalg.LinAlgError:
+        if len(a) == 1:
+            return np.linalg.pinv(a)
+        h = len(a) // 2
+        return np.concatenate([_inv_safe(a[:h]), _inv_safe(a[h:])])
+
+
+def _solve_safe(a, b):
+    """Batched a x = b; where a is exactly singular, the least-squares solution (never raises)."""
+    try:
+        return np.linalg.solve(a, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:
+        if len(a) == 1:
+            return np.linalg.lstsq(a[0], b[0], rcond=None)[0][None]
+        h = len(a) // 2           # find the singular ones by halves: the rest stay batched
+        return np.concatenate([_solve_safe(a[:h], b[:h]), _solve_safe(a[h:], b[h:])])
+
+
+# --------------------------------------------------------------------------- #
+# The loop cut at another joint (arms whose standard elimination degenerates)
+# --------------------------------------------------------------------------- #
+# The loop Rz(q1) K1 Rz(q2) K2 ... Rz(q6) K6 = I with K_j = C_{j+1} (j = 1..5) and the pose link
+# K6 = C7 T^-1 C1. Cut at joint e: G_k = Rz(q_k) K_k, G_e ... G_{e+5} = I, so with the z line of
+# joint e, G_{e+4} G_{e+5} [z] = (G_{e+1} G_{e+2} G_{e+3})^-1 K_e^-1 [z]: the same 14 equations,
+# the pair (e+4, e+5) eliminated linearly (it holds the pose link for e = 1, 2), the triple
+# (e+1, e+2, e+3) constant. Both sides are multilinear in (s, c, 1) of their joints; their
+# coefficients are fitted exactly from 3 sample angles per joint (the fit is checked at random
+# angles), the pair's per pose.
+_SAMPLES = np.array([0.0, 2.0, 4.0])
+_BS = np.stack([np.sin(_SAMPLES), np.cos(_SAMPLES), np.ones(3)], 1)       # (sample, (s, c, 1))
+
+
+def _line_eqs(m):
+    """The 14 equations' left sides for transforms m (..., 4, 4) applied to the z line."""
+    l, p = m[..., :3, 2], m[..., :3, 3]
+    pp = np.sum(p * p, -1)[..., None]
+    pl = np.sum(p * l, -1)[..., None]
+    return np.concatenate([l, p, pp, pl, np.cross(p, l), pp * l - 2 * pl * p], -1)
+
+
+def _cut_joints(e):
+    j = [((e - 1 + k) % 6) + 1 for k in range(1, 6)]
+    return j[:3], j[3:]                   # the constant triple, the pair
+
+
+def _links(c, target=None):
+    """K_1..K_5 (constant) and K_6 (pose link, (n, 4, 4) when target is given)."""
+    k = {j: c[j] for j in range(1, 6)}
+    if target is not None:
+        k[6] = c[6] @ np.linalg.inv(target) @ c[0]
+    return k
+
+
+def _triple_coefs(c, e):
+    """(14, 27) coefficients of the triple side, (s, c, 1) of the three joints in order."""
+    (a, b, d), _ = _cut_joints(e)
+    k = _links(c)
+    combos = np.array(list(itertools.product(_SAMPLES, repeat=3)))
+    g = [(_rz(combos[:, i]) @ k[j]) for i, j in enumerate((a, b, d))]
+    m = np.linalg.inv(k[e] @ g[0] @ g[1] @ g[2])
+    vals = _line_eqs(m)                                     # (27, 14)
+    return np.linalg.solve(np.kron(np.kron(_BS, _BS), _BS), vals).T
+
+
+def _pair_coefs(c, e, target):
+    """(n, 14, 9) coefficients of the pair side per pose."""
+    _, (a, b) = _cut_joints(e)
+    k = _links(c, target)
+    out = []
+    for t0, t1 in itertools.product(_SAMPLES, repeat=2):
+        ga = _rz(np.full(len(target), t0)) @ (k[a] if np.ndim(k[a]) == 3 else np.broadcast_to(k[a], (len(target), 4, 4)))
+        gb = _rz(np.full(len(target), t1)) @ (k[b] if np.ndim(k[b]) == 3 else np.broadcast_to(k[b], (len(target), 4, 4)))
+        out.append(_line_eqs(ga @ gb))
+    vals = np.stack(out, 1)                                  # (n, 9, 14)
+    return np.swapaxes(np.linalg.solve(np.kron(_BS, _BS), vals), 1, 2)
+
+
+def _check_cut(c, e):
+    """Whether the cut at joint e works on random configurations: the fit is exact, the
+    equations hold, Q has rank 8 and the 12 x 12 pencil is regular for one eigen-variable."""
+    rng = np.random.default_rng(11)
+    q = rng.uniform(-np.pi, np.pi, (6, 6))
+    _, target = _chain_frames(c, q)
+    y = _triple_coefs(c, e)
+    x = _pair_coefs(c, e, target)
+    (a, b, d), (f, h) = _cut_joints(e)
+    tr = lambda j: np.stack([np.sin(q[:, j - 1]), np.cos(q[:, j - 1]), np.ones(6)], 1)
+    ym = np.einsum("na,nb,nc->nabc", tr(a), tr(b), tr(d)).reshape(6, 27)
+    xm = np.einsum("na,nb->nab", tr(f), tr(h)).reshape(6, 9)
+    resid = np.abs(ym @ y.T - np.einsum("nek,nk->ne", x, xm)).max()
+    if not resid < 1e-9:
+        return False, f"the equations miss the configurations by {resid:.1e}", None
+    qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+    null = np.swapaxes(qq[:, :, 8:], 1, 2)
+    yy = np.broadcast_to(y, (6, 14, 27)).copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    ten = (null @ yy).reshape(6, 6, 3, 3, 3)
+    best = None
+    for ev in range(3):
+        t = np.moveaxis(ten, 2 + ev, 2)
+        th = rng.uniform(-np.pi, np.pi, 6)
+        sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
+        sv = np.linalg.svd(_twelve(sig @ _t45(0.3, -0.7)), compute_uv=False)
+        worst = float(np.min(sv[:, -1] / sv[:, 0]))
+        if not worst > RANK_TOL:
+            continue
+        # prefer the eigen-variable whose real roots are simple: a root shared by two solutions
+        # (the same q of this joint) needs the slower multiple-root path
+        mats = _twelve(t.reshape(6, 6, 3, 9).transpose(0, 2, 1, 3) @ _t45(0.3, -0.7))
+        mk = np.einsum("ak,naij->nkij", _half(0.5), mats)
+        inv = _inv_safe(mk[:, 2])
+        comp = np.zeros((6, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        lam = np.linalg.eigvals(np.where(np.isfinite(comp), comp, 0.0))
+        shared = 0
+        for row in lam:
+            xr = np.sort(row[np.abs(row.imag) < REAL_TOL * (1 + np.abs(row) ** 2)].real)
+            shared += int(np.sum(np.abs(np.diff(xr)) <= CLUSTER_TOL * (1 + np.abs(xr[1:]))))
+        if best is None or (shared, -worst) < (best[2], -best[1]):
+            best = (ev, worst, shared)
+    if best is None:
+        return False, "the 12 x 12 pencil is singular for every q of every joint of the triple", None
+    return True, (f"triple {(a, b, d)}, eigen-variable q{(a, b, d)[best[0]]}, pencil regular (smallest "
+                  f"relative singular value {best[1]:.1e}), {best[2]} shared roots on 6 random poses"), \
+        {"e": e, "ev": best[0], "y": y.tolist()}
+
+
+def _solve_chunk_cut(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c = pl.c
+    e, ev = pl.cut["e"], pl.cut["ev"]
+    y = np.array(pl.cut["y"])
+    triple, (f, h) = _cut_joints(e)
+    x = _pair_coefs(c, e, target)                           # (n, 14, 9)
+    qx = x[:, :, :8]
+    qq, rr = np.linalg.qr(qx, mode="complete")
+    diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
+    degen = diag.min(axis=1) < RANK_TOL * diag.max(axis=1)
+    null = np.swapaxes(qq[:, :, 8:], 1, 2)
+    yy = np.broadcast_to(y, (n, 14, 27)).copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    order = [ev] + [i for i in range(3) if i != ev]         # eigen joint, then the vector's two
+    ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
+    sig = (ten.reshape(n, 6, 3, 9) @ _t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
+    mats = _twelve(sig)
+    best_cond = np.full(n, np.inf)
+    best = np.zeros(n, dtype=int)
+    lead_inv = np.zeros((n, 12, 12))
+    mk = np.zeros((n, 3, 12, 12))
+    todo = np.arange(n)
+    for k, d3 in enumerate(pl.d3):
+        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])
+        lead = cand[:, 2]
+        inv = _inv_safe(lead)
+        with np.errstate(all="ignore"):
+            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
+        cond = np.where(np.isfinite(cond), cond, np.inf)
+        better = cond < best_cond[todo]
+        idx = todo[better]
+        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        todo = todo[~(best_cond[todo] < GOOD_COND)]
+        if len(todo) == 0:
+            break
+    degen |= ~(best_cond < LEADING_COND)
+    d3 = pl.d3[best]
+    comp = np.zeros((n, 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
+    comp = np.where(np.isfinite(comp), comp, 0.0)
+    lam = np.linalg.eigvals(comp)
+    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    ip, ie = np.nonzero(real)
+    x3 = lam[ip, ie].real
+    v = _monomial_vectors(mk, ip, x3)
+    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
+    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
+    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
+    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
+    vals = {order[0]: d3[ip] + 2 * np.arctan(x3),
+            order[1]: pl.offsets[0] + 2 * np.arctan2(num4, den4),
+            order[2]: pl.offsets[1] + 2 * np.arctan2(num5, den5)}
+    qt = [vals[i] for i in range(3)]                         # the triple's joints in order
+    tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
+    ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
+    rhs = np.einsum("mek,mk->me", yy[ip], ym)
+    yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    r8 = rr[ip, :8]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
+    x2 = _solve_safe(r8, yv)
+    qc = np.zeros((len(ip), 6))
+    for j, t in zip(triple, qt):
+        qc[:, j - 1] = t
+    qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
+    qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
+    # joint e from the rest: Rz(q_e) = (C1 Rz1 .. C_e)^-1 T (C_{e+1} Rz_{e+1} .. C7)^-1
+    frames, _ = _chain_frames(c, qc)
+    after = np.broadcast_to(c[6], (len(ip), 4, 4))
+    rz = _rz(qc)
+    for j in range(6, e, -1):                               # joints 6 .. e+1
+        after = c[j - 1] @ rz[:, j - 1] @ after
+    rel = np.linalg.inv(frames[:, e - 1]) @ target[ip] @ np.linalg.inv(after)
+    qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
+    qc = wrap_angle(_newton(c, qc, target[ip]))
+    return _collect(robot, pl, poses, ip, qc, n, degen)
+
+
+def _errors(c, q, target):
+    """(error (m, 6): position (scaled) and rotation vector, Jacobian (m, 6, 6))."""
+    frames, end = _chain_frames(c, q)
+    dp = target[:, :3, 3] - end[:, :3, 3]
+    rel = target[:, :3, :3] @ np.swapaxes(end[:, :3, :3], 1, 2)
+    w = 0.5 * np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], 1)
+    sn = np.linalg.norm(w, axis=1)
+    cs = 0.5 * (np.trace(rel, axis1=1, axis2=2) - 1)
+    ang = np.arctan2(sn, cs)
+    fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
+    err = np.concatenate([dp, w * fac[:, None]], 1)
+    axes = frames[:, :, :3, 2]
+    pts = frames[:, :, :3, 3]
+    jv = np.cross(axes, end[:, None, :3, 3] - pts)
+    jac = np.concatenate([jv, axes], 2).transpose(0, 2, 1)
+    return err, jac
+
+
+def _newton(c, q, target, steps=None):
+    """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
+    error (scaled lengths and rad) is below 1e-13 or NEWTON_MAX steps are done."""
+    q = q.copy()
+    idx = np.arange(len(q))
+    for _ in range(NEWTON_MAX):
+        err, jac = _errors(c, q[idx], target[idx])
+        todo = np.max(np.abs(err), axis=1) > 1e-13
+        idx, err, jac = idx[todo], err[todo], jac[todo]
+        if len(idx) == 0:
+            break
+        jt = np.swapaxes(jac, 1, 2)
+        a = jt @ jac
+        lam = 1e-14 * (np.trace(a, axis1=1, axis2=2) + 1e-30)
+        a = a + lam[:, None, None] * np.eye(6)
+        dq_ = _solve_safe(a, np.einsum("mij,mj->mi", jt, err))
+        big = np.max(np.abs(dq_), axis=1, keepdims=True)
+        dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
+        new = q[idx] + dq_
+        q[idx] = np.where(np.isfinite(new), new, q[idx])
+    return q
+
+
+def _collect(robot, pl, poses, ip, qc, n, degen):
+    """Check every candidate on derive's exact FK, merge duplicates, pad."""
+    q = np.full((n, MAX_SOLUTIONS, 6), np.nan)
+    counts = np.zeros(n, dtype=np.int64)
+    sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
+    if len(ip) == 0:
+        return q, counts, sing, degen
+    dpos, drot = _pose_error(fk(robot, qc), poses[ip])
+    ok = (dpos < ACCEPT) & (drot < ACCEPT) & np.all(np.isfinite(qc), axis=1)
+    ip, qc = ip[ok], qc[ok]
+    if len(ip) == 0:
+        return q, counts, sing, degen
+    # singular flag: the Jacobian's relative smallest singular value
+    c = pl.c
+    frames, end = _chain_frames(c, qc)
+    axes = frames[:, :, :3, 2]
+    jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
+    jac = jac.transpose(0, 2, 1)
+    ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)     # squared singular values, ascending
+    is_sing = ev[:, 0] < SINGULAR_TOL ** 2 * ev[:, -1]
+    order = np.lexsort((qc[:, 0], ip))
+    ip, qc, is_sing = ip[order], qc[order], is_sing[order]
+    # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint
+    starts = np.searchsorted(ip, ip)
+    rank = np.arange(len(ip)) - starts
+    width = int(rank.max()) + 1
+    grid = np.full((n, width, 6), np.nan)
+    grid[ip, rank] = qc
+    diff = np.abs(wrap_angle(grid[:, :, None, :] - grid[:, None, :, :]))
+    close = np.all(diff < MERGE_TOL, axis=-1) & np.tril(np.ones((width, width), dtype=bool), -1)
+    dup = np.any(close, axis=-1)[ip, rank]
+    ip, qc, is_sing = ip[~dup], qc[~dup], is_sing[~dup]
+    starts = np.searchsorted(ip, ip)
+    rank = np.arange(len(ip)) - starts
+    over = rank >= MAX_SOLUTIONS
+    degen[ip[over]] = True
+    ip, qc, is_sing, rank = ip[~over], qc[~over], is_sing[~over], rank[~over]
+    q[ip, rank] = qc
+    sing[ip, rank] = is_sing
+    counts[:] = np.bincount(ip, minlength=n)
+    return q, counts, sing, degen
