@@ -47,7 +47,7 @@ from derive.cache import find_artifact, shipped_index
 from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
-from derive.ik.closed_form import classify, spherical_class
+from derive.ik.closed_form import classify, parallel3_class, spherical_class
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
 from derive.ik.srs import arm_angle, ik_joint
@@ -271,7 +271,8 @@ def _robot_row(name: str) -> dict:
     """Class and availability of one library robot (no search for related robots: fast)."""
     r = load_robot(name)
     c = geometric_classify(r)
-    closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else "")
+    closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else
+                                         "three parallel" if parallel3_class(r) is not None else "")
     kind = redundant_kind(r) if not closed else None
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
