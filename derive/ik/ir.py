@@ -55,6 +55,7 @@ class IKProgram:
     # 2^(levels - 1) ... 1 (the nesting order); branch_labels are in the order of the weights
     bit_weights: tuple | None = None
     free_doc: str = ""                      # what it is, for the generated files' headers
+    singular_doc: str = ""                  # where the free joint is free, for the headers ("" : sin theta5 = 0)
 
 
 def leaf_weights(prog: IKProgram) -> tuple:

@@ -87,6 +87,10 @@ class P3Geometry:
     r6t: np.ndarray
     order: tuple
     error: float
+    ortho_wrist: bool = False
+
+    # ortho_wrist: axis 5 perpendicular to axes 4 and 6 (the Z1): the root of step 2 is taken as
+    # |h_2 x R_t h_6| (accurate at the wrist singularity) instead of sqrt(1 - d^2)
 
     @property
     def d1(self) -> float:
@@ -191,7 +195,8 @@ def _p3_geometry(robot) -> P3Geometry:
     err = float(max(dp.max(), dr.max()))
     if not err <= MAP_TOL:
         fail(f"its product-of-exponentials form reproduces the FK only to {err:.3g} (m, rad)")
-    return P3Geometry(name, h=h, p=p, r6t=geo.r6t, order=order, error=err)
+    ortho = bool(abs(h[1] @ h[4]) <= tol and abs(h[4] @ h[5]) <= tol)
+    return P3Geometry(name, h=h, p=p, r6t=geo.r6t, order=order, error=err, ortho_wrist=ortho)
 
 
 # --------------------------------------------------------------------------- #
@@ -241,9 +246,11 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
         q1 = q1s[:, i1]
         rt = np.einsum("nji,njk->nik", _rotm(hb[0], q1), r06)          # R_1^T R_06
         # 2. q5 (subproblem 4)
-        s5 = sp4(hb[1], hb[4], hb[5], np.einsum("i,nij,j->n", h[1], rt, h[5]))
+        rt6 = np.einsum("nij,j->ni", rt, h[5])                          # R_t h_6
+        s5 = sp4(hb[1], hb[4], hb[5], rt6 @ h[1])
         ok5 = _ok(s5)
-        q5s = _first_if_missing(s5, True)
+        q5s = _first_if_missing(s5, True) if not geo.ortho_wrist else _wrist_roots(geo, rt6)
+        ok5 = ok5 | geo.ortho_wrist
         for i5 in range(2):
             q5 = q5s[:, i5]
             u = rot(hb[4], -q5, hb[1])                                   # R_5^T h_2
@@ -274,6 +281,20 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
     if not keep_unreachable:
         out[code > 0] = np.nan
     return out, singular, code
+
+
+def _wrist_roots(geo: P3Geometry, rt6) -> np.ndarray:
+    """The two roots (n, 2) of step 2 for an ortho wrist (h_5 perpendicular to h_2 and h_6):
+    subproblem 4's line a . x = b with |a| = 1 and b = h_2^T R_t h_6, whose root
+    sqrt(|a|^2 - b^2) is the length of the part of the unit vector R_t h_6 across h_2,
+    |h_2 x R_t h_6|: exact at the wrist singularity, where sqrt(1 - b^2) carries the square root
+    of the rounding (about 1e-8 rad in q5)."""
+    h2, h5, h6 = geo.h[1], geo.h[4], geo.h[5]
+    a = np.array([np.cross(h5, h6) @ h2, h6 @ h2])                      # A(h5, h6)^T h2, |a| = 1
+    b = rt6 @ h2
+    r = np.linalg.norm(np.cross(h2, rt6), axis=-1)
+    roots = [np.arctan2(a[0] * b + sg * r * a[1], a[1] * b - sg * r * a[0]) for sg in (1.0, -1.0)]
+    return np.stack(roots, axis=-1)
 
 
 def _rotm(k, theta) -> np.ndarray:
