@@ -75,6 +75,26 @@ def test_z1_file_is_unitrees_urdf(z1):
     assert np.abs(a.p[0] + a.p[1] - b.p[0] - b.p[1]).max() < 1e-12
 
 
+def test_example_robot_datas_z1_with_its_gripper_is_solved(z1):
+    """example-robot-data ships the same URDF (with the gripper): link00 -> link06 is our file,
+    and the chain to the gripper's stator (a tool past the flange) is of the class too."""
+    import sysconfig
+    from pathlib import Path
+    path = next((Path(p) / "cmeel.prefix/share/example-robot-data/robots/z1_description/urdf/z1.urdf"
+                 for p in {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}), None)
+    assert path is not None and path.is_file()
+    flange = derive.load_robot(str(path), base="link00", tip="link06")
+    q = np.random.default_rng(3).uniform(-math.pi, math.pi, size=(200, 6))
+    assert np.abs(reference.fk_matrix(flange, q) - reference.fk_matrix(z1, q)).max() < 1e-12
+    gripper = derive.load_robot(str(path), tip="gripperStator")
+    assert derive.classify(gripper).cls == "three parallel"
+    poses = reference.fk(gripper, q[:50])
+    sols, counts = reference.ik_batch(gripper, poses)
+    assert all(_wrapped(sols[i, :counts[i]], q[i]).max(-1).min() < 1e-9 for i in range(50))
+    dp, dr = _fk_errors(gripper, sols, counts, poses)
+    assert dp < 1e-10 and dr < 1e-10
+
+
 def test_z1_file_matches_ssiks_z1(z1):
     rng = np.random.default_rng(2)
     q = rng.uniform(-math.pi, math.pi, size=(100, 6))
