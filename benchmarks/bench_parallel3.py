@@ -83,6 +83,13 @@ def main(argv=None) -> int:
     t_ref = _best_of(lambda: reference.ik_batch(robot, poses), 3)
     ref_sols, ref_counts = reference.ik_batch(robot, poses)
 
+    # the UR5's numpy reference on its own 10^4 poses, for scale (the same FK check and merge)
+    ur5 = derive.load_robot("ur5")
+    ur5_poses = reference.fk(ur5, rng.uniform(-math.pi, math.pi, size=(args.n, 6)))
+    t_ur5 = _best_of(lambda: reference.ik_batch(ur5, ur5_poses), 3)
+    k5 = derive.kernels("ur5", "c")
+    t_ur5c = _best_of(lambda: k5.ik(ur5_poses))
+
     k = derive.kernels("z1", "c")
     t_c = _best_of(lambda: k.ik(poses))
     c_sols, c_counts = k.ik(poses)
@@ -93,6 +100,7 @@ def main(argv=None) -> int:
            "reference": {**_stats(robot, ref_sols, ref_counts, q, poses, theirs), "us_per_pose": 1e6 * t_ref / args.n},
            "c_kernels": {**_stats(robot, c_sols, c_counts, q, poses, theirs), "ns_per_pose": 1e9 * t_c / args.n},
            "numpy_kernels": {"us_per_pose": 1e6 * t_np / args.n},
+           "ur5_for_scale": {"reference_us_per_pose": 1e6 * t_ur5 / args.n, "c_ns_per_pose": 1e9 * t_ur5c / args.n},
            "ssik": {"us_per_pose": 1e6 * t_ssik / args.n,
                     "counts": {int(a): int(b) for a, b in zip(*np.unique([len(x) for x in theirs], return_counts=True))}}}
     for name in ("reference", "c_kernels"):
@@ -103,7 +111,9 @@ def main(argv=None) -> int:
               f"{s['max_fk_error_m']:.2g} m, {s['max_fk_error_rad']:.2g} rad; counts {s['counts']}")
     print(f"time per pose: numpy reference {out['reference']['us_per_pose']:.2f} us (batch), C kernels "
           f"{out['c_kernels']['ns_per_pose']:.0f} ns (batch), numpy kernels {out['numpy_kernels']['us_per_pose']:.2f} us "
-          f"(batch), ssik {out['ssik']['us_per_pose']:.2f} us (one pose per call)")
+          f"(batch), ssik {out['ssik']['us_per_pose']:.2f} us (one pose per call); for scale, the UR5 in the same run: "
+          f"numpy reference {out['ur5_for_scale']['reference_us_per_pose']:.2f} us, C kernels "
+          f"{out['ur5_for_scale']['c_ns_per_pose']:.0f} ns")
     if args.json:
         with open(args.json, "w", encoding="utf-8") as fh:
             json.dump(out, fh, indent=2)
