@@ -274,7 +274,8 @@ def _ik_context(robot, free: str | None = None) -> dict:
                    "singular_flag": any(op.kind == "flag" and op.name == "singular" for op in prog.ops),
                    "same_as": same_as, "near": near, "dups": dups, "gates": gates,
                    "free": prog.free, "free_doc": prog.free_doc,
-                   "singular_doc": prog.singular_doc or "sin theta5 = 0"},
+                   "singular_doc": prog.singular_doc or "sin theta5 = 0",
+                   "steps_source": prog.steps_source or "from the derived equations"},
             "ik_missing": ""}
 
 

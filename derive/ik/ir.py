@@ -56,6 +56,7 @@ class IKProgram:
     bit_weights: tuple | None = None
     free_doc: str = ""                      # what it is, for the generated files' headers
     singular_doc: str = ""                  # where the free joint is free, for the headers ("" : sin theta5 = 0)
+    steps_source: str = ""                  # where the steps come from, for the headers ("": the derived equations)
 
 
 def leaf_weights(prog: IKProgram) -> tuple:

@@ -201,4 +201,5 @@ def parallel3_program(robot, geo: P3Geometry) -> IKProgram:
                      free_rule=("set to 0 (and q1 is set to 0 where the wrist point, where axes 5 and "
                                 "6 meet, lies on axis 1)"),
                      singular_doc="axis 6 parallel to axes 2, 3, 4",
+                     steps_source="IK-Geo's subproblems, the robot's numbers substituted",
                      steps=steps, parameters={}, branch_labels=list(bld.labels))
