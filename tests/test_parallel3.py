@@ -3,6 +3,7 @@ and ssik's prebuilt Z1, its classification, and its closed form (numpy reference
 kernels) against ssik's Z1 solver (IK-Geo's three parallel) on poses within the limits."""
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +18,8 @@ from derive.ik.subproblems import rot
 
 z1_ik = pytest.importorskip("ssik.prebuilt.unitree.z1_ik")
 
-URDF = "tests/data/z1.urdf"
+HERE = Path(__file__).resolve().parent
+URDF = str(HERE / "data" / "z1.urdf")
 N_POSES = 300
 DEG = math.pi / 180
 
@@ -79,10 +81,11 @@ def test_example_robot_datas_z1_with_its_gripper_is_solved(z1):
     """example-robot-data ships the same URDF (with the gripper): link00 -> link06 is our file,
     and the chain to the gripper's stator (a tool past the flange) is of the class too."""
     import sysconfig
-    from pathlib import Path
-    path = next((Path(p) / "cmeel.prefix/share/example-robot-data/robots/z1_description/urdf/z1.urdf"
-                 for p in {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}), None)
-    assert path is not None and path.is_file()
+    found = [Path(p) / "cmeel.prefix/share/example-robot-data/robots/z1_description/urdf/z1.urdf"
+             for p in {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]}]
+    found = [p for p in found if p.is_file()]
+    assert found, "example-robot-data is not installed (a test extra)"
+    path = found[0]
     flange = derive.load_robot(str(path), base="link00", tip="link06")
     q = np.random.default_rng(3).uniform(-math.pi, math.pi, size=(200, 6))
     assert np.abs(reference.fk_matrix(flange, q) - reference.fk_matrix(z1, q)).max() < 1e-12
@@ -125,7 +128,7 @@ def test_z1_is_three_parallel_and_ur_stays_ur():
 
 
 def _edited(tmp_path, old, new):
-    text = open("derive/robots/z1.yaml", encoding="utf-8").read()
+    text = (HERE.parent / "derive" / "robots" / "z1.yaml").read_text(encoding="utf-8")
     assert old in text
     path = tmp_path / "z1-edited.yaml"
     path.write_text(text.replace(old, new).replace("name: z1", "name: z1-edited"), encoding="utf-8")

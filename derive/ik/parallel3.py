@@ -207,10 +207,11 @@ def _ok(sol) -> np.ndarray:
     return sol.valid & (sol.residual <= SP_EXACT_TOL)
 
 
-def _first_if_missing(sol, keep: bool) -> np.ndarray:
-    """The (..., 2) angles of a two-slot subproblem; a missing second slot repeats the first."""
+def _first_if_missing(sol) -> np.ndarray:
+    """The (..., 2) angles of a two-slot subproblem; a missing second slot (one least-squares or
+    degenerate solution) repeats the first."""
     th = sol.theta[..., 0]
-    return np.where(sol.valid, th, th[..., :1]) if keep else th
+    return np.where(sol.valid, th, th[..., :1])
 
 
 def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = None,
@@ -241,7 +242,7 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
     s1 = sp4(hb[1], -hb[0], p16, np.full(n, geo.d1))
     sing1 = s1.degenerate
     ok1 = _ok(s1) | sing1[:, None]
-    q1s = np.where(sing1[:, None], free1[:, None], _first_if_missing(s1, True))
+    q1s = np.where(sing1[:, None], free1[:, None], _first_if_missing(s1))
     for i1 in range(2):
         q1 = q1s[:, i1]
         rt = np.einsum("nji,njk->nik", _rotm(hb[0], q1), r06)          # R_1^T R_06
@@ -249,7 +250,7 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
         rt6 = np.einsum("nij,j->ni", rt, h[5])                          # R_t h_6
         s5 = sp4(hb[1], hb[4], hb[5], rt6 @ h[1])
         ok5 = _ok(s5)
-        q5s = _first_if_missing(s5, True) if not geo.ortho_wrist else _wrist_roots(geo, rt6)
+        q5s = _first_if_missing(s5) if not geo.ortho_wrist else _wrist_roots(geo, rt6)
         ok5 = ok5 | geo.ortho_wrist
         for i5 in range(2):
             q5 = q5s[:, i5]
@@ -266,7 +267,7 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
             s3 = sp3(hb[1], np.broadcast_to(p[3], (n, 3)), np.broadcast_to(-p[2], (n, 3)),
                      np.linalg.norm(v, axis=-1))
             ok3 = _ok(s3)
-            q3s = _first_if_missing(s3, True)
+            q3s = _first_if_missing(s3)
             for i3 in range(2):
                 q3 = q3s[:, i3]
                 # 6. q2 (subproblem 1), q4 by subtraction
