@@ -48,7 +48,7 @@ from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik import nearclass
-from derive.ik.closed_form import spherical_class
+from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.nearclass import classify
 from derive.ik.program import write_class_data
 from derive.ik.redundant import NAMES as FREE_NAMES
@@ -274,7 +274,8 @@ def _robot_row(name: str) -> dict:
     """Class and availability of one library robot (no search for related robots: fast)."""
     r = load_robot(name)
     c = geometric_classify(r)
-    closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else "")
+    closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else
+                                         "three parallel" if parallel3_class(r) is not None else "")
     kind = redundant_kind(r) if not closed else None
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
     # a near-class arm (only where the description has near misses or names a nominal: fast)

@@ -193,9 +193,13 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
 
 
 def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
-    # a decimal UR5 (alpha 1.5708) is a near-class arm: its kernels solve the nominal's closed
-    # form and polish (derive.codegen.polish); an arm near no class gets FK kernels only
-    path = _write(tmp_path / "arm.yaml", _decimal_alphas(_ur5(name="approx-ur5"), 1.5708))
+    # twists 1.5708 alone keep axes 2, 3, 4 parallel and axes 5, 6 intersecting: the three-parallel
+    # class, solved exactly (tests/test_parallel3.py); a twist of 1e-4 rad between axes 2 and 3 as
+    # well makes a near-class arm: its kernels solve the nominal's closed form and polish
+    # (derive.codegen.polish); an arm near no class gets FK kernels only
+    data = _decimal_alphas(_ur5(name="approx-ur5"), 1.5708)
+    data["joints"][1]["alpha"] = 0.0001
+    path = _write(tmp_path / "arm.yaml", data)
     k = derive.kernels(path, "c")
     err = capfd.readouterr().err
     assert "[approx-ur5]" in err and "deriving" in err and "numeric product" in err

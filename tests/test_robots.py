@@ -16,7 +16,7 @@ DATA = Path(__file__).with_name("data")
 LIBRARY = ["abb-irb1600", "crx10ia", "fr3", "gen3", "general-6r", "gp8", "iiwa14", "iiwa7", "irb120", "irb1600",
            "irb6700", "jaco2-6dof", "kr210-r2700", "kr6-r900", "kunze-2r", "lrmate200id", "m710ic", "panda",
            "puma560", "rs007n", "rx160", "seed-arm", "tx2-60", "ur10", "ur10e", "ur16e", "ur3", "ur3-thesis",
-           "ur3e", "ur5", "ur5-calibrated", "ur5e", "vs060", "xarm6", "xarm7"]
+           "ur3e", "ur5", "ur5-calibrated", "ur5e", "vs060", "xarm6", "xarm7", "z1"]
 UR_DH = {  # d1 a2 a3 d4 d5 d6 from the issue / Universal Robots
     "ur3": (.1519, -.24365, -.21325, .11235, .08535, .0819),
     "ur5": (.089159, -.425, -.39225, .10915, .09465, .0823),

@@ -304,7 +304,9 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
                    "leaf": leaf or "0", "flat": flat, "flat_full": flat_full, "merge_tol": repr(MERGE_TOL), "steps": step_lines,
                    "singular_flag": any(op.kind == "flag" and op.name == "singular" for op in prog.ops),
                    "same_as": same_as, "near": near, "dups": dups, "gates": gates,
-                   "free": prog.free, "free_doc": prog.free_doc},
+                   "free": prog.free, "free_doc": prog.free_doc,
+                   "singular_doc": prog.singular_doc or "sin theta5 = 0",
+                   "steps_source": prog.steps_source or "from the derived equations"},
             "ik_missing": ""}
 
 

@@ -51,7 +51,9 @@ class IKClass:
     singular_sets: tuple
     reasons: tuple
     free: str | None = None           # the free parameter of a 7R class ("q7", "psi")
-    free_joint: int | None = None     # 6R: the joint (0-based) a wrist singularity leaves free
+    # 6R: the joint (0-based) a wrist singularity leaves free, or slice(None) where the class takes
+    # the whole reference configuration (three parallel: q1 at the shoulder, q6 at the wrist)
+    free_joint: int | slice | None = None
 
 
 def quiet_detect(fn):
@@ -83,6 +85,28 @@ def _spherical():
                        "shoulder: the wrist centre on axis 1 at b = 0 (theta1 roots meet)",
                        "elbow stretched or folded: the theta3 roots meet (merged)"),
         reasons=(sw.REASON_LATERAL, sw.REASON_REACH), free_joint=3)
+
+
+def _parallel3():
+    from derive.ik import parallel3 as p3
+
+    def candidates(geo, poses, free=None):
+        return p3.solve_batch(geo, poses, free)
+
+    return IKClass(
+        name="parallel3", title="three parallel axes, two intersecting (IK-Geo; the Unitree Z1)",
+        dof=6, detect=quiet_detect(p3.p3_geometry), candidates=candidates,
+        steps=(("q1", "sp4: the component of the wrist point along the parallel axes, two roots"),
+               ("q5", "sp4: h2^T R(h5, q5) h6 = h2^T R_t h6, two roots"),
+               ("q6", "sp1: R(-h6, q6) R5^T h2 = R_t^T h2; free where axis 6 is parallel to axes 2-4"),
+               ("q2 + q3 + q4", "sp1: the rotation about the parallel axes"),
+               ("q3", "sp3: the cosine law in the plane of the parallel axes, two roots"),
+               ("q2, q4", "sp1 in that plane, then the sum")),
+        branch_labels=("q1 root (+ / -)", "q5 root (+ / -)", "q3 root (+ / -)"),
+        singular_sets=("wrist: axis 6 parallel to axes 2-4, q6 free (from q_ref, else 0), marked singular",
+                       "shoulder: the wrist point on axis 1, q1 free (from q_ref, else 0), marked singular",
+                       "elbow stretched or folded: the q3 roots meet (merged)"),
+        reasons=(p3.REASON_SHOULDER, p3.REASON_REACH), free_joint=slice(None))
 
 
 def _panda():
@@ -143,8 +167,8 @@ def _srs():
 
 _BUILT: dict = {}
 #: Names of the classes in the order of detection.
-ORDER = ("ur", "spherical", "panda", "srs")
-_MAKERS = {"spherical": _spherical, "panda": _panda, "srs": _srs}
+ORDER = ("ur", "spherical", "parallel3", "panda", "srs")
+_MAKERS = {"spherical": _spherical, "parallel3": _parallel3, "panda": _panda, "srs": _srs}
 
 
 def register(cls: IKClass) -> None:

@@ -38,8 +38,9 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_z
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import classes, general6r, panda, spherical, srs
+from derive.ik import classes, general6r, panda, parallel3, spherical, srs
 from derive.ik.finish import finish, select_one
+from derive.ik.parallel3 import P3Geometry
 from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
 from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
@@ -217,10 +218,13 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
 
     ``geo``: a :class:`URGeometry` (candidates from :func:`solve_batch`; ``q_free`` the
     reference theta6 of the wrist singularity) or a :class:`derive.ik.spherical.SWGeometry`
-    (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4).
+    (candidates from :func:`derive.ik.spherical.solve_batch`; ``q_free`` the reference q4) or a
+    :class:`derive.ik.parallel3.P3Geometry` (:func:`derive.ik.parallel3.solve_batch`; ``q_free``
+    the reference configurations (n, 6), whose q1 and q6 are used where those joints are free).
     The candidates go through the finish step (:func:`derive.ik.finish.finish`: FK check, merge,
     compaction)."""
-    cls = classes.find("spherical" if isinstance(geo, SWGeometry) else "ur")
+    cls = classes.find("spherical" if isinstance(geo, SWGeometry) else
+                       "parallel3" if isinstance(geo, P3Geometry) else "ur")
     batch, why = cls.candidates, cls.reasons
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
@@ -412,6 +416,13 @@ def classify(robot) -> Classification:
         notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             "closed-form IK of the spherical-wrist class (derive.ik.spherical): " + spherical.describe(geo)])
+    p3 = parallel3_class(robot)
+    if p3 is not None:
+        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n
+                 and "derive.ik.parallel3" not in n]
+        return dataclasses.replace(c, closed_form=True, notes=notes + [
+            "closed-form IK of the three-parallel class (derive.ik.parallel3), up to 8 solutions: "
+            + parallel3.describe(p3)])
     rel = closed_form_relation(robot)
     if rel is None:
         return c
@@ -425,13 +436,14 @@ def classify(robot) -> Classification:
 
 def has_closed_form(robot) -> bool:
     """Whether :func:`ik` solves the robot: the UR structure (in its own frames or related to a
-    library robot) or the spherical-wrist class."""
+    library robot), the spherical-wrist class or the three-parallel class."""
     robot = load_robot(robot)
     try:
         ur_geometry(robot)
         return True
     except DeriveError:
-        return spherical.is_spherical(robot) or closed_form_relation(robot) is not None
+        return (spherical.is_spherical(robot) or parallel3.is_parallel3(robot)
+                or closed_form_relation(robot) is not None)
 
 
 def _solve_related(robot, poses, q_ref):
@@ -458,8 +470,8 @@ def _solve_related(robot, poses, q_ref):
         except DeriveError as exc:
             first = exc
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
-                          "UR family, the spherical-wrist (OPW) class and the general 6R, and this "
-                          f"chain is in none ({str(first).split(': ', 1)[-1]}; "
+                          "UR family, the spherical-wrist (OPW) class, the three-parallel class "
+                          f"and the general 6R, and this chain is in none ({str(first).split(': ', 1)[-1]}; "
                           f"{spherical_reason(robot).split(': ', 1)[-1]}; {general}); use derive.refine")
     lib = load_robot(rel.other)
     q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
@@ -478,6 +490,23 @@ def spherical_class(robot) -> SWGeometry | None:
         pass
     try:
         return sw_geometry(robot)
+    except DeriveError:
+        return None
+
+
+def parallel3_class(robot) -> P3Geometry | None:
+    """The three-parallel geometry of a robot (:mod:`derive.ik.parallel3`; the UR family and the
+    spherical-wrist class come first), or None."""
+    robot = load_robot(robot)
+    if spherical_class(robot) is not None:
+        return None
+    try:
+        ur_geometry(robot)
+        return None
+    except DeriveError:
+        pass
+    try:
+        return parallel3.p3_geometry(robot)
     except DeriveError:
         return None
 

@@ -55,6 +55,8 @@ class IKProgram:
     # 2^(levels - 1) ... 1 (the nesting order); branch_labels are in the order of the weights
     bit_weights: tuple | None = None
     free_doc: str = ""                      # what it is, for the generated files' headers
+    singular_doc: str = ""                  # where the free joint is free, for the headers ("" : sin theta5 = 0)
+    steps_source: str = ""                  # where the steps come from, for the headers ("": the derived equations)
 
 
 def leaf_weights(prog: IKProgram) -> tuple:

@@ -113,7 +113,7 @@ def nominal(robot) -> Nominal | None:
 
 def exact_class(robot) -> str | None:
     """The class whose closed form solves the robot as it is described ("UR", "spherical
-    wrist", "Panda", "SRS", "UR (through a library robot)"), or None."""
+    wrist", "three parallel", "Panda", "SRS", "UR (through a library robot)"), or None."""
     robot = load_robot(robot)
     return memo("exact-closed-form-class", robot.id, lambda: _exact_class(robot))
 
@@ -133,6 +133,8 @@ def _exact_class(robot) -> str | None:
         pass
     if closed_form.spherical_class(robot) is not None:
         return "spherical wrist"
+    if closed_form.parallel3_class(robot) is not None:
+        return "three parallel"
     if closed_form.closed_form_relation(robot) is not None:
         return "UR"
     return None

@@ -39,9 +39,10 @@ from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.cache import memo
 from derive.errors import DeriveError, InputError
 from derive.ik import class_programs
-from derive.ik.closed_form import URGeometry, closed_form_relation, spherical_class, ur_geometry
+from derive.ik.closed_form import URGeometry, closed_form_relation, parallel3_class, spherical_class, ur_geometry
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
 from derive.ik.program7 import seven_joint_program
+from derive.ik.program_parallel3 import parallel3_program
 from derive.ik.redundant import free_choice, redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
 from derive.ik.spherical import SWGeometry, canonical_robot
@@ -113,6 +114,9 @@ def _ik_program(robot, free) -> IKProgram:
     geo = spherical_class(robot)
     if geo is not None:
         return _spherical_program(robot, geo)
+    p3 = parallel3_class(robot)
+    if p3 is not None:
+        return parallel3_program(robot, p3)
     try:
         ur = ur_geometry(robot)
     except DeriveError:

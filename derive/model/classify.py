@@ -34,6 +34,11 @@ Classes (checked in this order, every property within EXACT_TOL; 1-based axis nu
 * ``"spherical wrist"``: 6R whose last three axes meet in one point but not OPW: Pieper's
   criterion (D. L. Pieper, "The kinematics of manipulators under computer control", 1968: a
   6R arm with three consecutive axes meeting in one point has a closed-form IK).
+* ``"three parallel"``: 6R, not of the classes above, with axes 2, 3, 4 parallel and axes 5 and 6
+  intersecting (axis 1 not parallel to axis 2, axis 5 not parallel to axis 4): the Unitree Z1,
+  whose axes 4 and 5 do not meet (IK-Geo's "three parallel, two intersecting": Elias & Wen,
+  arXiv:2211.05737, 2022; solved by :mod:`derive.ik.parallel3`). The UR layout has this
+  structure too and stays ``"UR"``.
 * ``"SRS"``: 7R with a spherical shoulder (axes 1-2-3 meet in one point) and a spherical wrist
   (axes 5-6-7), the shoulder-revolute-spherical arms such as the KUKA LBR iiwa.
 * ``"general"``: anything else, any number and kind of joints.
@@ -66,7 +71,7 @@ THESIS_FORM_TOL = 1e-12
 #: Axes of the UR chain in thesis form (as :data:`derive.ik.closed_form.UR_AXES`).
 UR_AXES = ((0, 0, 1), (0, -1, 0), (0, -1, 0), (0, -1, 0), (0, 0, -1), (0, -1, 0))
 
-CLASSES = ("UR", "OPW", "spherical wrist", "SRS", "general")
+CLASSES = ("UR", "OPW", "spherical wrist", "three parallel", "SRS", "general")
 
 _UNIT = {"parallel": "rad", "perpendicular": "rad", "intersecting": "m", "concurrent": "m"}
 
@@ -389,10 +394,14 @@ def _class(n, types, pairs, wrist, shoulder, tol) -> tuple[str, str]:
         if concurrent(wrist):
             return "spherical wrist", ("6R: axes 4, 5, 6 meet in one point (Pieper's criterion), "
                                        "base not ortho-parallel")
+        if par(2) and par(3) and meet(5) and not par(5) and not par(1) and not par(4):
+            return "three parallel", ("6R: axes 2, 3, 4 parallel, axes 5 and 6 intersecting, not "
+                                      "the UR layout (IK-Geo's three parallel, two intersecting)")
     if n == 7 and all_r and concurrent(shoulder) and concurrent(wrist):
         return "SRS", "7R: axes 1, 2, 3 meet in one point and axes 5, 6, 7 meet in one point"
-    why = ("none of the UR, OPW, spherical-wrist or SRS structures" if n in (6, 7) and all_r
-           else "the UR, OPW and spherical-wrist classes need 6R, SRS 7R")
+    why = ("none of the UR, OPW, spherical-wrist, three-parallel or SRS structures"
+           if n in (6, 7) and all_r
+           else "the UR, OPW, spherical-wrist and three-parallel classes need 6R, SRS 7R")
     return "general", f"{_joints_phrase(types)}: {why}"
 
 
@@ -437,6 +446,10 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
         notes.append("the UR structure holds, but the chain is not in the thesis form that "
                      f"derive.ik.closed_form.ur_geometry accepts ({why_not}): derive.refine "
                      "solves its IK numerically")
+    elif cls == "three parallel":
+        notes.append("Pieper's criterion holds (axes 2, 3, 4 parallel) and axes 5 and 6 intersect: "
+                     "the three-parallel class, solved in closed form by derive.ik.parallel3 "
+                     "(derive.reference.ik) where its geometry holds within 1e-10")
     elif cls in ("OPW", "spherical wrist"):
         opw = " (the OPW solution of Brandstoetter et al. 2014)" if cls == "OPW" else ""
         notes.append("Pieper's criterion holds (axes 4, 5, 6 meet in one point), so a closed-form "
