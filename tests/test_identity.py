@@ -212,7 +212,9 @@ def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, 
     robot = derive.load_robot(path)
     folder = user_folder(f"{robot.id}-L{robot.limits_id}")
     assert any(f.name.startswith(folder.name + "-n") for f in folder.parent.iterdir())
-    far = _write(tmp_path / "far.yaml", _decimal_alphas(_ur5(name="tilted-ur5"), 1.4))
+    far_data = _decimal_alphas(_ur5(name="tilted-ur5"), 1.4)
+    far_data["joints"][1]["alpha"] = 0.2                  # axes 2, 3 0.2 rad apart: near no class
+    far = _write(tmp_path / "far.yaml", far_data)
     kf = derive.kernels(far, "c")
     assert not kf.has_ik and kf.nominal is None
     with pytest.raises(DeriveError, match="derive.refine"):

@@ -6,8 +6,9 @@ Arms (no exact class; each has a nominal robot of a class with a closed form):
 * ``tests/data/puma560-printed.urdf``: the PUMA 560 with its twists printed as 1.570796325
   (spherical wrist within 2e-9 rad), against EAIK (its URDF reader ``UrdfRobot``, and ``HPRobot``
   on our axes) and ssik's ``from_axes``;
-* ``tests/data/ur5-decimal.yaml``: the UR5 with ``alpha: 1.5708`` (UR within 3.7e-6 rad), against
-  EAIK's ``HPRobot`` and ssik's ``from_axes``;
+* ``tests/data/ur5-decimal.yaml``: the UR5 with ``alpha: 1.5708`` (UR within 3.7e-6 rad); its axes
+  2, 3, 4 stay exactly parallel and axes 5, 6 meet, so it is of the three-parallel class and solved
+  exactly (no nominal), against EAIK's ``HPRobot`` and ssik's ``from_axes``;
 * ``tests/data/iiwa14-off.urdf``: the iiwa14 URDF with axes 5-7 0.44 mm off the arm line, joint 3
   given, against a dense multi-start on Pinocchio's model of the URDF (ssik's locked 6R arm
   refuses the near miss, its general solver needs a 240 s precompute per arm);
@@ -111,8 +112,12 @@ def _check_ours(robot, q, poses, sols, counts, what):
 def test_nominals_are_found_with_their_class_and_deviation():
     """Each arm has no exact class and a nominal of the expected class, whose deviation is the
     size of the description's error (measured by the relation on random configurations)."""
-    expect = {PUMA: ("spherical wrist", 1e-10, 1e-7), UR5_DECIMAL: ("UR", 1e-7, 1e-4),
-              IIWA_OFF: ("SRS", 1e-4, 3e-3), "ur5-calibrated": ("UR", 1e-3, 0.03)}
+    expect = {PUMA: ("spherical wrist", 1e-10, 1e-7), IIWA_OFF: ("SRS", 1e-4, 3e-3),
+              "ur5-calibrated": ("UR", 1e-3, 0.03)}
+    # twists written 1.5708 keep axes 2, 3, 4 exactly parallel and axes 5, 6 meeting: the UR5 so
+    # written is of the three-parallel class, solved exactly, and needs no nominal
+    assert nearclass.exact_class(derive.load_robot(UR5_DECIMAL)) == "three parallel"
+    assert nearclass.nominal(UR5_DECIMAL) is None
     for name, (cls, lo, hi) in expect.items():
         robot = derive.load_robot(name)
         assert nearclass.exact_class(robot) is None, name
@@ -168,14 +173,14 @@ def test_ur5_decimal_alpha_equals_eaik_and_ssik():
     robot = derive.load_robot(UR5_DECIMAL)
     q = _configs(robot, 300, 22)
     poses, mats = reference.fk(robot, q), reference.fk_matrix(robot, q)
-    r = nearclass.ik_batch(robot, poses)
-    _check_ours(robot, q, poses, r.q, r.counts, "ur5-decimal")
+    sols, counts = reference.ik_batch(robot, poses)     # the three-parallel class, exactly
+    _check_ours(robot, q, poses, sols, counts, "ur5-decimal")
     exact = reference.ik_batch("ur5", reference.fk("ur5", q))[1]
-    assert np.abs(r.counts - exact).sum() <= 3           # counts of the exact UR5 on nearly the same poses
+    assert np.abs(counts - exact).sum() <= 3             # counts of the exact UR5 on nearly the same poses
     H, P, r0 = _hp(robot)
     hp, man = HPRobot(H, P), ssik.Manipulator.from_axes(H, P)
     for i in range(len(q)):
-        ours = r.q[i, :r.counts[i]]
+        ours = sols[i, :counts[i]]
         s = hp.IK(mats[i] @ np.linalg.inv(r0))
         theirs = _distinct(_wrap(np.asarray(s.Q).reshape(-1, 6)[~np.asarray(s.is_LS, bool)]), 6)
         _same_set(ours, theirs, f"ur5-decimal pose {i} vs EAIK")

@@ -141,8 +141,11 @@ def test_an_offset_between_axes_5_and_6_leaves_the_class(tmp_path):
     assert c.cls == "general" and not c.closed_form
     with pytest.raises(DeriveError, match="axes 5 and 6 do not intersect"):
         parallel3.p3_geometry(r)
-    with pytest.raises(DeriveError, match="three-parallel"):
-        reference.ik(r, reference.fk(r, np.zeros(6)))
+    # outside every special class, the general 6R elimination (derive.ik.general6r) solves it
+    q0 = np.array([0.3, -0.4, 0.5, 0.2, -0.6, 0.7])
+    sols = reference.ik(r, reference.fk(r, q0))
+    assert len(sols) >= 1 and _wrapped(np.asarray(sols), q0).max(-1).min() < 1e-9
+    assert np.abs(reference.fk_matrix(r, np.asarray(sols)) - reference.fk_matrix(r, q0)).max() < 1e-10
 
 
 # --------------------------------------------------------------------------- #
