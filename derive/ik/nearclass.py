@@ -108,7 +108,7 @@ def nominal(robot) -> Nominal | None:
     and the relation FK_robot(q) ~= B FK_nominal(s q + o) T must hold within
     NEAR_DEVIATION_MAX on sample configurations; its largest mismatch is ``deviation``."""
     robot = load_robot(robot)
-    return memo("nominal", robot.id, lambda: _nominal(robot))
+    return memo("nominal", (robot.id, robot.limits_id), lambda: _nominal(robot))
 
 
 def exact_class(robot) -> str | None:

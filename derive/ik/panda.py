@@ -172,9 +172,9 @@ def canonical_description(values: dict, name: str = "panda-class") -> dict:
 
 def panda_geometry(robot) -> PandaGeometry:
     """The canonical form of a Panda-class arm (module docstring), or InputError naming what
-    differs; cached per robot identity."""
+    differs; cached per robot identity and joint limits (it holds the q7 limits)."""
     robot = load_robot(robot)
-    return memo("panda-geometry", robot.id, lambda: _panda_geometry(robot))
+    return memo("panda-geometry", (robot.id, robot.limits_id), lambda: _panda_geometry(robot))
 
 
 def is_panda_class(robot) -> bool:

@@ -143,10 +143,11 @@ class SRSSweep(NamedTuple):
 # Class test and canonical frame
 # --------------------------------------------------------------------------- #
 def srs_geometry(robot) -> SRSGeometry:
-    """The canonical form of an SRS arm (module docstring), cached per robot identity; raises
+    """The canonical form of an SRS arm (module docstring), cached per robot identity and joint
+    limits (it holds them); raises
     InputError naming the property a robot lacks."""
     robot = load_robot(robot)
-    return memo("srs-geometry", robot.id, lambda: _srs_geometry(robot))
+    return memo("srs-geometry", (robot.id, robot.limits_id), lambda: _srs_geometry(robot))
 
 
 def is_srs(robot) -> bool:

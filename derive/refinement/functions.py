@@ -268,8 +268,8 @@ def functions(robot, source: str | None = None) -> dict:
     Cached per identity."""
     robot = load_robot(robot)
     if source is not None:
-        return memo("casadi-functions", (robot.id, source), lambda: _functions(robot, source))
-    return memo("casadi-functions", (robot.id, None), lambda: _load_or_build(robot))
+        return memo("casadi-functions", (robot.id, robot.limits_id, source), lambda: _functions(robot, source))
+    return memo("casadi-functions", (robot.id, robot.limits_id, None), lambda: _load_or_build(robot))
 
 
 def _load_or_build(robot) -> dict:

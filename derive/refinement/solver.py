@@ -151,7 +151,7 @@ def _lm(resid, q, target, w, lam, q_ref, max_iter: int, tol: float):
 
 
 def _nlp(robot, max_iter: int):
-    return memo("casadi-nlp", (robot.id, max_iter), lambda: _build_nlp(robot, max_iter))
+    return memo("casadi-nlp", (robot.id, robot.limits_id, max_iter), lambda: _build_nlp(robot, max_iter))
 
 
 def _build_nlp(robot, max_iter: int):
