@@ -41,29 +41,25 @@ from derive import reference
 from derive._version import __version__
 from derive.algebra import dualquat as dq
 from derive.apps import path as cartesian
-from derive.bench.runner import BENCHES
-from derive.bench.runner import main as bench_main
+from derive.bench import BENCHES
 from derive.cache import find_artifact, shipped_index
-from derive.codegen.emit import write_ikfast, write_kernels
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik import nearclass
 from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.nearclass import classify
-from derive.ik.program import write_class_data
 from derive.ik.redundant import NAMES as FREE_NAMES
 from derive.ik.redundant import free_parameter, redundant_kind
 from derive.ik.srs import arm_angle, ik_joint
 from derive.ik.srs import within_limits as srs_within_limits
 from derive.kinematics.pose import from_position_quaternion, from_position_rpy, to_position_rpy
-from derive.model import export
 from derive.model.classify import classify as geometric_classify
 from derive.model.robot import list_robots, load_robot
-from derive.refinement.functions import write_casadi
-from derive.refinement.solver import refine
-from derive.reports.appendix import write_appendix
-from derive.reports.figures import arm_figure, ik_figure
-from derive.reports.ik_report import write_ik
+
+# The heavy modules (sympy, jinja2, CasADi, lxml, matplotlib and the benches: the emitters, the
+# reports, refine, export, plot, bench) are imported inside the subcommands that use them, so
+# that robots, fk, ik with a target, classify ... start without them (docs/architecture.md,
+# "Light import"; tests/test_light_import.py).
 
 #: Robots ``dq-derive generate`` (and so ``make generate``) works on by default.
 DEFAULT_ROBOTS = ("ur3", "ur5")
@@ -383,6 +379,7 @@ def _report(paths, t0=None, as_json=False) -> int:
 
 
 def cmd_appendix(args) -> int:
+    from derive.reports.appendix import write_appendix
     t0 = time.perf_counter()
     return _report(write_appendix(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
 
@@ -404,6 +401,7 @@ def cmd_ik(args) -> int:
                 or args.free is not None or args.sweep is not None or args.free_joint is not None):
             raise InputError("ik: --seed, --within-limits, --free, --free-joint, --sweep, --rpy and --quat need a "
                              "target (--q, --xyz or --dq)")
+        from derive.reports.ik_report import write_ik
         t0 = time.perf_counter()
         return _report(write_ik(_robot(args), args.out, progress=not (args.quiet or args.json)), t0, args.json)
     robot = _robot(args)
@@ -616,6 +614,7 @@ def _no_solution(robot, args, head, reason: str) -> int:
 
 def cmd_refine(args) -> int:
     """Refine IK solutions on the robot's model; the target from --q, --xyz or --dq."""
+    from derive.refinement.solver import refine
     _deprecated(args, "refine --pose", "--dq", "pose_old", "dq")
     robot = _robot(args)
     pose, q, target = _target(robot, args, "refine")
@@ -656,6 +655,7 @@ def cmd_refine(args) -> int:
 
 def cmd_export(args) -> int:
     """Write the robot as a kinematic URDF and/or as our YAML (convention urdf)."""
+    from derive.model import export
     robot = _robot(args)
     if args.urdf is None and args.yaml is None:
         raise InputError("export: give --urdf FILE and/or --yaml FILE")
@@ -663,6 +663,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_kernels(args) -> int:
+    from derive.codegen.emit import write_ikfast, write_kernels
     robot = _robot(args)
     written = write_kernels(robot, args.out)
     if args.ikfast:
@@ -672,6 +673,7 @@ def cmd_kernels(args) -> int:
 
 def cmd_plot(args) -> int:
     """The arm at --q, or every IK solution of the pose of --ik-of, as a PNG."""
+    from derive.reports.figures import arm_figure, ik_figure
     robot = _robot(args)
     if (args.q is None) == (args.ik_of is None):
         raise InputError("plot: give exactly one of --q (draw the arm) and --ik-of (draw every IK "
@@ -742,6 +744,11 @@ def cmd_path(args) -> int:
 
 def cmd_generate(args) -> int:
     """Regenerate the outputs of the default robots and print an FK table."""
+    from derive.codegen.emit import write_kernels
+    from derive.ik.program import write_class_data
+    from derive.refinement.functions import write_casadi
+    from derive.reports.appendix import write_appendix
+    from derive.reports.ik_report import write_ik
     t0 = time.perf_counter()
     robots = args.robots or list(DEFAULT_ROBOTS)
     print(f"dq-derive {__version__}: generate for {', '.join(robots)}")
@@ -805,6 +812,7 @@ def cmd_generate(args) -> int:
 
 
 def cmd_bench(args) -> int:
+    from derive.bench.runner import main as bench_main
     argv = [args.what, "--repeats", str(args.repeats)] + (["--robot", args.robot] if args.robot else [])
     argv += (["--json", args.json] if args.json else []) + (["--plot", args.plot] if args.plot else [])
     return bench_main(argv)

@@ -134,3 +134,38 @@ def test_exact_values_are_those_of_the_file():
     axis = robot_from_dict(_tool({"axis": [0.6, 0.8, 0], "angle": "pi/3"})).ends["tool"].ops[-1]
     assert exact.op_form(axis)[0] == (sp.Rational(3, 5), sp.Rational(4, 5), 0)
     assert np.allclose(axis.axis, [0.6, 0.8, 0])
+
+
+_CLI = r"""
+import contextlib, io, json, sys
+import derive.cli
+out = {"import": sorted(m for m in %r if m in sys.modules)}
+for name, argv in (("classify", ["classify", "ur5", "--json"]),
+                   ("fk", ["fk", "ur5", "--q", "0", "0", "0", "0", "0", "0", "--json"])):
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = derive.cli.main(argv)
+    out[name] = [rc, json.loads(buf.getvalue())]
+out["loaded"] = sorted(m for m in %r if m in sys.modules)
+print(json.dumps(out))
+"""
+
+
+def test_command_line_imports_no_heavy_module_for_classify_and_fk():
+    """``import derive.cli`` and ``dq-derive classify ur5`` / ``fk`` import none of the heavy
+    modules: the emitters, reports, refine, export, plot and bench import them inside their
+    subcommands (issue 30: classify of a URDF within 2 s from the command line)."""
+    run = subprocess.run([sys.executable, "-c", _CLI % (HEAVY, HEAVY)], capture_output=True, text=True,
+                         timeout=300)
+    assert run.returncode == 0, run.stderr
+    out = json.loads(run.stdout.strip().splitlines()[-1])
+    assert out["import"] == []
+    rc, c = out["classify"]
+    assert rc == 0 and c["robot"] == "ur5" and c["n"] == 6
+    assert c["class"] == "UR"                       # axes 2, 3, 4 parallel (alpha2 = alpha3 = 0 in the DH table)
+    rc, fk = out["fk"]
+    # UR5 DH at q = 0 (Universal Robots' table): x = a2 + a3 = -(0.425 + 0.39225), y = -(d4 + d6), z = d1 - d5
+    assert rc == 0
+    assert np.allclose(fk["position"]["value"], [-(0.425 + 0.39225), -(0.10915 + 0.0823), 0.089159 - 0.09465],
+                       atol=1e-9)
+    assert out["loaded"] == []

@@ -13,6 +13,7 @@ import time
 import numpy as np
 
 from derive import reference
+from derive.bench import BENCHES
 from derive.bench.chain import bench_chain_c, bench_chain_numpy, op_counts, plot
 from derive.bench.kernels import bench_kernels, report
 from derive.bench.load import bench_load
@@ -20,9 +21,6 @@ from derive.bench.load import report as load_report
 from derive.bench.machine import machine
 from derive.codegen.loader import kernels
 from derive.refinement.solver import refine
-
-#: What `dq-derive bench` measures.
-BENCHES = ("derivation", "ik", "fk", "kernels", "chain", "refine", "load")
 
 _DERIVATION_RUN = r"""
 import json, sys, time
