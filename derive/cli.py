@@ -278,7 +278,8 @@ def _robot_row(name: str) -> dict:
     near = (not closed and not kind and (r.nominal or c.near_misses) and reference._near(r))
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
                     f"nominal {nearclass.nominal_class(r)} + Newton polish" if near else
-                    f"no: refine, seeded by {r.nominal}" if r.nominal else "no: refine")
+                    f"no: refine, seeded by {r.nominal}" if r.nominal else
+                    "general 6R elimination (numpy)" if _general_6r(r) else "no: refine")
     # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
     # run the nominal's closed form and polish (derive.codegen.polish)
     has_ik = bool(closed or kind or (near and r.dof == 6))
@@ -292,6 +293,12 @@ def _robot_row(name: str) -> dict:
                        + ", " + _where(r.id, "c_source"),
             "casadi": ("fk, residual, ik" if has_ik else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
+
+
+def _general_6r(robot) -> bool:
+    """Whether the numpy reference solves a robot outside every special class by the general 6R
+    elimination (derive.ik.general6r): six revolute joints, no mimic joint."""
+    return robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints)
 
 
 def _where(robot_id: str, role: str) -> str:
@@ -449,7 +456,8 @@ def cmd_ik(args) -> int:
                  ("singular: the free wrist joint chosen" if g else ""), {"singular": bool(g)})
                 for s, g in zip(sols, sols.singular)]
         reason = sols.reason
-        what = "closed form"
+        what = ("closed form" if nearclass.exact_class(robot) else
+                "general 6R elimination, numpy reference" if _general_6r(robot) else "closed form")
     if not rows:
         return _no_solution(robot, args, head, reason or "no solution")
     if args.json:

@@ -30,7 +30,8 @@ needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None or shutil.which("g++"
 
 @pytest.fixture(scope="module")
 def decimal(tmp_path_factory):
-    """The UR5 with its twists written 1.5708 (not exact: no closed form of its own) and its
+    """The UR5 with its twists written 1.5708 (not exact; it is of the three-parallel class, but
+    here it is given the UR5 as its nominal by hand, to test the polish) and its
     nominal, the library UR5, related by identities (the relation written by hand)."""
     text = (ROOT / "derive" / "robots" / "ur5.yaml").read_text()
     text = text.replace("name: ur5", "name: ur5-decimal").replace("-pi/2", "-1.5708").replace("pi/2", "1.5708")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import ssik.prebuilt.unitree.z1_ik as z1_ik     # ssik is in the test extra: a missing one fails
 
 import derive
 from derive import dualquat as DQ
@@ -16,7 +17,6 @@ from derive.ik import parallel3
 from derive.ik.closed_form import parallel3_class
 from derive.ik.subproblems import rot
 
-z1_ik = pytest.importorskip("ssik.prebuilt.unitree.z1_ik")
 
 HERE = Path(__file__).resolve().parent
 URDF = str(HERE / "data" / "z1.urdf")

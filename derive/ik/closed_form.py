@@ -413,12 +413,12 @@ def classify(robot) -> Classification:
             "the generated kernels: derive.kernels(robot, 'c').ik(poses, free=v))"])
     geo = spherical_class(robot)
     if geo is not None:
-        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
+        notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n]
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             "closed-form IK of the spherical-wrist class (derive.ik.spherical): " + spherical.describe(geo)])
     p3 = parallel3_class(robot)
     if p3 is not None:
-        notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n
+        notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n
                  and "derive.ik.parallel3" not in n]
         return dataclasses.replace(c, closed_form=True, notes=notes + [
             "closed-form IK of the three-parallel class (derive.ik.parallel3), up to 8 solutions: "
@@ -426,7 +426,7 @@ def classify(robot) -> Classification:
     rel = closed_form_relation(robot)
     if rel is None:
         return c
-    notes = [n for n in c.notes if "derive.refine solves" not in n and "no closed form" not in n]
+    notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n]
     return dataclasses.replace(
         c, closed_form=True,
         notes=notes + [f"closed-form IK through the library robot {rel.other}: " + rel.describe()],

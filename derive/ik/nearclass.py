@@ -547,8 +547,9 @@ class NearSolutions(NamedTuple):
     reasons: list
 
 
-REASON_NOT_CONVERGED = ("unreachable: no candidate of the nominal closed form converged under the "
-                        "Newton polish on this arm's FK")
+REASON_NOT_CONVERGED = ("no solution found: no candidate of the nominal closed form converged under "
+                        "the Newton polish on this arm's FK (near a singular set of the nominal two "
+                        "solutions can share one candidate; derive.refine searches from other starts)")
 
 
 def _candidates(nom: Nominal, pn: np.ndarray, qr_n, given):
@@ -766,7 +767,11 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
         dropped[s:e] = (reached & ~ok).sum(1)
         for i in range(e - s):
             if counts[s + i] == 0:
-                reasons[s + i] = why[i] if why[i] and not reached[i].any() else REASON_NOT_CONVERGED
+                # the nominal's reason says why the nominal misses the pose; the arm itself is only
+                # known to be unreachable where no clipped candidate came near it either
+                reasons[s + i] = (why[i] if why[i] and not reached[i].any() and not np.isfinite(start[i]).any()
+                                  else (f"{why[i]} for the nominal robot, and no candidate converged on this arm"
+                                        if why[i] and not reached[i].any() else REASON_NOT_CONVERGED))
     return NearSolutions(q_all, counts, sing_all, res_all, it_all, dropped, reasons)
 
 
@@ -861,6 +866,10 @@ def ik_batch(robot, poses, q_ref=None, *, free=None, free_name=None) -> NearSolu
     ``free_name="q3"`` for the SRS class, joint 7 for the Panda class)."""
     robot = load_robot(robot)
     nom = nominal(robot)
+    if nom is None:
+        raise DeriveError(f"{robot.name}: no nominal robot of a class with a closed form"
+                          + (f" (it has an exact class, {exact_class(robot)}: use derive.reference.ik)"
+                             if exact_class(robot) else ""))
     P, _ = as_pose_batch(poses)
     n = len(P)
     qr = None

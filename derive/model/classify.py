@@ -465,12 +465,16 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
     elif six_r and pieper:
         triples = "; ".join(f"axes {_axes(a)} {k}" for a, k in pieper)
         notes.append(f"Pieper's criterion holds ({triples}), so a closed-form IK exists, but "
-                     "dq-derive implements none for this structure: derive.refine solves the IK "
-                     "numerically")
+                     "dq-derive implements no special class for this structure: the numpy "
+                     "reference (derive.reference.ik) solves a 6R arm by the general 6R elimination "
+                     "(derive.ik.general6r, every solution; no generated kernels for it yet), "
+                     "derive.refine numerically")
     elif six_r:
         notes.append("no three consecutive axes are parallel or meet in one point (Pieper's "
-                     "criterion fails): no closed form, up to 16 solutions; derive.refine solves "
-                     "the IK numerically from several starts")
+                     "criterion fails): no special class, up to 16 solutions; the numpy reference "
+                     "(derive.reference.ik) solves a 6R arm by the general 6R elimination "
+                     "(derive.ik.general6r, every solution; no generated kernels for it yet), "
+                     "derive.refine numerically from several starts")
     elif chain.n == 7 and all(t == "revolute" for t in chain.types):
         notes.append("7R, redundant: no closed form in dq-derive for this chain unless it is of "
                      "the Franka Panda class (q7 given, derive.ik.panda), which derive.classify checks")
