@@ -788,8 +788,16 @@ def classify(robot):
     line = describe(robot)
     if not line:
         return c
-    stale = ("derive.refine", "no closed form", "implements none", "a calibrated arm")
+    # also the geometric SRS note's "free=psi": psi is defined on the exact class only
+    stale = ("derive.refine", "no closed form", "implements none", "a calibrated arm", "free=psi")
     notes = [n for n in c.notes if not any(k in n for k in stale)]
+    if c.cls == "SRS" and robot.dof == 7:
+        # the geometric SRS test (spherical shoulder and wrist) holds, the exact closed form does not
+        try:
+            srs.srs_geometry(robot)
+        except DeriveError as exc:
+            notes.append("the exact SRS closed form does not apply as described: "
+                         + str(exc).split(": ", 1)[-1])
     return dataclasses.replace(c, closed_form=True, notes=notes + [f"class: {c.cls}; {line}"])
 
 
@@ -846,12 +854,13 @@ def _given(robot, nom: Nominal, free, free_name, n: int):
     if free is None:
         raise InputError(f"free: {robot.name} has 7 joints (nominal class {exact_class(nom.robot)}): "
                          "give the value of the joint held, free=v with "
-                         + ("free_name='q3' (joint 3)" if kind == "srs" else "q7 (joint 7)"))
+                         + ("free_name='q3' (joint 3; dq-derive ik: --free V --free-joint 3)"
+                            if kind == "srs" else "q7 (joint 7; dq-derive ik: --free V)"))
     if kind == "srs":
         if free_name != "q3":
             raise InputError(f"free_name: {robot.name} is solved through its nominal SRS robot with joint "
-                             "3 given (free_name='q3'); the arm angle psi is defined on the exact "
-                             "class only")
+                             "3 given (free_name='q3'; dq-derive ik: --free V --free-joint 3); the "
+                             "arm angle psi is defined on the exact class only")
         joint = 2
     else:
         if free_name not in (None, "q7"):
