@@ -479,15 +479,21 @@ def _solve_related(robot, poses, q_ref):
     return wrap_angle(q * rel.signs), counts, singular, reasons
 
 
+def _is_ur(robot) -> bool:
+    """Whether the robot has the UR family's closed form in its own frames (:func:`ur_geometry`)."""
+    try:
+        ur_geometry(robot)
+        return True
+    except DeriveError:
+        return False
+
+
 def spherical_class(robot) -> SWGeometry | None:
     """The spherical-wrist geometry of a robot outside the UR family (whose own closed form
     comes first), or None."""
     robot = load_robot(robot)
-    try:
-        ur_geometry(robot)
+    if _is_ur(robot):
         return None
-    except DeriveError:
-        pass
     try:
         return sw_geometry(robot)
     except DeriveError:
@@ -498,13 +504,8 @@ def parallel3_class(robot) -> P3Geometry | None:
     """The three-parallel geometry of a robot (:mod:`derive.ik.parallel3`; the UR family and the
     spherical-wrist class come first), or None."""
     robot = load_robot(robot)
-    if spherical_class(robot) is not None:
+    if spherical_class(robot) is not None or _is_ur(robot):
         return None
-    try:
-        ur_geometry(robot)
-        return None
-    except DeriveError:
-        pass
     try:
         return parallel3.p3_geometry(robot)
     except DeriveError:

@@ -511,6 +511,43 @@ def _to_matrix(poses):
     return m
 
 
+def _pencil_roots(pl, mats, degen):
+    """The 12 x 12 quadratic pencil M0 + x M1 + x^2 M2 of each pose solved as a 24 x 24 companion
+    eigenproblem (Manocha and Canny 1994, section 4): for each pose the first offset of the
+    eigen-variable (``pl.d3``, the Moebius substitution) whose leading matrix M2 is well
+    conditioned (1-norm condition below GOOD_COND), else the best tried. Returns (the offset per
+    pose (n,), the pencil (n, 3, 12, 12), eigenvalues (n, 24), which are real (n, 24), the
+    degenerate flags with poses whose best leading matrix is still past LEADING_COND added)."""
+    n = len(mats)
+    best_cond = np.full(n, np.inf)
+    best = np.zeros(n, dtype=int)
+    lead_inv = np.zeros((n, 12, 12))
+    mk = np.zeros((n, 3, 12, 12))
+    todo = np.arange(n)
+    for k, d3 in enumerate(pl.d3):
+        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])   # M0, M1, M2
+        lead = cand[:, 2]
+        inv = _inv_safe(lead)
+        with np.errstate(all="ignore"):
+            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
+        cond = np.where(np.isfinite(cond), cond, np.inf)
+        better = cond < best_cond[todo]
+        idx = todo[better]
+        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        todo = todo[~(best_cond[todo] < GOOD_COND)]
+        if len(todo) == 0:
+            break
+    degen = degen | ~(best_cond < LEADING_COND)
+    comp = np.zeros((n, 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
+    comp = np.where(np.isfinite(comp), comp, 0.0)
+    lam = np.linalg.eigvals(comp)                            # (n, 24)
+    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    return pl.d3[best], mk, lam, real, degen
+
+
 def _solve_chunk(robot, pl: Plan, poses):
     n = poses.shape[0]
     target = _to_matrix(poses)
@@ -540,33 +577,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     pa[:, :, 2, 8] -= r0
     # the offset of q3: the first whose leading matrix is well conditioned, else the best of
     # those tried (the Moebius substitution against a singular leading matrix)
-    best_cond = np.full(n, np.inf)
-    best = np.zeros(n, dtype=int)
-    lead_inv = np.zeros((n, 12, 12))
-    mk = np.zeros((n, 3, 12, 12))
-    todo = np.arange(n)
-    for k, d3 in enumerate(pl.d3):
-        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])   # M0, M1, M2
-        lead = cand[:, 2]
-        inv = _inv_safe(lead)
-        with np.errstate(all="ignore"):
-            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
-        cond = np.where(np.isfinite(cond), cond, np.inf)
-        better = cond < best_cond[todo]
-        idx = todo[better]
-        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
-        todo = todo[~(best_cond[todo] < GOOD_COND)]
-        if len(todo) == 0:
-            break
-    degen |= ~(best_cond < LEADING_COND)
-    d3 = pl.d3[best]
-    comp = np.zeros((n, 24, 24))
-    comp[:, :12, 12:] = np.eye(12)
-    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
-    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
-    comp = np.where(np.isfinite(comp), comp, 0.0)
-    lam = np.linalg.eigvals(comp)                            # (n, 24)
-    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
     # candidates: (pose, eigenvalue)
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
@@ -834,33 +845,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
     sig = (ten.reshape(n, 6, 3, 9) @ _t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
     mats = _twelve(sig)
-    best_cond = np.full(n, np.inf)
-    best = np.zeros(n, dtype=int)
-    lead_inv = np.zeros((n, 12, 12))
-    mk = np.zeros((n, 3, 12, 12))
-    todo = np.arange(n)
-    for k, d3 in enumerate(pl.d3):
-        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])
-        lead = cand[:, 2]
-        inv = _inv_safe(lead)
-        with np.errstate(all="ignore"):
-            cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
-        cond = np.where(np.isfinite(cond), cond, np.inf)
-        better = cond < best_cond[todo]
-        idx = todo[better]
-        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
-        todo = todo[~(best_cond[todo] < GOOD_COND)]
-        if len(todo) == 0:
-            break
-    degen |= ~(best_cond < LEADING_COND)
-    d3 = pl.d3[best]
-    comp = np.zeros((n, 24, 24))
-    comp[:, :12, 12:] = np.eye(12)
-    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
-    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
-    comp = np.where(np.isfinite(comp), comp, 0.0)
-    lam = np.linalg.eigvals(comp)
-    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
     v = _monomial_vectors(mk, ip, x3)
