@@ -104,7 +104,7 @@ def ik_program(robot, free: str | None = None) -> IKProgram:
     choice (:func:`derive.ik.redundant.free_choice`: "q3" instead of psi for the SRS class)."""
     robot = load_robot(robot)
     free = free_choice(robot, free)
-    return memo("ik-program", (robot.id, robot.limits_id, free), lambda: _ik_program(robot, free))
+    return memo("ik-program", (robot.id, free), lambda: _ik_program(robot, free))
 
 
 def _ik_program(robot, free) -> IKProgram:
