@@ -32,8 +32,9 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError, InputError, as_finite_array
-from derive.ik import closed_form, panda, redundant, select, spherical, srs
+from derive.ik import closed_form, panda, redundant, spherical, srs
 from derive.ik.closed_form import IKSolutions
+from derive.ik.finish import select_one
 from derive.ik.tolerances import (
            MERGE_TOL,
            HOMOTOPY_FROM,
@@ -903,17 +904,10 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
     k = int(r.counts[0])
     sols, sing, res, its = r.q[0, :k], r.singular[0, :k], r.residual[0, :k], r.iterations[0, :k]
     reason = r.reasons[0]
-    if within_limits:
-        qq, cnt, idx, sg = select.within_limits(sols[None], np.array([k]), robot.limits, robot.revolute,
-                                                branch=np.arange(k)[None], singular=sing[None])
-        rows = idx[0, :cnt[0]]
-        sols, sing, res, its = qq[0, :cnt[0]], sg[0, :cnt[0]], res[rows], its[rows]
-        if len(sols) == 0 and not reason:
-            reason = f"no solution inside the joint limits ({k} outside)"
-    if sort_by is not None and len(sols):
-        ref = as_finite_array(sort_by, "sort_by", last_dim=robot.dof)
-        order = select.sort_order(sols, ref, robot.revolute, windings=within_limits)
-        sols, sing, res, its = sols[order], sing[order], res[order], its[order]
+    # the selection passes of every class (finish.select_one); each row's index rides along as
+    # its branch, so residuals and Newton steps follow their rows (windings repeat them)
+    sols, sing, rows, reason = select_one(robot, sols, sing, np.arange(k), reason, within_limits, sort_by)
+    res, its = res[rows], its[rows]
     nom = nominal(robot)
     note = (f"nominal {nom.robot.name} ({nominal_class(robot)}, deviation {nom.deviation:.2g} m / rad), "
             f"closed form + Newton polish: {k} solution(s)"
