@@ -29,7 +29,7 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   monomials), the 14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the
   same SVD), the remaining rotation q6.
 * Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
-  Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`ACCEPT` m and
+  Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`G6_ACCEPT` m and
   rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
 
 A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
@@ -53,31 +53,13 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import find_artifact, memo, step, store_artifacts, task
 from derive.errors import BudgetError, DeriveError
-from derive.ik.tolerances import MERGE_TOL
+from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
+                                  G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 
-#: A returned solution's FK misses the pose by at most this (m and rad), on derive's exact FK.
-ACCEPT = 1e-10
-#: An eigenvalue x3 counts as real when |Im x3| / (1 + |x3|^2) is below this (the distance of
-#: exp(i q3) from the unit circle, to first order); the candidate is kept only when Newton
-#: polish brings it onto the pose. Generous, so that a double root split by rounding (about the
-#: square root of rounding, 1e-8) is never lost.
-REAL_TOL = 1e-3
-#: Newton iterations at most per candidate (most need one or two).
-NEWTON_MAX = 30
-#: A solution is singular (flag) when the Jacobian's smallest singular value over its largest is
-#: below this.
-SINGULAR_TOL = 1e-8
-#: The leading matrix of the pencil is too ill-conditioned (flag "degenerate") beyond this
-#: 1-norm condition number for every offset tried.
-LEADING_COND = 1e12
-#: A leading matrix this well conditioned is taken without trying the other offsets of q3.
-GOOD_COND = 1e6
-#: Relative singular value below which Q (14 x 8) or the pencil is rank-deficient.
-RANK_TOL = 1e-9
 
 #: Version of the derivation's stored form (the artifact is remade when it changes).
 FORMAT = 1
@@ -401,7 +383,7 @@ def _check_generic(robot, cc, elim):
     pm = _pose_monomials(lp, elim.monomials)
     qm = np.einsum("ekm,nm->nek", elim.q, pm)
     sv = np.linalg.svd(qm, compute_uv=False)
-    rank = int(np.max(np.sum(sv > RANK_TOL * sv[:, :1], axis=1)))
+    rank = int(np.max(np.sum(sv > G6_RANK_TOL * sv[:, :1], axis=1)))
     if rank < 2:
         return False, f"rank Q = {rank}, unusable"
     # the equations must hold at the true configuration and the pencil must be regular
@@ -426,7 +408,7 @@ def _check_generic(robot, cc, elim):
     m12 = _twelve(sig @ _t45(0.3, -0.7))
     sv12 = np.linalg.svd(m12, compute_uv=False)
     worst = float(np.min(sv12[:, -1] / sv12[:, 0]))
-    if worst < RANK_TOL:
+    if worst < G6_RANK_TOL:
         return False, f"rank Q = {rank}, the 12 x 12 pencil is singular for every q3 (smallest relative singular value {worst:.1e})"
     return True, f"rank Q = {rank}, pencil regular (smallest relative singular value {worst:.1e} at random q3)"
 
@@ -515,9 +497,9 @@ def _pencil_roots(pl, mats, degen):
     """The 12 x 12 quadratic pencil M0 + x M1 + x^2 M2 of each pose solved as a 24 x 24 companion
     eigenproblem (Manocha and Canny 1994, section 4): for each pose the first offset of the
     eigen-variable (``pl.d3``, the Moebius substitution) whose leading matrix M2 is well
-    conditioned (1-norm condition below GOOD_COND), else the best tried. Returns (the offset per
+    conditioned (1-norm condition below G6_GOOD_COND), else the best tried. Returns (the offset per
     pose (n,), the pencil (n, 3, 12, 12), eigenvalues (n, 24), which are real (n, 24), the
-    degenerate flags with poses whose best leading matrix is still past LEADING_COND added)."""
+    degenerate flags with poses whose best leading matrix is still past G6_LEADING_COND added)."""
     n = len(mats)
     best_cond = np.full(n, np.inf)
     best = np.zeros(n, dtype=int)
@@ -534,17 +516,17 @@ def _pencil_roots(pl, mats, degen):
         better = cond < best_cond[todo]
         idx = todo[better]
         best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
-        todo = todo[~(best_cond[todo] < GOOD_COND)]
+        todo = todo[~(best_cond[todo] < G6_GOOD_COND)]
         if len(todo) == 0:
             break
-    degen = degen | ~(best_cond < LEADING_COND)
+    degen = degen | ~(best_cond < G6_LEADING_COND)
     comp = np.zeros((n, 24, 24))
     comp[:, :12, 12:] = np.eye(12)
     comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
     comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
     comp = np.where(np.isfinite(comp), comp, 0.0)
     lam = np.linalg.eigvals(comp)                            # (n, 24)
-    real = np.abs(lam.imag) < REAL_TOL * (1 + np.abs(lam) ** 2)
+    real = np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)
     return pl.d3[best], mk, lam, real, degen
 
 
@@ -566,7 +548,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     qq, rr = np.linalg.qr(qm, mode="complete")               # (n, 14, 14), (n, 14, 8)
     diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
     rank = pl.rank_q
-    degen = diag.min(axis=1) < RANK_TOL * diag.max(axis=1) if rank == 8 else np.zeros(n, dtype=bool)
+    degen = diag.min(axis=1) < G6_RANK_TOL * diag.max(axis=1) if rank == 8 else np.zeros(n, dtype=bool)
     null = pl.mix @ np.swapaxes(qq[:, :, rank:], 1, 2)       # (n, 6, 14)
     t45 = _t45(pl.offsets[0], pl.offsets[1])
     pt = np.broadcast_to(el.pl @ t45, (n, 14, 3, 9)).copy()  # P (1 + x4^2)(1 + x5^2) in x4^i x5^j
@@ -598,7 +580,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     rhs = np.einsum("mej,mj->me", p3, x1)
     y = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
     r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
     x2 = _solve_safe(r8, y)
     q1 = np.arctan2(x2[:, 2], x2[:, 5])
@@ -800,7 +782,7 @@ def _check_cut(c, e):
         sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
         sv = np.linalg.svd(_twelve(sig @ _t45(0.3, -0.7)), compute_uv=False)
         worst = float(np.min(sv[:, -1] / sv[:, 0]))
-        if not worst > RANK_TOL:
+        if not worst > G6_RANK_TOL:
             continue
         # prefer the eigen-variable whose real roots are simple: a root shared by two solutions
         # (the same q of this joint) needs the slower multiple-root path
@@ -814,7 +796,7 @@ def _check_cut(c, e):
         lam = np.linalg.eigvals(np.where(np.isfinite(comp), comp, 0.0))
         shared = 0
         for row in lam:
-            xr = np.sort(row[np.abs(row.imag) < REAL_TOL * (1 + np.abs(row) ** 2)].real)
+            xr = np.sort(row[np.abs(row.imag) < G6_REAL_TOL * (1 + np.abs(row) ** 2)].real)
             shared += int(np.sum(np.abs(np.diff(xr)) <= CLUSTER_TOL * (1 + np.abs(xr[1:]))))
         if best is None or (shared, -worst) < (best[2], -best[1]):
             best = (ev, worst, shared)
@@ -837,7 +819,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     qx = x[:, :, :8]
     qq, rr = np.linalg.qr(qx, mode="complete")
     diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
-    degen = diag.min(axis=1) < RANK_TOL * diag.max(axis=1)
+    degen = diag.min(axis=1) < G6_RANK_TOL * diag.max(axis=1)
     null = np.swapaxes(qq[:, :, 8:], 1, 2)
     yy = np.broadcast_to(y, (n, 14, 27)).copy()
     yy[:, :, 26] -= x[:, :, 8]
@@ -862,7 +844,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     rhs = np.einsum("mek,mk->me", yy[ip], ym)
     yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
     r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
     x2 = _solve_safe(r8, yv)
     qc = np.zeros((len(ip), 6))
@@ -902,10 +884,10 @@ def _errors(c, q, target):
 
 def _newton(c, q, target, steps=None):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
-    error (scaled lengths and rad) is below 1e-13 or NEWTON_MAX steps are done."""
+    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done."""
     q = q.copy()
     idx = np.arange(len(q))
-    for _ in range(NEWTON_MAX):
+    for _ in range(G6_NEWTON_MAX):
         err, jac = _errors(c, q[idx], target[idx])
         todo = np.max(np.abs(err), axis=1) > 1e-13
         idx, err, jac = idx[todo], err[todo], jac[todo]
@@ -931,7 +913,7 @@ def _collect(robot, pl, poses, ip, qc, n, degen):
     if len(ip) == 0:
         return q, counts, sing, degen
     dpos, drot = _pose_error(fk(robot, qc), poses[ip])
-    ok = (dpos < ACCEPT) & (drot < ACCEPT) & np.all(np.isfinite(qc), axis=1)
+    ok = (dpos < G6_ACCEPT) & (drot < G6_ACCEPT) & np.all(np.isfinite(qc), axis=1)
     ip, qc = ip[ok], qc[ok]
     if len(ip) == 0:
         return q, counts, sing, degen
@@ -942,7 +924,7 @@ def _collect(robot, pl, poses, ip, qc, n, degen):
     jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
     jac = jac.transpose(0, 2, 1)
     ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)     # squared singular values, ascending
-    is_sing = ev[:, 0] < SINGULAR_TOL ** 2 * ev[:, -1]
+    is_sing = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
     order = np.lexsort((qc[:, 0], ip))
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
     # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint

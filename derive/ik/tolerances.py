@@ -156,3 +156,25 @@ HOMOTOPY_STEPS = 4
 #: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
 #: pose (dimensionless; the comparison is in m and rad, max of the two).
 SEED_REACH = 4.0
+
+# --- General 6R (derive.ik.general6r): the Raghavan-Roth / Manocha-Canny elimination.
+
+#: A returned solution's FK misses the pose by at most this (m and rad), on derive's exact FK.
+G6_ACCEPT = 1e-10
+#: An eigenvalue x3 counts as real when |Im x3| / (1 + |x3|^2) is below this (the distance of
+#: exp(i q3) from the unit circle, to first order); the candidate is kept only when Newton
+#: polish brings it onto the pose. Generous, so that a double root split by rounding (about the
+#: square root of rounding, 1e-8) is never lost.
+G6_REAL_TOL = 1e-3
+#: Newton iterations at most per candidate (most need one or two).
+G6_NEWTON_MAX = 30
+#: A solution is singular (flag) when the Jacobian's smallest singular value over its largest is
+#: below this.
+G6_SINGULAR = 1e-8
+#: The leading matrix of the pencil is too ill-conditioned (flag "degenerate") beyond this
+#: 1-norm condition number for every offset tried.
+G6_LEADING_COND = 1e12
+#: A leading matrix this well conditioned is taken without trying the other offsets of q3.
+G6_GOOD_COND = 1e6
+#: Relative singular value below which Q (14 x 8) or the pencil is rank-deficient.
+G6_RANK_TOL = 1e-9
