@@ -128,17 +128,21 @@ def _rz(t):
 
 def _chain_frames(c, q):
     """The frames A_i = C1 Rz(q1) ... C_i (i = 1..6, before joint i's rotation) and the end
-    pose, for q (m, 6): (frames (m, 6, 4, 4), end (m, 4, 4))."""
+    pose, for q (m, 6): (frames (m, 6, 4, 4), end (m, 4, 4)). A right factor Rz(q) mixes only
+    the first two columns (done as such); a constant C_i is one matrix product of all rows."""
     m = q.shape[0]
+    cq, sq = np.cos(q), np.sin(q)
+    frames = np.empty((m, 6, 4, 4))
     a = np.broadcast_to(c[0], (m, 4, 4)).copy()
-    rz = _rz(q)
-    frames = []
     for i in range(6):
         if i:
-            a = a @ c[i]
-        frames.append(a)
-        a = a @ rz[:, i]
-    return np.stack(frames, 1), a @ c[6]
+            a = (a.reshape(4 * m, 4) @ c[i]).reshape(m, 4, 4)
+        frames[:, i] = a
+        a0, a1 = a[:, :, 0].copy(), a[:, :, 1]
+        ci, si = cq[:, i, None], sq[:, i, None]
+        a[:, :, 0] = ci * a0 + si * a1
+        a[:, :, 1] = ci * a1 - si * a0
+    return frames, (a.reshape(4 * m, 4) @ c[6]).reshape(m, 4, 4)
 
 
 # --------------------------------------------------------------------------- #
@@ -589,11 +593,11 @@ def _solve_chunk(robot, pl: Plan, poses):
     frames, _ = _chain_frames(c, qc)
     r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
     qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc = _newton(c, qc, target[ip])
+    qc, err = _newton(c, qc, target[ip], with_error=True)
     if pl.reverse:
         qc = -qc[:, ::-1]
     qc = wrap_angle(qc)
-    return _collect(robot, pl, poses, ip, qc, n, degen)
+    return _collect(robot, pl, poses, ip, qc, n, degen, err)
 
 
 #: Rows of the 12 monomials x4^i x5^j (index 3 i + j) and their shifts by x4 and by x5.
@@ -860,8 +864,8 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
         after = c[j - 1] @ rz[:, j - 1] @ after
     rel = np.linalg.inv(frames[:, e - 1]) @ target[ip] @ np.linalg.inv(after)
     qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
-    qc = wrap_angle(_newton(c, qc, target[ip]))
-    return _collect(robot, pl, poses, ip, qc, n, degen)
+    qc, err = _newton(c, qc, target[ip], with_error=True)
+    return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err)
 
 
 def _errors(c, q, target):
@@ -882,16 +886,21 @@ def _errors(c, q, target):
     return err, jac
 
 
-def _newton(c, q, target, steps=None):
+def _newton(c, q, target, steps=None, with_error=False):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
-    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done."""
+    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done. With
+    ``with_error``, also the last error measured per candidate (max of scaled position and
+    rotation; inf where never measured below the loop's end)."""
     q = q.copy()
+    last = np.full(len(q), np.inf)
     idx = np.arange(len(q))
-    for _ in range(G6_NEWTON_MAX):
+    for k in range(G6_NEWTON_MAX + 1):
         err, jac = _errors(c, q[idx], target[idx])
-        todo = np.max(np.abs(err), axis=1) > 1e-13
+        size = np.max(np.abs(err), axis=1)
+        last[idx] = size
+        todo = size > 1e-13
         idx, err, jac = idx[todo], err[todo], jac[todo]
-        if len(idx) == 0:
+        if len(idx) == 0 or k == G6_NEWTON_MAX:
             break
         jt = np.swapaxes(jac, 1, 2)
         a = jt @ jac
@@ -902,14 +911,20 @@ def _newton(c, q, target, steps=None):
         dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
         new = q[idx] + dq_
         q[idx] = np.where(np.isfinite(new), new, q[idx])
-    return q
+    return (q, last) if with_error else q
 
 
-def _collect(robot, pl, poses, ip, qc, n, degen):
-    """Check every candidate on derive's exact FK, merge duplicates, pad."""
+def _collect(robot, pl, poses, ip, qc, n, degen, err=None):
+    """Check every candidate on derive's exact FK, merge duplicates, pad. ``err``: the
+    product-form error Newton left (scaled lengths and rad); a candidate whose error is surely
+    past G6_ACCEPT (1e-9 in metres and rad, 10 times the acceptance) is dropped before the exact
+    FK (the two FKs agree to rounding)."""
     q = np.full((n, MAX_SOLUTIONS, 6), np.nan)
     counts = np.zeros(n, dtype=np.int64)
     sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
+    if err is not None:
+        near = err <= 10 * G6_ACCEPT * max(1.0, 1.0 / pl.scale)
+        ip, qc = ip[near], qc[near]
     if len(ip) == 0:
         return q, counts, sing, degen
     dpos, drot = _pose_error(fk(robot, qc), poses[ip])
@@ -927,15 +942,16 @@ def _collect(robot, pl, poses, ip, qc, n, degen):
     is_sing = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
     order = np.lexsort((qc[:, 0], ip))
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
-    # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint
-    starts = np.searchsorted(ip, ip)
-    rank = np.arange(len(ip)) - starts
-    width = int(rank.max()) + 1
-    grid = np.full((n, width, 6), np.nan)
-    grid[ip, rank] = qc
-    diff = np.abs(wrap_angle(grid[:, :, None, :] - grid[:, None, :, :]))
-    close = np.all(diff < MERGE_TOL, axis=-1) & np.tril(np.ones((width, width), dtype=bool), -1)
-    dup = np.any(close, axis=-1)[ip, rank]
+    # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
+    # pairs (j, j + d) of one pose, d = 1, 2, ...)
+    dup = np.zeros(len(ip), dtype=bool)
+    for d in range(1, len(ip)):
+        same = ip[d:] == ip[:-d]
+        if not np.any(same):
+            break
+        j = np.nonzero(same)[0]
+        close = np.all(np.abs(wrap_angle(qc[j + d] - qc[j])) < MERGE_TOL, axis=1)
+        dup[j[close] + d] = True
     ip, qc, is_sing = ip[~dup], qc[~dup], is_sing[~dup]
     starts = np.searchsorted(ip, ip)
     rank = np.arange(len(ip)) - starts
