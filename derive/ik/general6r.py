@@ -42,6 +42,7 @@ Fanuc CRX-10iA, whose standard pencil has rank 10 for every q3); when all degene
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from dataclasses import dataclass
@@ -281,6 +282,16 @@ class Plan:
     d3: np.ndarray          # (K,) candidate offsets of q3
     notes: tuple
     cut: dict | None = None  # the loop cut at another joint (see _check_cut), or None
+    #: (len(d3), 24, k): per offset of the eigen-variable, an orthonormal basis of the complement
+    #: of the pencil's pose-independent eigenvectors (the roots every pose shares: x = +-i, the
+    #: spurious factor (1 + x^2)^4 of det M, and for a cut the constant real roots of its
+    #: special geometry); None: no deflation (see :func:`_deflation`).
+    deflate: np.ndarray | None = None
+    #: The number of columns of ``deflate`` that span the complement (24 less the removed roots).
+    deflate_keep: int = 24
+    #: The eigen-variable's pose-independent real roots (rad, in the joint's own angle), removed
+    #: by the deflation; a pose whose own root falls on one gets the null-space search there.
+    spurious: tuple = ()
 
 
 def _seeded(robot_id: str) -> np.random.Generator:
@@ -360,9 +371,9 @@ def _plan_from(robot, c, scale, data):
         rng = _seeded(robot.id)
         offsets = rng.uniform(-np.pi, np.pi, 3)
         empty = Elimination(pl=np.zeros((14, 3, 9)), r0=np.zeros((14, 0)), q=np.zeros((14, 8, 0)), monomials=())
-        return Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8, mix=np.eye(6),
-                    offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]), notes=tuple(data["notes"]),
-                    cut=data["cut"])
+        return _with_deflation(Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8,
+                                    mix=np.eye(6), offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]),
+                                    notes=tuple(data["notes"]), cut=data["cut"]))
     elim = Elimination(pl=np.array(data["pl"]), r0=np.array(data["r0"]).reshape(14, -1),
                        q=np.array(data["q"]).reshape(14, 8, -1),
                        monomials=tuple(tuple(m) for m in data["monomials"]))
@@ -371,8 +382,101 @@ def _plan_from(robot, c, scale, data):
     mix = np.linalg.qr(rng.standard_normal((14 - rank_q, 6)))[0].T if rank_q < 8 else np.eye(6)
     offsets = rng.uniform(-np.pi, np.pi, 3)
     d3 = offsets[2] + np.array([0.0, 2.0, 4.0])
-    return Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
-                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None)
+    return _with_deflation(Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
+                                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None))
+
+
+def _with_deflation(pl: Plan) -> Plan:
+    """The plan with its deflation (:func:`_deflation`), or unchanged when there is none."""
+    found = _deflation(pl)
+    if found is None:
+        return pl
+    basis, keep, spurious = found
+    return dataclasses.replace(pl, deflate=basis, deflate_keep=keep, spurious=spurious)
+
+
+def _pencil_samples(pl: Plan, m: int = 4, seed: int = 17):
+    """The pencil's coefficients (m, 3, 12, 12) at m random configurations' poses."""
+    q = np.random.default_rng(seed).uniform(-np.pi, np.pi, (m, 6))
+    _, target = _chain_frames(pl.c, q)
+    return _cut_front(pl, target)[-1] if pl.cut else _standard_front(pl, target)[5]
+
+
+def _constant_null(ms):
+    """The common null space (12, k) of the matrices ms (m, 12, 12) when every one has the same
+    null space (to rounding), else None."""
+    u, sv, vh = np.linalg.svd(ms)
+    k = np.sum(sv < 1e-10 * sv[:, :1], axis=1)
+    if k.min() == 0 or k.min() != k.max():
+        return None
+    k = int(k[0])
+    bases = np.concatenate([vh[i, -k:].conj().T for i in range(len(ms))], axis=1)
+    s2 = np.linalg.svd(bases, compute_uv=False)
+    if np.sum(s2 > 1e-8 * s2[0]) != k:
+        return None
+    return vh[0, -k:].conj().T
+
+
+def _deflation(pl: Plan):
+    """The pencil's pose-independent eigenvectors, removed before the eigenvalues are taken.
+
+    det M(x) has the factor (1 + x^2)^4 for every pose (x = +-i: (s, c) of the eigen-variable
+    with s^2 + c^2 = 0); a loop cut of a special arm can add real roots that every pose shares
+    (the CRX's q3 = -pi/2 of the cut at joint 2, a 4-fold spurious root). When M's null space
+    there is the same for every pose (checked on random poses), the companion matrix C has the
+    invariant subspace V spanned by [u; x u] (u in that null space) for every pose, so in an
+    orthonormal basis [W V] C is block triangular and the other eigenvalues are those of
+    W^T C W: 16 x 16 for a general arm instead of 24 x 24 (the eigen-solver's work falls by
+    (24/16)^3), and no spurious candidate. Returns (bases (len(d3), 24, 24) with W first, the
+    number of W's columns, the spurious real roots in rad), or None."""
+    mats = _pencil_samples(pl)
+    # real roots every sample shares (in the eigen-variable's angle)
+    d0 = pl.d3[0]
+    mk = np.einsum("ak,naij->nkij", _half(d0), mats)
+    comp = np.zeros((len(mats), 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    inv = _inv_safe(mk[:, 2])
+    comp[:, 12:, :12] = -inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -inv @ mk[:, 1]
+    if not np.all(np.isfinite(comp)):
+        return None
+    lam = np.linalg.eigvals(comp)
+    # roots every sample shares (x at the offset d0; x = +-i is known), one of each conjugate pair
+    common = []
+    for x in lam[0]:
+        if abs(abs(x.imag) - 1) < 1e-6 and abs(x.real) < 1e-6 or x.imag < -1e-9 * (1 + abs(x)):
+            continue
+        if all(np.min(np.abs(r - x)) < 1e-7 * (1 + abs(x)) for r in lam[1:]) and \
+                not any(abs(x - y) < 1e-7 * (1 + abs(x)) for y in common):
+            common.append(complex(x.real, x.imag) if abs(x.imag) > 1e-9 * (1 + abs(x)) else complex(x.real, 0))
+    cols = {k: [] for k in range(len(pl.d3))}
+    spurious = []
+    u = _constant_null(1j * mats[:, 0] + mats[:, 1])       # x = i: (s, c, 1) ~ (i, 1, 0)
+    if u is not None:
+        for k in range(len(pl.d3)):                         # [u; i u], real and imaginary parts
+            cols[k] += [np.concatenate([u.real, -u.imag]), np.concatenate([u.imag, u.real])]
+    for x in common:
+        u = _constant_null(mk[:, 0] + x * mk[:, 1] + x * x * mk[:, 2])
+        if u is None:
+            continue
+        t = d0 + 2 * np.arctan(x)                           # the eigen-variable's (complex) angle
+        if x.imag == 0:
+            spurious.append(float(wrap_angle(t.real)))
+        for k, d in enumerate(pl.d3):                       # [cos h u; sin h u], h = (t - d) / 2
+            h = 0.5 * (t - d)
+            w = np.concatenate([np.cos(h) * u, np.sin(h) * u])
+            cols[k] += [w.real] + ([w.imag] if x.imag != 0 else [])
+    if not cols[0]:
+        return None
+    bases = []
+    for k in range(len(pl.d3)):
+        v = np.concatenate(cols[k], axis=1)
+        qv, rv = np.linalg.qr(v, mode="complete")
+        r = v.shape[1]
+        if np.sum(np.abs(np.diag(rv[:r])) > 1e-8 * np.abs(rv).max()) != r:
+            return None
+        bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+    return np.array(bases), 24 - r, tuple(spurious)
 
 
 def _check_generic(robot, cc, elim):
@@ -529,15 +633,16 @@ def _pencil_roots(pl, mats, degen):
     comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
     comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
     comp = np.where(np.isfinite(comp), comp, 0.0)
-    lam = np.linalg.eigvals(comp)                            # (n, 24)
+    lam = _eigvals(pl, comp, best)                           # (n, 24), NaN-padded
     real = np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)
     return pl.d3[best], mk, lam, real, degen
 
 
-def _solve_chunk(robot, pl: Plan, poses):
-    n = poses.shape[0]
-    target = _to_matrix(poses)
-    target[:, :3, 3] /= pl.scale
+def _standard_front(pl: Plan, target):
+    """The pencil of each pose (target: (n, 4, 4) scaled matrices of the forward chain): (c,
+    target in the solved direction, the complete QR of Q, degenerate flags, the pencil's
+    coefficients of (s3, c3, 1) (n, 3, 12, 12), P with the pose terms (n, 14, 3, 9))."""
+    n = target.shape[0]
     c = _reverse(pl.c) if pl.reverse else pl.c
     if pl.reverse:
         target = np.linalg.inv(target)
@@ -561,6 +666,44 @@ def _solve_chunk(robot, pl: Plan, poses):
     mats = _twelve(sig)                                      # (n, 3, 12, 12)
     pa = np.broadcast_to(el.pl, (n, 14, 3, 9)).copy()
     pa[:, :, 2, 8] -= r0
+    return c, target, qq, rr, degen, mats, pa
+
+
+#: The deflation is used for a pose when the block it drops, W^T C V, is below this relative
+#: to C's largest entry (it is zero to rounding: the removed eigenvectors are the same for every
+#: pose); else that pose's 24 x 24 companion is solved whole.
+DEFLATE_LEAK = 1e-9
+
+
+def _eigvals(pl: Plan, comp, best):
+    """The eigenvalues of the companion matrices comp (n, 24, 24) (offset index best (n,)):
+    those of the deflated block W^T C W (:func:`_deflation`), NaN-padded to 24, where the
+    deflation holds; the whole matrix's elsewhere."""
+    n = len(comp)
+    if pl.deflate is None:
+        return np.linalg.eigvals(comp)
+    keep = pl.deflate_keep
+    lam = np.full((n, 24), np.nan + 0j)
+    whole = np.zeros(n, dtype=bool)
+    for k in np.unique(best):
+        idx = np.nonzero(best == k)[0]
+        b = pl.deflate[k]
+        t = np.swapaxes(b, 0, 1) @ comp[idx] @ b
+        leak = np.abs(t[:, :keep, keep:]).max(axis=(1, 2))
+        good = leak <= DEFLATE_LEAK * np.abs(comp[idx]).max(axis=(1, 2))
+        if np.any(good):
+            lam[idx[good], :keep] = np.linalg.eigvals(t[good, :keep, :keep])
+        whole[idx[~good]] = True
+    if np.any(whole):
+        lam[whole] = np.linalg.eigvals(comp[whole])
+    return lam
+
+
+def _solve_chunk(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c, target, qq, rr, degen, mats, pa = _standard_front(pl, target)
     # the offset of q3: the first whose leading matrix is well conditioned, else the best of
     # those tried (the Moebius substitution against a singular leading matrix)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
@@ -811,15 +954,15 @@ def _check_cut(c, e):
         {"e": e, "ev": best[0], "y": y.tolist()}
 
 
-def _solve_chunk_cut(robot, pl: Plan, poses):
-    n = poses.shape[0]
-    target = _to_matrix(poses)
-    target[:, :3, 3] /= pl.scale
-    c = pl.c
+def _cut_front(pl: Plan, target):
+    """The pencil of each pose for the loop cut (target: (n, 4, 4) scaled): (the pair's
+    coefficients (n, 14, 9), the complete QR of their Q, degenerate flags, the triple side with
+    the pose terms (n, 14, 27), the triple's joints in the pencil's order, the pencil's
+    coefficients (n, 3, 12, 12))."""
+    n = target.shape[0]
     e, ev = pl.cut["e"], pl.cut["ev"]
     y = np.array(pl.cut["y"])
-    triple, (f, h) = _cut_joints(e)
-    x = _pair_coefs(c, e, target)                           # (n, 14, 9)
+    x = _pair_coefs(pl.c, e, target)                        # (n, 14, 9)
     qx = x[:, :, :8]
     qq, rr = np.linalg.qr(qx, mode="complete")
     diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
@@ -830,7 +973,17 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     order = [ev] + [i for i in range(3) if i != ev]         # eigen joint, then the vector's two
     ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
     sig = (ten.reshape(n, 6, 3, 9) @ _t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
-    mats = _twelve(sig)
+    return x, qq, rr, degen, yy, order, _twelve(sig)
+
+
+def _solve_chunk_cut(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c = pl.c
+    e = pl.cut["e"]
+    triple, (f, h) = _cut_joints(e)
+    x, qq, rr, degen, yy, order, mats = _cut_front(pl, target)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
