@@ -615,7 +615,8 @@ def _pencil_roots(pl, mats, degen):
     mk = np.zeros((n, 3, 12, 12))
     todo = np.arange(n)
     for k, d3 in enumerate(pl.d3):
-        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])   # M0, M1, M2
+        sub = mats if len(todo) == n else mats[todo]
+        cand = (_half(d3).T @ sub.reshape(len(todo), 3, 144)).reshape(len(todo), 3, 12, 12)   # M0, M1, M2
         lead = cand[:, 2]
         inv = _inv_safe(lead)
         with np.errstate(all="ignore"):
@@ -623,7 +624,10 @@ def _pencil_roots(pl, mats, degen):
         cond = np.where(np.isfinite(cond), cond, np.inf)
         better = cond < best_cond[todo]
         idx = todo[better]
-        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        if len(idx) == n:
+            best[:], best_cond[:], lead_inv, mk = k, cond, inv, cand
+        else:
+            best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
         todo = todo[~(best_cond[todo] < G6_GOOD_COND)]
         if len(todo) == 0:
             break
@@ -632,7 +636,8 @@ def _pencil_roots(pl, mats, degen):
     comp[:, :12, 12:] = np.eye(12)
     comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
     comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
-    comp = np.where(np.isfinite(comp), comp, 0.0)
+    if not np.all(np.isfinite(comp)):
+        comp[~np.isfinite(comp)] = 0.0
     lam = _eigvals(pl, comp, best)                           # (n, 24), NaN-padded
     real = np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)
     return pl.d3[best], mk, lam, real, degen
@@ -688,7 +693,9 @@ def _eigvals(pl: Plan, comp, best):
     for k in np.unique(best):
         idx = np.nonzero(best == k)[0]
         b = pl.deflate[k]
-        t = np.swapaxes(b, 0, 1) @ comp[idx] @ b
+        m = len(idx)
+        cb = (comp[idx].reshape(24 * m, 24) @ b).reshape(m, 24, 24)           # C B
+        t = np.swapaxes((np.swapaxes(cb, 1, 2).reshape(24 * m, 24) @ b).reshape(m, 24, 24), 1, 2)   # B^T C B
         leak = np.abs(t[:, :keep, keep:]).max(axis=(1, 2))
         good = leak <= DEFLATE_LEAK * np.abs(comp[idx]).max(axis=(1, 2))
         if np.any(good):
@@ -725,7 +732,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     x1 = np.einsum("ma,mb->mab", np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
                    np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 9)
     rhs = np.einsum("mej,mj->me", p3, x1)
-    y = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    y = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
     r8 = rr[ip, :8]
     ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
@@ -999,7 +1006,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
     ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
     rhs = np.einsum("mek,mk->me", yy[ip], ym)
-    yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    yv = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
     r8 = rr[ip, :8]
     ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
@@ -1091,8 +1098,15 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None):
     axes = frames[:, :, :3, 2]
     jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
     jac = jac.transpose(0, 2, 1)
-    ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)     # squared singular values, ascending
-    is_sing = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
+    # sigma_min / sigma_max >= |det J| / |J|_F^6 (sigma_min >= |det J| / sigma_max^5 and
+    # sigma_max <= |J|_F): where that bound already clears G6_SINGULAR the Jacobian is regular;
+    # the others get the singular values (eigenvalues of J^T J)
+    with np.errstate(all="ignore"):
+        bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+    is_sing = ~(bound >= G6_SINGULAR)
+    if np.any(is_sing):
+        ev = np.linalg.eigvalsh(np.swapaxes(jac[is_sing], 1, 2) @ jac[is_sing])   # ascending
+        is_sing[is_sing] = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
     order = np.lexsort((qc[:, 0], ip))
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
     # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
