@@ -83,6 +83,16 @@ def _frame(axis, point):
     return f
 
 
+def _inv_rigid(t):
+    """Batched inverse of rigid transforms (..., 4, 4)."""
+    out = np.zeros_like(t)
+    rt = np.swapaxes(t[..., :3, :3], -1, -2)
+    out[..., :3, :3] = rt
+    out[..., :3, 3] = -(rt @ t[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
+
+
 def _inv(t):
     out = np.eye(4)
     out[:3, :3] = t[:3, :3].T
@@ -766,7 +776,8 @@ def _monomial_vectors(mk, ip, x3):
     monomial vectors in the null space V are found by the shift structure of the monomials
     (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
     (Stetter's eigenvector method)."""
-    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
+    powers = np.stack([np.ones_like(x3), x3, x3 * x3], 1)[:, None, :]            # (k, 1, 3)
+    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip]).reshape(len(ip), 12, 12)
     scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
     mx = mx / np.where(scale_m > 0, scale_m, 1.0)
     v = _null_vectors(mx + _NUDGE * np.eye(12))
@@ -1016,13 +1027,11 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
         qc[:, j - 1] = t
     qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
     qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
-    # joint e from the rest: Rz(q_e) = (C1 Rz1 .. C_e)^-1 T (C_{e+1} Rz_{e+1} .. C7)^-1
-    frames, _ = _chain_frames(c, qc)
-    after = np.broadcast_to(c[6], (len(ip), 4, 4))
-    rz = _rz(qc)
-    for j in range(6, e, -1):                               # joints 6 .. e+1
-        after = c[j - 1] @ rz[:, j - 1] @ after
-    rel = np.linalg.inv(frames[:, e - 1]) @ target[ip] @ np.linalg.inv(after)
+    # joint e from the rest: with q_e = 0 the chain is A_e B (A_e = C1 Rz1 .. C_e, B the rest),
+    # so Rz(q_e) = A_e^-1 T B^-1 = A_e^-1 T (A_e B)^-1 A_e
+    frames, end0 = _chain_frames(c, qc)
+    a_e = frames[:, e - 1]
+    rel = _inv_rigid(a_e) @ target[ip] @ _inv_rigid(end0) @ a_e
     qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
     qc, err = _newton(c, qc, target[ip], with_error=True)
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err)
