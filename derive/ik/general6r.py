@@ -55,7 +55,8 @@ from derive.algebra.angles import wrap_angle
 from derive.cache import find_artifact, memo, step, store_artifacts, task
 from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
-                                  G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+                                  G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
+                                  G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -599,8 +600,54 @@ def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
         e = min(n, s + chunk)
         q[s:e], counts[s:e], sing[s:e], degen[s:e] = (_solve_chunk_cut if pl.cut else _solve_chunk)(
             robot, pl, poses[s:e])
-    reason = ["" if k else "unreachable: no real root of the eliminant reproduces the pose" for k in counts]
+    todo = np.nonzero(degen)[0]
+    for s in range(0, len(todo), chunk):
+        t = todo[s:s + chunk]
+        q[t], counts[t], sing[t], degen[t] = _perturbed(robot, pl, poses[t], q[t], counts[t])
+    # a singular solution: the pose is on the singular set's image, where solutions can merge or
+    # form a continuum (then only points of it are returned): flagged
+    degen |= np.any(sing, axis=1)
+    reason = ["" if k else ("degenerate: the elimination degenerates at this pose and at the nearby poses "
+                            "tried; no solution found" if d else
+                            "unreachable: no real root of the eliminant reproduces the pose")
+              for k, d in zip(counts, degen)]
     return General6RSolutions(q=q, counts=counts, singular=sing, degenerate=degen, reason=reason)
+
+
+def _perturbed(robot, pl: Plan, poses, q0, counts0):
+    """The poses whose elimination degenerates (the pencil singular or Q rank-deficient at that
+    pose, though its solutions may be isolated and regular: e.g. axis-aligned configurations of
+    the CRX), solved again at G6_PERTURB_TRIALS nearby poses (each moved by a random twist of
+    G6_PERTURB rad and G6_PERTURB times the arm's size), whose solutions Newton carries back onto
+    the pose (a regular solution moves continuously with the pose). Returns (q, counts,
+    singular, degenerate) as :func:`_collect`; degenerate stays set where every nearby pose was
+    degenerate too or a solution found is singular (a continuum of solutions, or a multiple root:
+    some may be missing)."""
+    n = len(poses)
+    target = _to_matrix(poses)
+    rng = np.random.default_rng(20261205)
+    ips = [np.repeat(np.arange(n), counts0)]
+    qs = [q0[np.arange(MAX_SOLUTIONS)[None, :] < counts0[:, None]]]
+    every = np.ones(n, dtype=bool)
+    solver = _solve_chunk_cut if pl.cut else _solve_chunk
+    for _ in range(G6_PERTURB_TRIALS):
+        tw = rng.standard_normal((n, 6))
+        tw *= G6_PERTURB / np.linalg.norm(tw, axis=1, keepdims=True)
+        moved = target.copy()
+        ang = np.linalg.norm(tw[:, :3], axis=1)
+        rot = quat._to_matrix(quat._from_axis_angle(tw[:, :3] / np.maximum(ang, 1e-300)[:, None], ang))
+        moved[:, :3, :3] = target[:, :3, :3] @ rot
+        moved[:, :3, 3] += tw[:, 3:] * pl.scale
+        qp, cp, _, dp = solver(robot, pl, as_pose_batch(moved)[0])
+        every &= dp
+        ips.append(np.repeat(np.arange(n), cp))
+        qs.append(qp[np.arange(MAX_SOLUTIONS)[None, :] < cp[:, None]])
+    ip, qc = np.concatenate(ips), np.concatenate(qs)
+    scaled = target.copy()
+    scaled[:, :3, 3] /= pl.scale
+    qc, err = _newton(pl.c, qc, scaled[ip], with_error=True)
+    q, counts, sing, degen = _collect(robot, pl, poses, ip, wrap_angle(qc), n, every, err)
+    return q, counts, sing, degen | np.any(sing, axis=1)
 
 
 def _to_matrix(poses):
@@ -1112,10 +1159,14 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None):
     # the others get the singular values (eigenvalues of J^T J)
     with np.errstate(all="ignore"):
         bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
-    is_sing = ~(bound >= G6_SINGULAR)
+    is_sing = ~(bound >= G6_NEAR_SINGULAR)
+    near_sing = is_sing.copy()
     if np.any(is_sing):
         ev = np.linalg.eigvalsh(np.swapaxes(jac[is_sing], 1, 2) @ jac[is_sing])   # ascending
         is_sing[is_sing] = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
+        near_sing[near_sing] = ev[:, 0] < G6_NEAR_SINGULAR ** 2 * ev[:, -1]
+    # near the singular set (solutions merging: one of a merged pair can be lost): flagged
+    degen[ip[near_sing]] = True
     order = np.lexsort((qc[:, 0], ip))
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
     # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
