@@ -373,6 +373,29 @@ def _plan(robot, progress):
     return _plan_from(robot, c, scale, data)
 
 
+def describe(robot) -> str:
+    """Why and how the general 6R elimination solves a robot of no special class, for classify:
+    the formulation its cached derivation chose (forward or reversed chain, or the loop cut and
+    why), without deriving (a robot not derived yet says so)."""
+    robot = load_robot(robot)
+    head = ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
+            "applies, so derive.reference.ik solves it by the general 6R elimination "
+            "(derive.ik.general6r: Raghavan-Roth's 14 equations derived with sympy for this arm, "
+            "solved per pose as Manocha-Canny's eigenproblem in numpy; every solution, up to 16)")
+    found = find_artifact(robot.id, "general6r")
+    data = json.loads(found.read_text()) if found is not None else None
+    if data is None or data.get("format") != FORMAT:
+        return head + "; derived on first use (a few seconds, then cached)"
+    if data.get("cut"):
+        how = (f"its standard elimination degenerates ({'; '.join(data['notes'][:-1])}), so the loop is "
+               f"{data['notes'][-1]}")
+    else:
+        how = data["notes"][-1] if data.get("notes") else ""
+        how = ("solved as the reversed chain (the forward one degenerates): " if data["reverse"] else
+               "solved as the forward chain: ") + how.split(": ", 1)[-1]
+    return head + "; " + how
+
+
 def info_rank(info: str) -> int:
     return int(info.split("rank Q = ")[1].split(",")[0])
 
