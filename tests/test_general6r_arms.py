@@ -115,3 +115,32 @@ def test_crx_axis_aligned_configurations():
     # root of 1e-10); a few double roots with only regular solutions beside them are neither
     # (10 of 400 in benchmarks/bench_general6r_accuracy.py; 0.1 of the singular ones at most)
     assert len(unflagged) <= 0.1 * np.sum(~regular), unflagged
+
+
+@pytest.mark.parametrize("name", ["general-6r", "crx10ia"])
+def test_deflated_eigenvalues_are_the_companion_ones_without_the_spurious(name):
+    """The 16 x 16 block W^T C W (the plan's deflation) has the eigenvalues of the whole 24 x 24
+    companion matrix C less those every pose shares: +-i (4 each; 2 each for the CRX's cut) and,
+    for the CRX's cut, the 4-fold root at q3 = -pi/2; checked against numpy's eigenvalues of C
+    itself."""
+    pl = general6r.plan(name, progress=False)
+    assert pl.deflate is not None and pl.deflate_keep == 16
+    if name == "crx10ia":
+        assert len(pl.spurious) == 1 and abs(pl.spurious[0] + math.pi / 2) < 1e-9
+    q = np.random.default_rng(8).uniform(-math.pi, math.pi, (20, 6))
+    _, target = general6r._chain_frames(pl.c, q)
+    mats = general6r._cut_front(pl, target)[-1] if pl.cut else general6r._standard_front(pl, target)[5]
+    d3, mk, lam, real, degen = general6r._pencil_roots(pl, mats, np.zeros(20, dtype=bool))
+    for i in range(20):
+        comp = np.zeros((24, 24))
+        comp[:12, 12:] = np.eye(12)
+        inv = np.linalg.inv(mk[i, 2])
+        comp[12:, :12], comp[12:, 12:] = -inv @ mk[i, 0], -inv @ mk[i, 1]
+        full = np.linalg.eigvals(comp)
+        shared = [1j, -1j] + [np.tan((t - d3[i]) / 2) for t in pl.spurious]
+        near = np.array([min(abs(y - x) / (1 + abs(x)) for x in shared) < 1e-5 for y in full])
+        assert near.sum() == 8                       # (1 + x^2)^4, or (1 + x^2)^2 and a 4-fold root
+        got = lam[i][np.isfinite(lam[i])]
+        assert len(got) == 16 and not np.any([min(abs(y - x) for x in shared) < 1e-5 for y in got])
+        for x in full[~near]:          # each remaining eigenvalue is one of the deflated block's
+            assert np.min(np.abs(got - x)) < 1e-6 * (1 + abs(x)), (i, x)
