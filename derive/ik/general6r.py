@@ -24,13 +24,20 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   x4^i x5^j (i <= 3, j <= 2): ``M(x3) v = 0`` with M quadratic in x3 = tan((q3 - d3)/2), d3 a
   random offset chosen per pose from a few so that the leading matrix is best conditioned (the
   Moebius substitution of Manocha-Canny). det M has degree 24 (8 spurious roots at +-i).
-* ``M(x3) v = 0`` is the 24 x 24 companion eigenproblem ``[[0, I], [-M2^-1 M0, -M2^-1 M1]]``
-  (numpy.linalg.eig); real eigenvalues give q3, their eigenvectors q4 and q5 (ratios of the
-  monomials), the 14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the
-  same SVD), the remaining rotation q6.
+* ``M(x3) v = 0`` is the 24 x 24 companion eigenproblem ``C = [[0, I], [-M2^-1 M0, -M2^-1 M1]]``.
+  The roots every pose shares (x3 = +-i, the factor (1 + x3^2)^4 of det M, and a cut arm's
+  constant spurious roots) have the same eigenvectors for every pose, found once per robot
+  (:func:`_deflation`); in an orthonormal basis [W V] with V spanning them C is block
+  triangular, so numpy.linalg.eigvals of W^T C W (16 x 16) gives the other roots. Real
+  eigenvalues give q3, the null vectors of M(x3) q4 and q5 (ratios of the monomials), the
+  14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the same QR), the
+  remaining rotation q6.
 * Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
   Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`G6_ACCEPT` m and
   rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
+* A pose whose elimination degenerates (the leading matrix ill-conditioned for every offset, or
+  Q rank-deficient there) is solved at nearby poses and Newton carries their solutions back
+  (:func:`_perturbed`); a pose with a (near-)singular solution is flagged ``degenerate``.
 
 A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
 geometry) is tried in reverse order (the IK of T^-1 for the reversed chain, where q4 is the
@@ -637,6 +644,11 @@ def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
     return General6RSolutions(q=q, counts=counts, singular=sing, degenerate=degen, reason=reason)
 
 
+#: Unit twists (rotation vector, translation / size) to the nearby poses of a degenerate pose.
+_TWISTS = np.random.default_rng(20261205).standard_normal((8, 6))
+_TWISTS /= np.linalg.norm(_TWISTS, axis=1, keepdims=True)
+
+
 def _perturbed(robot, pl: Plan, poses, q0, counts0):
     """The poses whose elimination degenerates (the pencil singular or Q rank-deficient at that
     pose, though its solutions may be isolated and regular: e.g. axis-aligned configurations of
@@ -648,14 +660,13 @@ def _perturbed(robot, pl: Plan, poses, q0, counts0):
     some may be missing)."""
     n = len(poses)
     target = _to_matrix(poses)
-    rng = np.random.default_rng(20261205)
     ips = [np.repeat(np.arange(n), counts0)]
     qs = [q0[np.arange(MAX_SOLUTIONS)[None, :] < counts0[:, None]]]
     every = np.ones(n, dtype=bool)
     solver = _solve_chunk_cut if pl.cut else _solve_chunk
-    for _ in range(G6_PERTURB_TRIALS):
-        tw = rng.standard_normal((n, 6))
-        tw *= G6_PERTURB / np.linalg.norm(tw, axis=1, keepdims=True)
+    for k in range(G6_PERTURB_TRIALS):
+        # the same twists for every pose (a pose's result does not depend on its batch)
+        tw = np.broadcast_to(_TWISTS[k % len(_TWISTS)] * G6_PERTURB, (n, 6))
         moved = target.copy()
         ang = np.linalg.norm(tw[:, :3], axis=1)
         rot = quat._to_matrix(quat._from_axis_angle(tw[:, :3] / np.maximum(ang, 1e-300)[:, None], ang))
