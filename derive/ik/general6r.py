@@ -679,8 +679,8 @@ def _perturbed(robot, pl: Plan, poses, q0, counts0):
     ip, qc = np.concatenate(ips), np.concatenate(qs)
     scaled = target.copy()
     scaled[:, :3, 3] /= pl.scale
-    qc, err = _newton(pl.c, qc, scaled[ip], with_error=True)
-    q, counts, sing, degen = _collect(robot, pl, poses, ip, wrap_angle(qc), n, every, err)
+    qc, err, jac = _newton(pl.c, qc, scaled[ip], with_error=True)
+    q, counts, sing, degen = _collect(robot, pl, poses, ip, wrap_angle(qc), n, every, err, jac)
     return q, counts, sing, degen | np.any(sing, axis=1)
 
 
@@ -834,11 +834,12 @@ def _solve_chunk(robot, pl: Plan, poses):
     frames, _ = _chain_frames(c, qc)
     r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
     qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc, err = _newton(c, qc, target[ip], with_error=True)
+    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
     if pl.reverse:
         qc = -qc[:, ::-1]
+        jac = None                     # the reversed chain's Jacobian: the forward one is made again
     qc = wrap_angle(qc)
-    return _collect(robot, pl, poses, ip, qc, n, degen, err)
+    return _collect(robot, pl, poses, ip, qc, n, degen, err, jac)
 
 
 #: Rows of the 12 monomials x4^i x5^j (index 3 i + j) and their shifts by x4 and by x5.
@@ -1114,8 +1115,8 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     a_e = frames[:, e - 1]
     rel = _inv_rigid(a_e) @ target[ip] @ _inv_rigid(end0) @ a_e
     qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
-    qc, err = _newton(c, qc, target[ip], with_error=True)
-    return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err)
+    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
 def _errors(c, q, target):
@@ -1140,14 +1141,17 @@ def _newton(c, q, target, steps=None, with_error=False):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
     error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done. With
     ``with_error``, also the last error measured per candidate (max of scaled position and
-    rotation; inf where never measured below the loop's end)."""
+    rotation) and the Jacobian there (at the returned q: the loop measures before it steps)."""
     q = q.copy()
     last = np.full(len(q), np.inf)
+    last_jac = np.zeros((len(q), 6, 6))
     idx = np.arange(len(q))
     for k in range(G6_NEWTON_MAX + 1):
         err, jac = _errors(c, q[idx], target[idx])
         size = np.max(np.abs(err), axis=1)
         last[idx] = size
+        if with_error:
+            last_jac[idx] = jac
         todo = size > 1e-13
         idx, err, jac = idx[todo], err[todo], jac[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
@@ -1161,20 +1165,22 @@ def _newton(c, q, target, steps=None, with_error=False):
         dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
         new = q[idx] + dq_
         q[idx] = np.where(np.isfinite(new), new, q[idx])
-    return (q, last) if with_error else q
+    return (q, last, last_jac) if with_error else q
 
 
-def _collect(robot, pl, poses, ip, qc, n, degen, err=None):
+def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
     """Check every candidate on derive's exact FK, merge duplicates, pad. ``err``: the
     product-form error Newton left (scaled lengths and rad); a candidate whose error is surely
     past G6_ACCEPT (1e-9 in metres and rad, 10 times the acceptance) is dropped before the exact
-    FK (the two FKs agree to rounding)."""
+    FK (the two FKs agree to rounding). ``jac``: the forward chain's Jacobians (m, 6, 6) at qc
+    (Newton's last), else made here."""
     q = np.full((n, MAX_SOLUTIONS, 6), np.nan)
     counts = np.zeros(n, dtype=np.int64)
     sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
     if err is not None:
         near = err <= 10 * G6_ACCEPT * max(1.0, 1.0 / pl.scale)
         ip, qc = ip[near], qc[near]
+        jac = None if jac is None else jac[near]
     if len(ip) == 0:
         return q, counts, sing, degen
     dpos, drot = _pose_error(fk(robot, qc), poses[ip])
@@ -1183,11 +1189,13 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None):
     if len(ip) == 0:
         return q, counts, sing, degen
     # singular flag: the Jacobian's relative smallest singular value
-    c = pl.c
-    frames, end = _chain_frames(c, qc)
-    axes = frames[:, :, :3, 2]
-    jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
-    jac = jac.transpose(0, 2, 1)
+    if jac is None:
+        frames, end = _chain_frames(pl.c, qc)
+        axes = frames[:, :, :3, 2]
+        jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
+        jac = jac.transpose(0, 2, 1)
+    else:
+        jac = jac[ok]
     # sigma_min / sigma_max >= |det J| / |J|_F^6 (sigma_min >= |det J| / sigma_max^5 and
     # sigma_max <= |J|_F): where that bound already clears G6_SINGULAR the Jacobian is regular;
     # the others get the singular values (eigenvalues of J^T J)
