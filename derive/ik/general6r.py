@@ -723,13 +723,10 @@ def _pencil_roots(pl, mats, degen):
         if len(todo) == 0:
             break
     degen = degen | ~(best_cond < G6_LEADING_COND)
-    comp = np.zeros((n, 24, 24))
-    comp[:, :12, 12:] = np.eye(12)
-    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
-    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
-    if not np.all(np.isfinite(comp)):
-        comp[~np.isfinite(comp)] = 0.0
-    lam = _eigvals(pl, comp, best)                           # (n, 24), NaN-padded
+    lower = np.concatenate([-lead_inv @ mk[:, 0], -lead_inv @ mk[:, 1]], axis=2)   # C's lower rows
+    if not np.all(np.isfinite(lower)):
+        lower[~np.isfinite(lower)] = 0.0
+    lam = _eigvals(pl, lower, best)                          # (n, 24), NaN-padded
     real = np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)
     return pl.d3[best], mk, lam, real, degen
 
@@ -771,29 +768,40 @@ def _standard_front(pl: Plan, target):
 DEFLATE_LEAK = 1e-9
 
 
-def _eigvals(pl: Plan, comp, best):
-    """The eigenvalues of the companion matrices comp (n, 24, 24) (offset index best (n,)):
-    those of the deflated block W^T C W (:func:`_deflation`), NaN-padded to 24, where the
-    deflation holds; the whole matrix's elsewhere."""
-    n = len(comp)
+def _eigvals(pl: Plan, lower, best):
+    """The eigenvalues of the companion matrices C = [[0, I], lower] (lower (n, 12, 24), offset
+    index best (n,)): those of the deflated block W^T C W (:func:`_deflation`), NaN-padded to
+    24, where the deflation holds; the whole matrix's elsewhere. With [W V] = B = [B1; B2]
+    (rows 1-12 and 13-24), C B = [B2; lower B], so W^T C B = W1^T B2 + W2^T (lower B): no 24 x 24
+    product per pose."""
+    n = len(lower)
+
+    def whole_matrix(idx):
+        comp = np.zeros((len(idx), 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:] = lower[idx]
+        return comp
+
     if pl.deflate is None:
-        return np.linalg.eigvals(comp)
+        return np.linalg.eigvals(whole_matrix(np.arange(n)))
     keep = pl.deflate_keep
     lam = np.full((n, 24), np.nan + 0j)
     whole = np.zeros(n, dtype=bool)
     for k in np.unique(best):
         idx = np.nonzero(best == k)[0]
-        b = pl.deflate[k]
         m = len(idx)
-        cb = (comp[idx].reshape(24 * m, 24) @ b).reshape(m, 24, 24)           # C B
-        t = np.swapaxes((np.swapaxes(cb, 1, 2).reshape(24 * m, 24) @ b).reshape(m, 24, 24), 1, 2)   # B^T C B
-        leak = np.abs(t[:, :keep, keep:]).max(axis=(1, 2))
-        good = leak <= DEFLATE_LEAK * np.abs(comp[idx]).max(axis=(1, 2))
+        b = pl.deflate[k]
+        w1, w2 = b[:12, :keep], b[12:, :keep]
+        low = lower[idx]
+        cb = (low.reshape(12 * m, 24) @ b).reshape(m, 12, 24)                 # lower B
+        t = w1.T @ b[12:] + w2.T @ cb                                         # W^T C B (m, keep, 24)
+        leak = np.abs(t[:, :, keep:]).max(axis=(1, 2))                        # W^T C V
+        good = leak <= DEFLATE_LEAK * np.maximum(1.0, np.abs(low).max(axis=(1, 2)))
         if np.any(good):
-            lam[idx[good], :keep] = np.linalg.eigvals(t[good, :keep, :keep])
+            lam[idx[good], :keep] = np.linalg.eigvals(t[good, :, :keep])
         whole[idx[~good]] = True
     if np.any(whole):
-        lam[whole] = np.linalg.eigvals(comp[whole])
+        lam[whole] = np.linalg.eigvals(whole_matrix(np.nonzero(whole)[0]))
     return lam
 
 
