@@ -144,3 +144,22 @@ def test_deflated_eigenvalues_are_the_companion_ones_without_the_spurious(name):
         assert len(got) == 16 and not np.any([min(abs(y - x) for x in shared) < 1e-5 for y in got])
         for x in full[~near]:          # each remaining eigenvalue is one of the deflated block's
             assert np.min(np.abs(got - x)) < 1e-6 * (1 + abs(x)), (i, x)
+
+
+def test_crx_solution_sets_are_closed_under_its_pairing():
+    """The CRX-10iA's solutions come in pairs: (q1 + pi, -q2, -pi - q3, q4 + pi, q5, q6) reaches the
+    same pose as q (checked here on the matrix FK); so every set the solver returns holds the
+    partner of each of its solutions (a property of the arm, not of the elimination)."""
+    robot = derive.load_robot("crx10ia")
+
+    def partner(q):
+        return wrap_angle(np.stack([q[..., 0] + math.pi, -q[..., 1], -math.pi - q[..., 2],
+                                    q[..., 3] + math.pi, q[..., 4], q[..., 5]], -1))
+
+    q = _within_limits(robot, 100, seed=77)
+    assert np.abs(reference.fk_matrix(robot, q) - reference.fk_matrix(robot, partner(q))).max() < 1e-12
+    res = general6r.solve(robot, reference.fk(robot, q))
+    for i in range(len(q)):
+        sols = res.q[i, :res.counts[i]]
+        for s in sols:
+            assert _contains(sols, partner(s)), (i, s)
