@@ -637,6 +637,8 @@ def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
     # a singular solution: the pose is on the singular set's image, where solutions can merge or
     # form a continuum (then only points of it are returned): flagged
     degen |= np.any(sing, axis=1)
+    # off the singular set a 6R has an even number of solutions: an odd count lost or merged one
+    degen |= counts % 2 == 1
     reason = ["" if k else ("degenerate: the elimination degenerates at this pose and at the nearby poses "
                             "tried; no solution found" if d else
                             "unreachable: no real root of the eliminant reproduces the pose")
@@ -819,6 +821,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     # the null vector of M(x3) (the monomials x4^i x5^j) by one step of inverse iteration from a
     # fixed vector: M(x3) is singular to rounding, so its solution is the null vector
     v = _monomial_vectors(mk, ip, x3)
+    ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
@@ -857,6 +860,11 @@ _BASE5 = [3 * i + j for i in range(4) for j in range(2)]
 _SHIFT5 = [3 * i + j + 1 for i in range(4) for j in range(2)]
 #: Eigenvalues x3 of one pose closer than this (relative to 1 + |x3|) are one multiple root.
 CLUSTER_TOL = 1e-6
+#: Two eigenvalues of one pose closer than this (relative to 1 + |x3|), but apart by more than
+#: CLUSTER_TOL, are a near pair: two solutions with almost the same q3 (near a fold of the
+#: pose's solutions). Their null vectors are nearly parallel; extra candidates are made from
+#: the two-dimensional near-null space (:func:`_near_pair_candidates`).
+NEAR_PAIR_TOL = 1e-3
 
 
 def _monomial_vectors(mk, ip, x3):
@@ -905,6 +913,43 @@ def _monomial_vectors(mk, ip, x3):
         if np.all(np.isfinite(vecs)):
             v[members[:d]] = vecs.reshape(d, 4, 3)
     return v
+
+
+def _near_pair_candidates(mk, ip, x3, v):
+    """Extra candidates for near pairs of eigenvalues (:data:`NEAR_PAIR_TOL`): for the pair's
+    two members, the two monomial vectors in the span of M(x)'s two smallest right singular
+    vectors (x the pair's mean) found by the shift structure as in :func:`_monomial_vectors`,
+    each with each member's x3. They only add candidates (Newton and the FK check decide), so a
+    solution the single null vectors missed (the two nearly parallel) is found. Returns (ip,
+    x3, v) with the extra candidates appended."""
+    if len(ip) < 2:
+        return ip, x3, v
+    order = np.lexsort((x3, ip))
+    ips, xs = ip[order], x3[order]
+    gap = np.abs(xs[1:] - xs[:-1])
+    pair = (ips[1:] == ips[:-1]) & (gap > CLUSTER_TOL * (1 + np.abs(xs[1:]))) & \
+        (gap <= NEAR_PAIR_TOL * (1 + np.abs(xs[1:])))
+    k = np.nonzero(pair)[0]
+    if len(k) == 0:
+        return ip, x3, v
+    a, b = order[k], order[k + 1]
+    xm = 0.5 * (x3[a] + x3[b])
+    powers = np.stack([np.ones_like(xm), xm, xm * xm], 1)[:, None, :]
+    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip[a]]).reshape(len(a), 12, 12)
+    basis = np.swapaxes(np.linalg.svd(mx)[2][:, -2:], 1, 2)                 # (p, 12, 2)
+    with np.errstate(all="ignore"):
+        mult = (np.linalg.pinv(basis[:, _BASE4]) @ basis[:, _SHIFT4]
+                + 0.7071 * np.linalg.pinv(basis[:, _BASE5]) @ basis[:, _SHIFT5])
+        _, cvec = np.linalg.eig(mult)
+        vecs = np.swapaxes(basis @ cvec, 1, 2)                                # (p, 2, 12)
+        big = np.take_along_axis(vecs, np.argmax(np.abs(vecs), axis=2)[..., None], axis=2)
+        vecs = (vecs / np.where(big != 0, big, 1.0)).real
+    ok = np.all(np.isfinite(vecs), axis=(1, 2))
+    a, b, vecs = a[ok], b[ok], vecs[ok]
+    # each vector with each member's x3: 4 candidates per pair
+    idx = np.concatenate([a, a, b, b])
+    extra = np.concatenate([vecs[:, 0], vecs[:, 1], vecs[:, 0], vecs[:, 1]]).reshape(-1, 4, 3)
+    return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, extra])
 
 
 def _null_vectors(m):
@@ -1096,6 +1141,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
     v = _monomial_vectors(mk, ip, x3)
+    ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
