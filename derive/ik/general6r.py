@@ -864,7 +864,7 @@ CLUSTER_TOL = 1e-6
 #: CLUSTER_TOL, are a near pair: two solutions with almost the same q3 (near a fold of the
 #: pose's solutions). Their null vectors are nearly parallel; extra candidates are made from
 #: the two-dimensional near-null space (:func:`_near_pair_candidates`).
-NEAR_PAIR_TOL = 1e-3
+NEAR_PAIR_TOL = 1e-4
 
 
 def _monomial_vectors(mk, ip, x3):
