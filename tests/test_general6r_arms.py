@@ -113,8 +113,9 @@ def test_crx_axis_aligned_configurations():
     # singular: a continuum or merged solutions. The pose is flagged degenerate, or the generating
     # configuration is found to the accuracy a singular solution has (joints to about the square
     # root of 1e-10); a few double roots with only regular solutions beside them are neither
-    # (10 of 400 in benchmarks/bench_general6r_accuracy.py; 0.1 of the singular ones at most)
-    assert len(unflagged) <= 0.1 * np.sum(~regular), unflagged
+    # (5 of the 315 singular ones of 400 in benchmarks/bench_general6r_accuracy.py; here at most
+    # a twentieth of the singular ones)
+    assert len(unflagged) <= 0.05 * np.sum(~regular), unflagged
 
 
 @pytest.mark.parametrize("name", ["general-6r", "crx10ia"])
