@@ -41,6 +41,9 @@ def main(argv=None):
     q = sixteen(robot)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     sols, _ = ik_figure(robot, q, a.out, deg=True)
+    # a 256-colour palette (the drawing has few colours): a third of the bytes in the repository
+    from PIL import Image
+    Image.open(a.out).convert("RGB").quantize(256, method=Image.Quantize.FASTOCTREE).save(a.out, optimize=True)
     err = np.abs(reference.fk_matrix(robot, sols) - reference.fk_matrix(robot, q)).max()
     print(f"crx10ia at q = {np.round(np.rad2deg(q), 1).tolist()} deg: {len(sols)} solutions, "
           f"largest FK error {err:.1e}; wrote {a.out}")
