@@ -431,6 +431,9 @@ def classify(robot) -> Classification:
             + parallel3.describe(p3)])
     rel = closed_form_relation(robot)
     if rel is None:
+        if robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints):
+            why = general6r.describe(robot)
+            return dataclasses.replace(c, general6r=why, notes=c.notes + [why])
         return c
     notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n]
     return dataclasses.replace(

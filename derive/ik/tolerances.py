@@ -181,3 +181,14 @@ G6_LEADING_COND = 1e12
 G6_GOOD_COND = 1e6
 #: Relative singular value below which Q (14 x 8) or the pencil is rank-deficient.
 G6_RANK_TOL = 1e-9
+#: A pose whose elimination degenerates is solved again at nearby poses, each moved by a random
+#: twist of this size (rad, and this times the arm's size in m), and Newton carries their
+#: solutions back onto it.
+G6_PERTURB = 1e-4
+#: Nearby poses tried for a degenerate pose.
+G6_PERTURB_TRIALS = 3
+#: A pose with a solution whose Jacobian's smallest singular value over its largest is below this
+#: is flagged degenerate (near the singular set's image two solutions merge, and one of a nearly
+#: merged pair can be lost; at a singular solution the joints are only determined to about the
+#: square root of G6_ACCEPT).
+G6_NEAR_SINGULAR = 1e-6

@@ -192,6 +192,9 @@ class Classification:
     pieper: list = field(default_factory=list)     # [(axes, "parallel" | "meet in one point")]
     notes: list = field(default_factory=list)
     closed_form_through: dict | None = None       # set by derive.ik.closed_form.classify
+    #: why and how the general 6R elimination solves this arm (set by
+    #: derive.ik.closed_form.classify for a 6R arm of no special class), else None
+    general6r: str | None = None
 
     def to_dict(self) -> dict:
         return {"robot": self.robot, "n": self.n, "types": list(self.types),
@@ -203,7 +206,8 @@ class Classification:
                 "nominal_class": self.nominal_cls, "nominal_test": self.nominal_test,
                 "near_misses": list(self.near_misses), "closed_form": self.closed_form,
                 "pieper": [{"axes": list(a), "kind": k} for a, k in self.pieper],
-                "notes": list(self.notes), "closed_form_through": self.closed_form_through}
+                "notes": list(self.notes), "closed_form_through": self.closed_form_through,
+                "general6r": self.general6r}
 
     def report(self) -> str:
         """The text ``dq-derive classify ROBOT`` prints."""
@@ -232,7 +236,9 @@ class Classification:
         lines += ["", f"class: {self.cls} ({self.test})",
                   f"nominal class (within NEAR_TOL): {self.nominal_cls}"
                   + ("" if self.nominal_cls == self.cls else f" ({self.nominal_test})"),
-                  f"closed form in dq-derive: {'yes' if self.closed_form else 'no'}"]
+                  f"closed form in dq-derive: {'yes' if self.closed_form else 'no'}"
+                  + (" (no special class: the general 6R elimination solves it, every solution)"
+                     if self.general6r and not self.closed_form else "")]
         lines.append("near misses:" + ("" if self.near_misses else " none"))
         lines += [f"  - {m}" for m in self.near_misses]
         if self.notes:
