@@ -159,6 +159,27 @@ def test_nearest_and_details_on_a_general_arm(quick_c):
     assert np.abs(near.q - q).max() < 1e-3
 
 
+@pytest.mark.parametrize("robot", ["crx10ia", "xarm6"])
+def test_numpy_and_python_kernels_give_the_reference_solution_sets(robot):
+    """The numpy kernels (batched, numpy.linalg) on 60 poses and the pure-Python ones (the C's
+    algorithm transliterated, its own Hessenberg-QR eigen-solver) on 6: the reference's solution
+    sets, the generating configuration among them."""
+    kn = derive.kernels(robot, "numpy")
+    kp = derive.kernels(robot, "python")
+    assert kn.has_ik and kp.has_ik and kn.max_solutions == kp.max_solutions == 16
+    q, P = _poses(robot, 60, 11)
+    ref = general6r.solve(robot, P)
+    sols, counts = kn.ik(P)
+    assert sols.shape == (60, 16, 6)
+    assert _same_sets(sols, counts, ref.q, ref.counts).all()
+    assert all(_contains(sols[i, :counts[i]], q[i]) for i in range(len(q)))
+    sp, cp = kp.ik(P[:6])
+    assert _same_sets(sp, cp, ref.q[:6], ref.counts[:6]).all()
+    assert all(_contains(sp[i, :cp[i]], q[i]) for i in range(6))
+    with pytest.raises(InputError):
+        kp.ik(np.full(8, np.inf))
+
+
 @needs_gcc
 def test_general_c_source_compiles_as_c99_and_cxx17(tmp_path):
     """The emitted source of a standard-elimination arm (reversed chain, xarm6) and of a cut arm
