@@ -156,6 +156,14 @@ HOMOTOPY_STEPS = 4
 #: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
 #: pose (dimensionless; the comparison is in m and rad, max of the two).
 SEED_REACH = 4.0
+#: A candidate of the nominal closed form whose Jacobian on the arm (the free joints' columns,
+#: rows metres per rad and rad per rad) has its smallest singular value below this fraction of
+#: its largest times the square root of the nominal's deviation (this factor in 1 / sqrt(m or
+#: rad)) lies near a singular set of the arm: extra seeds on both sides along the singular
+#: direction are polished too (derive.ik.nearclass._singular_seeds). The calibrated UR5
+#: (deviation 0.016) seeds below a ratio of 0.13, the iiwa14 with axes 0.44 mm off (8.8e-4)
+#: below 0.03, a URDF's printed constants (1e-8) below 1e-4.
+SEED_SINGULAR = 1.0
 
 # --- General 6R (derive.ik.general6r): the Raghavan-Roth / Manocha-Canny elimination.
 
