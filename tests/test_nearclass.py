@@ -346,3 +346,25 @@ def test_calibrated_ur5_near_its_singular_sets_equals_the_general_6r_elimination
         ours, theirs = r.q[i, :r.counts[i]], g.q[i, :g.counts[i]]
         assert _has(ours, q[i])
         assert all(_has(ours, s) for s in theirs) and all(_has(theirs, s) for s in ours)
+
+
+def test_gen3_gets_an_srs_nominal_and_is_solved_with_joint3_given():
+    """The Kinova Gen3 (its shoulder axes miss a common point by 5.9 mm, its axis points step by
+    6.4 mm sideways): no nominal within NEAR_POINT_TOL, an SRS one from the seven-joint
+    projection (all axis points on one line, 0.049 m / rad off). With joint 3 given, on 30 random
+    configurations within the limits, the generating configuration is among the solutions and
+    every solution's reference FK is within 1e-10 of the pose."""
+    robot = derive.load_robot("gen3")
+    nom = nearclass.nominal(robot)
+    assert nom is not None and nearclass.nominal_class(robot) == "SRS"
+    assert 0.04 < nom.deviation < 0.06
+    lo, hi = np.maximum(robot.limits[:, 0], -math.pi), np.minimum(robot.limits[:, 1], math.pi)
+    q = np.random.default_rng(5).uniform(lo, hi, size=(30, 7))
+    P = reference.fk(robot, q)
+    r = nearclass.ik_batch(robot, P, free=q[:, 2], free_name="q3")
+    for i in range(len(q)):
+        sols = r.q[i, :r.counts[i]]
+        assert _has(sols, q[i])
+        dp, dr = pose_error(reference.fk(robot, sols), np.repeat(P[i:i + 1], len(sols), axis=0))
+        assert max(dp.max(), dr.max()) < 1e-10
+        assert np.allclose(sols[:, 2], q[i, 2])

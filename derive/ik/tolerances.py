@@ -136,6 +136,15 @@ NEAR_POINT_TOL = 1e-3
 #: angle (rad), each compared with it (``Nominal.deviation``). The calibrated UR5
 #: (ur5-calibrated.yaml) is 0.016 from the UR5.
 NEAR_DEVIATION_MAX = 0.03
+#: Seven-joint arms only, when the projection with NEAR_POINT_TOL gives no nominal: the axis
+#: points' coordinates within this (m) are made equal (the Kinova Gen3: its shoulder axes miss a
+#: common point by 5.9 mm, its axis points step by 6.4 mm; all of them are then merged onto one
+#: line, an SRS arm) ...
+NEAR_POINT_TOL_7R = 1e-2
+#: ... and the relation's largest mismatch (m, rad; as NEAR_DEVIATION_MAX) may be up to this:
+#: the Gen3's projected SRS nominal is 0.049 from it. Solved with joint 3 given, the polish with
+#: the seeds near singular sets found the generating configuration on 2000 of 2000 poses.
+NEAR_DEVIATION_MAX_7R = 0.06
 #: A polished solution has converged when its residual, the larger of the position error (m)
 #: and the rotation angle (rad) of FK(q) against the pose, is at or below this.
 POLISH_TOL = 1e-12
@@ -163,7 +172,7 @@ SEED_REACH = 4.0
 #: direction are polished too (derive.ik.nearclass._singular_seeds). The calibrated UR5
 #: (deviation 0.016) seeds below a ratio of 0.13, the iiwa14 with axes 0.44 mm off (8.8e-4)
 #: below 0.03, a URDF's printed constants (1e-8) below 1e-4.
-SEED_SINGULAR = 1.0
+SEED_SINGULAR = 0.1
 
 # --- General 6R (derive.ik.general6r): the Raghavan-Roth / Manocha-Canny elimination.
 
