@@ -29,7 +29,8 @@ DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 CASES_ALL = [("PUMA 560 URDF, twists 1.570796325", str(DATA / "puma560-printed.urdf"), None),
          ("UR5, alpha 1.5708", str(DATA / "ur5-decimal.yaml"), None),
          ("iiwa14 URDF, axes 0.44 mm off, q3 given", str(DATA / "iiwa14-off.urdf"), 2),
-         ("UR5 calibrated (nominal: ur5)", "ur5-calibrated", None)]
+         ("UR5 calibrated (nominal: ur5)", "ur5-calibrated", None),
+         ("Kinova Gen3, q3 given", "gen3", 2)]
 CASES = CASES_ALL
 
 
