@@ -40,6 +40,12 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    singular value below G6_SINGULAR, by a cyclic Jacobi eigenvalue sweep of J^T J), the
    **merge** of duplicates (MERGE_TOL in every joint) and the **order** (ascending q1), at most
    16 solutions. Every value is tested with isfinite; no NaN leaves a kernel but the padding.
+8. **Nearby poses** (:func:`derive.ik.general6r._perturbed`): a pose flagged degenerate by the
+   steps above is solved again at G6_PERTURB_TRIALS nearby poses (the reference's fixed twists
+   ``_TWISTS`` times G6_PERTURB, baked in as a quaternion and a translation each); Newton (every
+   step) carries their candidates back onto the pose, they are checked and merged with the
+   pose's own; the flag stays set where every nearby pose is degenerate too or a solution found
+   is singular.
 
 The rank-deficient Q of a general arm (rank < 8, ``Plan.mix``) is not emitted: DeriveError.
 """
