@@ -40,6 +40,12 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    singular value below G6_SINGULAR, by a cyclic Jacobi eigenvalue sweep of J^T J), the
    **merge** of duplicates (MERGE_TOL in every joint) and the **order** (ascending q1), at most
    16 solutions. Every value is tested with isfinite; no NaN leaves a kernel but the padding.
+8. **Nearby poses** (:func:`derive.ik.general6r._perturbed`): a pose flagged degenerate by the
+   steps above is solved again at G6_PERTURB_TRIALS nearby poses (the reference's fixed twists
+   ``_TWISTS`` times G6_PERTURB, baked in as a quaternion and a translation each); Newton (every
+   step) carries their candidates back onto the pose, they are checked and merged with the
+   pose's own; the flag stays set where every nearby pose is degenerate too or a solution found
+   is singular.
 
 The rank-deficient Q of a general arm (rank < 8, ``Plan.mix``) is not emitted: DeriveError.
 """
@@ -50,8 +56,9 @@ import numpy as np
 
 from derive.errors import DeriveError
 from derive.ik import general6r as g6
-from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_RANK_TOL,
-                                  G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+from derive.algebra import quaternion as quat
+from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_PERTURB,
+                                  G6_PERTURB_TRIALS, G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
 
 #: The solutions a general 6R kernel returns at most (the degree of the eliminant).
 MAX_SOLUTIONS = g6.MAX_SOLUTIONS
@@ -118,6 +125,13 @@ def general_context(robot) -> dict:
                 old[order[0]], old[order[1]], old[order[2]] = a, b, c
                 perm.append(9 * old[0] + 3 * old[1] + old[2])
     halves = [g6._half(d) for d in pl.d3]
+    # the nearby poses of a degenerate pose (derive.ik.general6r._perturbed): the pose's rotation
+    # times the quaternion of the twist's rotation (body frame), its translation plus the twist's
+    # translation times the arm's size (m)
+    tw = np.array([g6._TWISTS[k % len(g6._TWISTS)] * G6_PERTURB for k in range(G6_PERTURB_TRIALS)]).reshape(-1, 6)
+    ang = np.linalg.norm(tw[:, :3], axis=1)
+    pq = quat._from_axis_angle(tw[:, :3] / np.maximum(ang, 1e-300)[:, None], ang)
+    pt = tw[:, 3:] * pl.scale
     start = g6._START
     return {
         "mode": mode, "reverse": bool(pl.reverse) and not cut, "scale": _lit(pl.scale),
@@ -129,7 +143,8 @@ def general_context(robot) -> dict:
         "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
-        "max_solutions": MAX_SOLUTIONS, "notes": [g6_comment(n) for n in pl.notes],
+        "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
+        "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
                 % (cut["e"], tuple(pair), tuple(triple), triple[ev]) if cut else
                 "Raghavan-Roth elimination of the %s chain (q1, q2 eliminated linearly, eigen-variable %s)"
