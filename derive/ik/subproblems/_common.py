@@ -109,9 +109,14 @@ def dot(a, b):
 def cross(a, b):
     """a x b over the last axis: numpy's component formulas on the components (strided views),
     without np.cross's broadcast copies and moved axes; a constant axis (3,) enters as numbers."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    out = np.empty(shape + (3,))
+    tmp = np.empty(shape)
+    for j, (i, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(a[..., i], b[..., k], out=out[..., j])
+        np.multiply(a[..., k], b[..., i], out=tmp)
+        np.subtract(out[..., j], tmp, out=out[..., j])
+    return out
 
 
 def rot(k, theta, p):
@@ -149,8 +154,13 @@ def a_matrix(k, p):
 def a_coef(k, p, h):
     """A(k, p)^T h as its two components (h . (k x p), h . (p - (k . p) k)), and the axial
     part (k . p) k: the line a . x of ``circle_line`` without building A."""
+    return a_coef_with(k, p, h, cross(k, p))
+
+
+def a_coef_with(k, p, h, kxp):
+    """``a_coef`` with k x p given."""
     axial = np.asarray(dot(k, p))[..., None] * k
-    return dot(cross(k, p), h), dot(p - axial, h), axial
+    return dot(kxp, h), dot(p - axial, h), axial
 
 
 def wrap_pi(a):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, wrap_pi, a_coef, axis, batch_shape, cross,
-                                           dot, finish, rot, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef_with, axis, batch_shape, cross,
+                                           dot, finish, rot, vector, wrap_pi)
 from derive.ik.tolerances import SP_FREE_ANGLE
 
 
@@ -16,8 +16,8 @@ def angle_sp1(k, p1, p2):
     Returns (theta (...), degenerate (...)); theta = atan2((k x p1) . p2, (p1 - (k . p1) k) . p2),
     0 where degenerate (p1 or p2 within SP_FREE_ANGLE of the axis).
     """
-    c0, c1, _axial = a_coef(k, p1, p2)
     kxp1, kxp2 = cross(k, p1), cross(k, p2)
+    c0, c1, _axial = a_coef_with(k, p1, p2, kxp1)
     degenerate = (dot(kxp1, kxp1) <= SP_FREE_ANGLE ** 2) | (dot(kxp2, kxp2) <= SP_FREE_ANGLE ** 2)
     theta = np.where(degenerate, 0.0, np.arctan2(c0, c1))
     return theta, degenerate

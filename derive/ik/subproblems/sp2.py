@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, wrap_pi, a_coef, axis, batch_shape,
-                                           circle_line2, dot, finish, rot, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, vector,
+                                           wrap_pi)
 from derive.ik.subproblems.sp1 import angle_sp1
 from derive.ik.tolerances import SP_FREE_ANGLE
 

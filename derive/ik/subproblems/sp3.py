@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from derive.errors import InputError
-from derive.ik.subproblems._common import (SubproblemSolutions, wrap_pi, a_coef, axis, batch_shape,
-                                           circle_line2, dot, finish, rot, scalar, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, scalar, vector,
+                                           wrap_pi)
 
 
 def solve_sp3(k, p1, p2, d):

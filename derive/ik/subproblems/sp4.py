@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, wrap_pi, a_coef, axis, batch_shape,
-                                           circle_line2, dot, finish, rot, scalar, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, scalar, vector,
+                                           wrap_pi)
 
 
 def solve_sp4(h, k, p, d):
