@@ -158,9 +158,13 @@ def a_coef(k, p, h):
 
 
 def a_coef_with(k, p, h, kxp):
-    """``a_coef`` with k x p given."""
+    """``a_coef`` with k x p given. A constant axis k (3,) (the compositions' steps) takes two
+    dot products; a batch of axes goes through A^T h as before (the same sums, bit for bit)."""
     axial = np.asarray(dot(k, p))[..., None] * k
-    return dot(kxp, h), dot(p - axial, h), axial
+    if k.ndim == 1:
+        return dot(kxp, h), dot(p - axial, h), axial
+    coef = np.einsum("...ij,...i->...j", np.stack([kxp, p - axial], axis=-1), h)
+    return coef[..., 0], coef[..., 1], axial
 
 
 def wrap_pi(a):
@@ -204,11 +208,16 @@ def circle_line2(a0, a1, beta):
     root = np.sqrt(np.where(two, disc, 0.0))
     b0, b1 = a0 * beta, a1 * beta
     r0, r1 = root * a1, root * a0
-    sign = np.where(beta < 0, -1.0, 1.0)
-    ls = np.arctan2(a0 * sign, a1 * sign)
-    theta = np.stack([np.where(two, np.arctan2((b0 + r0) / safe, (b1 - r1) / safe), ls),
-                      np.where(two, np.arctan2((b0 - r0) / safe, (b1 + r1) / safe), ls)], axis=-1)
-    return np.where(free[..., None], 0.0, theta), two, free
+    theta = np.empty(np.broadcast_shapes(np.shape(norm2), np.shape(beta)) + (2,))
+    np.arctan2((b0 + r0) / safe, (b1 - r1) / safe, out=theta[..., 0])
+    np.arctan2((b0 - r0) / safe, (b1 + r1) / safe, out=theta[..., 1])
+    if not np.all(two):                     # least-squares slots: x = a sign(beta) / |a|
+        sign = np.where(beta < 0, -1.0, 1.0)
+        ls = np.arctan2(a0 * sign, a1 * sign)[..., None]
+        np.copyto(theta, np.broadcast_to(ls, theta.shape), where=~two[..., None])
+    if np.any(free):
+        np.copyto(theta, 0.0, where=free[..., None])
+    return theta, two, free
 
 
 # --- two linear equations in two unit 2-vectors (sp5, sp6) ----------------------------------

@@ -19,7 +19,9 @@ def angle_sp1(k, p1, p2):
     kxp1, kxp2 = cross(k, p1), cross(k, p2)
     c0, c1, _axial = a_coef_with(k, p1, p2, kxp1)
     degenerate = (dot(kxp1, kxp1) <= SP_FREE_ANGLE ** 2) | (dot(kxp2, kxp2) <= SP_FREE_ANGLE ** 2)
-    theta = np.where(degenerate, 0.0, np.arctan2(c0, c1))
+    theta = np.arctan2(c0, c1)
+    if np.any(degenerate):
+        theta = np.where(degenerate, 0.0, theta)
     return theta, degenerate
 
 
