@@ -48,7 +48,7 @@ from derive.ik.subproblems.sp1 import _sp1
 from derive.ik.subproblems.sp2 import _sp2
 from derive.ik.subproblems.sp3 import _sp3
 from derive.ik.subproblems.sp4 import _sp4
-from derive.ik.spherical import SWGeometry, _slot, sw_geometry
+from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
 from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
 from derive.kinematics.pose import as_pose_batch
@@ -117,10 +117,6 @@ def _ur_geometry(robot) -> URGeometry:
 _X, _Y, _Z = np.eye(3)
 
 
-def _b(v, n):
-    return np.broadcast_to(v, (n, 3))
-
-
 def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
     """Rotation matrices (n,3,3) and translations (n,3) of the chain end frame (pose * G^-1)."""
     chain = dq._mul(poses, dq.conj_quaternion(geo.g))
@@ -178,7 +174,7 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
     # constant vectors stay (3,): the subproblems' private steps (no input checks, no residuals)
-    # broadcast them and take their cross products through constant matrices
+    # broadcast them, and a constant axis enters their products as three numbers
     x, y, z = _X, _Y, _Z
     a3x, ma2x = geo.a3 * _X, -geo.a2 * _X
     # the slots of step 4 in the order sin t3 >= 0, < 0 (slot 0 has the sign of -a2 a3)

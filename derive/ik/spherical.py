@@ -299,12 +299,6 @@ def _sw_geometry(robot) -> SWGeometry:
 _X, _Y, _Z = np.eye(3)
 
 
-def _slot(sol, i):
-    """Angles (n, j) of slot i of a two-slot subproblem; a missing second slot (one double,
-    least-squares or free solution) repeats the first."""
-    return np.where(sol.valid[:, i, None], sol.theta[:, i], sol.theta[:, 0])
-
-
 def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -339,7 +333,7 @@ def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = 
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
     # constant vectors stay (3,): the subproblems' private steps (no input checks, no residuals)
-    # broadcast them and take their cross products through constant matrices
+    # broadcast them, and a constant axis enters their products as three numbers
     x, y, z = _X, _Y, _Z
     fore, upper = np.array([geo.a2, 0.0, geo.c3]), geo.c2 * z
     k2 = geo.a2 ** 2 + geo.c3 ** 2
