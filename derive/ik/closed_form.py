@@ -233,7 +233,8 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
     The candidates go through the finish step (:func:`derive.ik.finish.finish`: FK check, merge,
     compaction)."""
     cls = classes.find("spherical" if isinstance(geo, SWGeometry) else
-                       "parallel3" if isinstance(geo, P3Geometry) else "ur")
+                       ("parallel3-sp6" if geo.layout == "sp6" else "parallel3")
+                       if isinstance(geo, P3Geometry) else "ur")
     batch, why = cls.candidates, cls.reasons
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
@@ -517,10 +518,12 @@ def parallel3_class(robot) -> P3Geometry | None:
     robot = load_robot(robot)
     if spherical_class(robot) is not None or _is_ur(robot):
         return None
-    try:
-        return parallel3.p3_geometry(robot)
-    except DeriveError:
-        return None
+    for geometry in (parallel3.p3_geometry, parallel3.p3_sp6_geometry):   # axes 5, 6 meeting or not
+        try:
+            return geometry(robot)
+        except DeriveError:
+            pass
+    return None
 
 
 def spherical_reason(robot) -> str:
