@@ -279,19 +279,23 @@ def _robot_row(name: str) -> dict:
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
                     f"nominal {nearclass.nominal_class(r)} + Newton polish" if near else
                     f"no: refine, seeded by {r.nominal}" if r.nominal else
-                    "general 6R elimination (numpy)" if _general_6r(r) else "no: refine")
+                    "general 6R elimination" if _general_6r(r) else
+                    "any joint given (numpy)" if _seven_revolute(r) else "no: refine")
     # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
-    # run the nominal's closed form and polish (derive.codegen.polish)
-    has_ik = bool(closed or kind or (near and r.dof == 6))
+    # run the nominal's closed form and polish (derive.codegen.polish), a seven-joint one's with
+    # joint 3 given; any other 6R arm's kernels the general 6R elimination (up to 16 solutions)
+    general = not closed and not kind and not near and _general_6r(r)
+    has_ik = bool(closed or kind or (near and r.dof == 6) or general)
+    given = " (q3 given)" if near and r.dof == 7 else ""
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
             "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else
                                          f"nominal {nearclass.nominal_class(r)} + polish" if near else None),
             "free_parameter": FREE_NAMES[kind] if kind else None,
             "ik": ik,
-            "kernels": ("FK+IK" if has_ik else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else "")
+            "kernels": ("FK+IK" if has_ik or given else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else given)
                        + ", " + _where(r.id, "c_source"),
-            "casadi": ("fk, residual, ik" if has_ik else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
+            "casadi": ("fk, residual, ik" if has_ik and not general else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
 
 
@@ -299,6 +303,12 @@ def _general_6r(robot) -> bool:
     """Whether the numpy reference solves a robot outside every special class by the general 6R
     elimination (derive.ik.general6r): six revolute joints, no mimic joint."""
     return robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints)
+
+
+def _seven_revolute(robot) -> bool:
+    """Whether a robot outside the 7R classes is solved with any one joint given
+    (derive.ik.free_joint): seven revolute joints, no mimic joint."""
+    return robot.dof == 7 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints)
 
 
 def _where(robot_id: str, role: str) -> str:

@@ -14,6 +14,7 @@ import yaml
 
 import derive
 from derive import DeriveError, reference
+from derive.algebra.angles import wrap_angle
 from derive.cache import clear_memory, user_folder
 from derive.cli import main
 from derive.model.exact import op_form as exact_form
@@ -192,11 +193,11 @@ def test_decimal_dh_file_under_a_new_name_gets_fk_and_ik_kernels(tmp_path, cache
     assert "set B" not in err                                                       # nothing derived
 
 
-def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, cache, rng, capfd):
+def test_robot_that_is_not_exact_gets_polish_or_general_kernels(tmp_path, cache, rng, capfd):
     # twists 1.5708 alone keep axes 2, 3, 4 parallel and axes 5, 6 intersecting: the three-parallel
     # class, solved exactly (tests/test_parallel3.py); a twist of 1e-4 rad between axes 2 and 3 as
     # well makes a near-class arm: its kernels solve the nominal's closed form and polish
-    # (derive.codegen.polish); an arm near no class gets FK kernels only
+    # (derive.codegen.polish); an arm near no class gets the general 6R elimination's kernels
     data = _decimal_alphas(_ur5(name="approx-ur5"), 1.5708)
     data["joints"][1]["alpha"] = 0.0001
     path = _write(tmp_path / "arm.yaml", data)
@@ -216,9 +217,12 @@ def test_robot_that_is_not_exact_gets_fk_kernels_and_points_to_refine(tmp_path, 
     far_data["joints"][1]["alpha"] = 0.2                  # axes 2, 3 0.2 rad apart: near no class
     far = _write(tmp_path / "far.yaml", far_data)
     kf = derive.kernels(far, "c")
-    assert not kf.has_ik and kf.nominal is None
-    with pytest.raises(DeriveError, match="derive.refine"):
-        kf.ik(reference.fk(far, q[0]))
+    # near no class: its IK kernels are the general 6R elimination's (up to 16 solutions)
+    assert kf.has_ik and kf.nominal is None and kf.max_solutions == 16
+    sols, counts = kf.ik(reference.fk(far, q[:10]))
+    for i in range(10):
+        assert counts[i] >= 1 and np.min(np.abs(wrap_angle(sols[i, :counts[i]] - q[i])).max(1)) < 1e-8
+        assert _same_pose(kf.fk(sols[i, :counts[i]]), np.repeat(reference.fk(far, q[i])[None], counts[i], 0)) < 1e-10
     far_robot = derive.load_robot(far)
     assert (user_folder(f"{far_robot.id}-L{far_robot.limits_id}") / "manifest.json").is_file()
 
@@ -252,6 +256,7 @@ def hook(frame, event, arg):
         if any(w in f for w in watched):
             calls.append(f"{f}:{frame.f_code.co_name}")
 import derive
+from derive.algebra.angles import wrap_angle
 import derive.refinement.solver   # refine's modules, imported on first use: importing is not work
 sys.setprofile(hook)
 k = derive.kernels("ur5", "c")

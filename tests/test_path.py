@@ -194,8 +194,18 @@ def test_path_input_errors():
         derive.path(robot, P, np.zeros(6), max_step=0.0)
     with pytest.raises(InputError):
         derive.path(robot, np.zeros((3, 8)), np.zeros(6))                # not unit
-    with pytest.raises(DeriveError, match="closed-form IK"):
-        derive.path("general-6r", P, np.zeros(6))
+    with pytest.raises(DeriveError, match="no IK kernels"):
+        derive.path("seed-arm", reference.fk("seed-arm", np.zeros(5)), np.zeros(5))
+
+
+def test_path_of_one_pose_of_a_general_6r_arm():
+    """One pose (8,) is a path of one point; a general 6R arm's kernels (the elimination) solve it:
+    the configuration nearest the start, on the pose."""
+    q0 = np.array([0.3, -0.4, 0.5, 0.2, -0.6, 0.1])
+    P = reference.fk("general-6r", q0)
+    p = derive.path("general-6r", P, q0 + 0.01)
+    assert p.q.shape == (1, 6) and p.found.tolist() == [True]
+    assert np.abs(p.q[0] - q0).max() < 1e-8
 
 
 # --------------------------------------------------------------------------- #

@@ -115,9 +115,11 @@ def test_fk_equals_ssik_prebuilt_module(name):
 
 
 @pytest.mark.parametrize("name", list(ARMS))
-def test_vendor_arms_classify_as_general_without_closed_form(name):
+def test_vendor_arms_classify_as_general(name):
     c = derive.classify(name)
-    assert c.cls == "general" and not c.closed_form
+    # gen3 is within the near-class tolerances of the SRS class: its nominal's closed form and a
+    # polish solve it (derive.ik.nearclass); the others have none
+    assert c.cls == "general" and c.closed_form == (name == "gen3")
     assert derive.load_robot(name).exact == (name in ("crx10ia", "jaco2-6dof"))
 
 
@@ -131,11 +133,16 @@ def test_general_6r_has_no_special_structure():
         assert p.parallel.deviation > 0.3 and p.intersecting.deviation >= 0.02
 
 
-def test_robots_command_lists_them_without_closed_form(capsys):
+def test_robots_command_lists_their_ik(capsys):
     from derive.cli import main
     assert main(["robots"]) == 0
     rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.strip()}
     for name in ARMS:
         robot = derive.load_robot(name)
-        # six revolute joints: the numpy reference's general 6R elimination; seven: refine
-        assert ("general 6R elimination (numpy)" if robot.dof == 6 else "no: refine") in rows[name], rows[name]
+        # six revolute joints: the general 6R elimination, kernels with IK; seven: one joint given
+        # (the near-class polish with q3 given for the gen3, the free_joint route for the xArm7)
+        expected = {6: ("general 6R elimination", "FK+IK, "), 7: ("any joint given (numpy)", "FK, ")}
+        if name == "gen3":
+            expected[7] = ("nominal SRS + Newton polish", "FK+IK (q3 given)")
+        for text in expected[robot.dof]:
+            assert text in rows[name], rows[name]

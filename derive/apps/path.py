@@ -103,15 +103,13 @@ def path(robot, poses, q_start, backend: str = "c", max_step: float = MAX_STEP) 
     """The joint path of ``poses`` (unit dual quaternions (n, 8) or 4x4 matrices (n, 4, 4) of
     the robot's default end frame in its base frame), starting nearest to ``q_start`` (dof,):
     see the module docstring. ``backend``: the kernels that solve it (:func:`derive.kernels`);
-    ``max_step``: steps above it are reported as ``jump`` events. A robot without a closed-form
-    IK raises :class:`~derive.errors.DeriveError`; an unreachable pose does not (an event)."""
+    ``max_step``: steps above it are reported as ``jump`` events. A robot without IK
+    kernels raises :class:`~derive.errors.DeriveError`; an unreachable pose does not (an event)."""
     robot = load_robot(robot)
     if not (isinstance(max_step, (int, float)) and not isinstance(max_step, bool)
             and math.isfinite(max_step) and max_step > 0):
         raise InputError(f"max_step: expected a finite number > 0 (rad or m), got {max_step!r}")
-    P, single = as_pose_batch(poses)
-    if single:
-        P = P[None]
+    P, _ = as_pose_batch(poses)           # (n, 8), a single pose as n = 1
     if len(P) == 0:
         raise InputError("poses: the path has no poses")
     seed = as_finite_array(q_start, "q_start", last_dim=robot.dof)
@@ -119,7 +117,7 @@ def path(robot, poses, q_start, backend: str = "c", max_step: float = MAX_STEP) 
         raise InputError(f"q_start: expected {robot.dof} joint values, got shape {seed.shape}")
     k = kernels(robot, backend)
     if not k.has_ik:
-        raise DeriveError(f"{robot.name}: no closed-form IK, so no path (derive.refine solves single poses)")
+        raise DeriveError(f"{robot.name}: no IK kernels, so no path (derive.refine solves single poses)")
     n, dof = len(P), robot.dof
     q = np.full((n, dof), np.nan)
     found = np.zeros(n, dtype=bool)
