@@ -830,8 +830,10 @@ def _any_joint(robot, free) -> bool:
     """Whether ``free`` is "qK" for a 7R arm and not one of its class's own choices
     (:data:`derive.ik.redundant.FREE_CHOICES`, kept by the generated kernels) nor a near-class
     arm's q3 (the polish kernels)."""
+    if free is None or robot.dof != 7:
+        return False
     from derive.ik.free_joint import parse_joint
-    if parse_joint(free) is None or robot.dof != 7:
+    if parse_joint(free) is None:
         return False
     if free in redundant.FREE_CHOICES.get(redundant.redundant_kind(robot), ()):
         return False

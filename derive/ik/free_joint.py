@@ -35,6 +35,7 @@ from __future__ import annotations
 import itertools
 import math
 import re
+import dataclasses
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -146,6 +147,7 @@ class Plan:
     offsets: np.ndarray
     d3: np.ndarray
     notes: str
+    alt: "Plan | None" = None    # the rescue: another cut (or other offsets), see _general
 
 
 def plan(robot, joint: int) -> Plan:
@@ -189,13 +191,17 @@ def _plan(robot, joint):
                 options.append((shared, -worst, reverse, e, max(set(evs), key=evs.count), info))
     if options:
         # the fewest multiple roots (a root shared by two solutions needs the slower path), then
-        # the best conditioned pencil
-        shared, _, reverse, e, ev, info = min(options, key=lambda o: o[:2])
-        offsets = g6._seeded(robot.id).uniform(-np.pi, np.pi, 3)
-        return Plan(robot=robot.name, joint=joint, c=c, scale=scale, reverse=reverse, e=e, ev=ev,
-                    offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]),
-                    notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}: {info} "
-                          f"({shared} shared roots over the 3 values)")
+        # the best conditioned pencil; the next option (else other offsets) is the rescue
+        options.sort(key=lambda o: o[:2])
+        rng = g6._seeded(robot.id)
+        plans = []
+        for shared, _, reverse, e, ev, info in (options * 2)[:2]:
+            offsets = rng.uniform(-np.pi, np.pi, 3)
+            plans.append(Plan(robot=robot.name, joint=joint, c=c, scale=scale, reverse=reverse, e=e, ev=ev,
+                              offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]),
+                              notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}: {info} "
+                                    f"({shared} shared roots over the 3 values)"))
+        return dataclasses.replace(plans[0], alt=plans[1])
     raise DeriveError(f"{robot.name} with q{joint} given: the general 6R elimination degenerates for "
                       f"every cut ({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
 
@@ -350,23 +356,44 @@ class FreeJointSolutions(finish.Solutions):
     joint: int = 0
 
 
-def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
+def _candidates(pl: Plan, poses, values):
+    """(pose index (m,), candidates (m, 7), degenerate (n,)) of one plan."""
     n = len(poses)
-    k = pl.joint
     target = g6._to_matrix(poses)
     target[:, :3, 3] /= pl.scale
-    d = locked_chain(pl.c, k, values)
+    d = locked_chain(pl.c, pl.joint, values)
     if pl.reverse:
         d = np.stack([g6._reverse(x) for x in d]) if n else d
         target = np.linalg.inv(target)
     ip, q6, degen = _six(pl, d, target)
     if pl.reverse:
         q6 = -q6[:, ::-1]
-    q7 = np.insert(wrap_angle(q6), k - 1, values[ip], axis=1)
+    return ip, np.insert(wrap_angle(q6), pl.joint - 1, values[ip], axis=1), degen
+
+
+def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
+    """The general route: the plan's candidates, checked on the 7R's FK; where a pose looks
+    incomplete (an odd number of solutions: the real roots of the eliminant come in pairs but
+    for a root lost to rounding; a real eigenvalue whose candidate failed the check; no
+    solution; the degenerate flag), the rescue plan's candidates (another cut, other offsets)
+    are added; then merged and padded."""
+    n = len(poses)
+    k = pl.joint
+    ip, q7, degen = _candidates(pl, poses, values)
+    cand = _grid(ip, q7, n)
+    ok, _ = _check(robot, poses, cand)
+    good = ok & ~finish.duplicates(cand, ok)
+    count = good.sum(1)
+    suspect = (count % 2 == 1) | (count == 0) | degen | np.any(np.all(np.isfinite(cand), -1) & ~ok, 1)
+    if pl.alt is not None and np.any(suspect):
+        rows = np.nonzero(suspect)[0]
+        ip2, q72, degen2 = _candidates(pl.alt, poses[rows], values[rows])
+        ip, q7 = np.concatenate([ip, rows[ip2]]), np.concatenate([q7, q72])
+        order = np.argsort(ip, kind="stable")
+        ip, q7 = ip[order], q7[order]
+        degen[rows] &= degen2
+    cand = _grid(ip, q7, n)
     # check on the exact FK of the 7R, merge, pad
-    cand = np.full((n, max(int(np.bincount(ip, minlength=n).max(initial=0)), 1), 7), np.nan)
-    rank = np.arange(len(ip)) - np.searchsorted(ip, ip)       # ip is sorted (np.nonzero)
-    cand[ip, rank] = q7
     ok, residual = _check(robot, poses, cand)
     dup = finish.duplicates(cand, ok)
     keep = ok & ~dup
@@ -389,6 +416,14 @@ def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
                        "reproduces the pose" for c_ in counts], dtype=object)
     return FreeJointSolutions(q=q, counts=counts, branch=branch, singular=sing, residual=res, reason=reason,
                               free=values.copy(), degenerate=degen, joint=k)
+
+
+def _grid(ip, q7, n):
+    """Candidates (m, 7) of the poses ip (sorted) as (n, width, 7), NaN-padded."""
+    cand = np.full((n, max(int(np.bincount(ip, minlength=n).max(initial=0)), 1), 7), np.nan)
+    rank = np.arange(len(ip)) - np.searchsorted(ip, ip)
+    cand[ip, rank] = q7
+    return cand
 
 
 def _check(robot, poses, cand):
