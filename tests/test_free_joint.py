@@ -151,11 +151,11 @@ def test_contains_every_solution_of_ssik_jointlock(name, module, k):
 
 
 def test_class_routes_and_refusals():
-    """The SRS class answers joints 1, 3, 5, 7 by srs.ik_joint and refuses joint 4 (it alone
-    fixes the shoulder-wrist distance); the Panda class answers q7 by its closed form; other
+    """The SRS class answers joints 1, 3, 5, 7 by srs.ik_joint, 2 and 6 by its own closed form,
+    and refuses joint 4 (it alone fixes the shoulder-wrist distance); the Panda class answers q7 by its closed form; other
     joints go to the general 6R; a 6R arm and a joint outside 1..7 are refused."""
     assert [free_joint.route("iiwa14", k) for k in (1, 2, 3, 5, 6, 7)] == \
-        ["srs", "general", "srs", "srs", "general", "srs"]
+        ["srs", "srs-2", "srs", "srs", "srs-2", "srs"]
     assert free_joint.route("panda", 7) == "panda" and free_joint.route("panda", 1) == "general"
     assert {free_joint.route("xarm7", k) for k in range(1, 8)} == {"general"}
     with pytest.raises(InputError, match="joint 4 alone sets the shoulder-wrist distance"):
@@ -171,6 +171,28 @@ def test_class_routes_and_refusals():
     ref = srs.ik_joint(robot, poses, 5, q[:, 4])
     np.testing.assert_array_equal(r.counts, ref.count)
     np.testing.assert_allclose(r.q, ref.q, atol=1e-12)
+
+
+@pytest.mark.parametrize("k", [2, 6])
+def test_srs_joint2_closed_form_equals_the_general_route(k):
+    """Two independent paths on the iiwa7 with q2 / q6 given: the SRS closed form (route
+    "srs-2") and the general 6R elimination of the same locked chain (forced): the same
+    solution sets on 60 regular configurations."""
+    robot = derive.load_robot("iiwa7")
+    q = _inside(robot, 60, np.random.default_rng(40 + k))
+    poses = reference.fk(robot, q)
+    closed = free_joint.solve(robot, poses, k, q[:, k - 1])
+    general = free_joint._general(robot, free_joint.plan(robot, k), poses, q[:, k - 1])
+    assert np.all(closed.counts == 8)
+    same = 0
+    for i in range(60):
+        a, b = closed.q[i, :closed.counts[i]], general.q[i, :general.counts[i]]
+        d = _wrapped(a[:, None] - b[None]).max(-1)
+        if len(b) == 8 and d.min(1).max() < 1e-7 and d.min(0).max() < 1e-7:
+            same += 1
+        else:      # the general route may lose a root at shared roots; never adds a wrong one
+            assert len(b) == 0 or d.min(0).max() < 1e-7
+    assert same >= 58
 
 
 def test_unreachable_pose_has_no_solution_and_says_why():

@@ -11,7 +11,9 @@ first or last one, so the 6R of the other joints is the same for every v and onl
 (T' = (C1 Rz(v))^-1 ...); for a middle K two links of the loop change with v.
 
 Routing (:func:`route`): where the held joint leaves a special class, that class's closed form
-is used (the SRS class with joint 1, 3, 5 or 7 given: :func:`derive.ik.srs.ik_joint`; the
+is used (the SRS class with joint 1, 3, 5 or 7 given: :func:`derive.ik.srs.ik_joint`; with
+joint 2 or 6 given: :func:`_srs_joint2`, the same steps with the shoulder's subproblem solved
+for t1, t3 at a given t2; the
 Franka Panda class with joint 7 given: :func:`derive.ik.panda.ik_q7`); the SRS class's joint 4
 fixes the shoulder-wrist distance (held, it leaves a one-parameter family or nothing), so it is
 refused. Every other (arm, K) is solved as a general 6R by the loop-cut form of
@@ -108,7 +110,8 @@ def parse_joint(free) -> int | None:
 
 
 def route(robot, joint: int) -> str:
-    """"srs" (:func:`derive.ik.srs.ik_joint`), "panda" (:func:`derive.ik.panda.ik_q7`) or
+    """"srs" (:func:`derive.ik.srs.ik_joint`), "srs-2" (:func:`_srs_joint2`, joint 2 or 6 of
+    an SRS arm), "panda" (:func:`derive.ik.panda.ik_q7`) or
     "general" (the loop-cut general 6R of this module) for ``robot`` with ``joint`` given;
     InputError for a joint that cannot be given (not 1..7, or the SRS class's elbow)."""
     robot = load_robot(robot)
@@ -126,6 +129,7 @@ def route(robot, joint: int) -> str:
                              "or the arm angle psi")
         if joint in srs.JOINTS_GIVEN:
             return "srs"
+        return "srs-2"            # joint 2 or 6: _srs_joint2
     if kind == "panda" and joint == 7:
         return "panda"
     return "general"
@@ -448,6 +452,76 @@ def _singular(pl, d, q6):
 
 
 # --------------------------------------------------------------------------- #
+# The SRS class with joint 2 or 6 given
+# --------------------------------------------------------------------------- #
+def _joint2_steps(geo, rc, w, t2, free1, free3, free5):
+    """Canonical angles (n, 8, 7), singular (n, 8), root exists (n, 8) of the SRS chain with
+    canonical t2 given (the steps of :func:`derive.ik.srs.joint_given_steps`): the elbow t4 from
+    the shoulder-wrist distance (two signs); then Rz(t1) Ry(t2) Rz(t3) v(t4) = W, v = (v_x, 0,
+    v_z): its z row -sin t2 cos t3 v_x + cos t2 v_z = W_z gives cos t3 (two roots; t3 free where
+    sin t2 v_x = 0: axes 1 and 3 in line, or the elbow stretched), its x-y rows
+    t1 = atan2(W_y, W_x) - atan2(u_y, u_x), u = Ry(t2) Rz(t3) v (t1 free where W lies on axis 1);
+    the wrist by the ZYZ decomposition of (R_s Ry(t4))^T R (two signs)."""
+    n = len(w)
+    theta = np.full((n, 8, 7), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    reach_all = np.zeros((n, 8), dtype=bool)
+    c4 = srs.elbow_cosine(geo, w)
+    ok = np.abs(c4) <= 1.0 + srs.REACH_TOL
+    t4abs = srs.elbow_angle(c4)
+    s2, c2 = np.sin(t2), np.cos(t2)
+    on_axis = np.hypot(w[:, 0], w[:, 1]) < srs.AXIS_TOL
+    for i4, g4 in enumerate((1.0, -1.0)):
+        t4 = g4 * t4abs
+        v = srs._forearm(geo, t4)
+        den = s2 * v[:, 0]
+        num = c2 * v[:, 2] - w[:, 2]
+        flat = np.abs(den) < srs.WRIST_SINGULAR * max(geo.d_ew, 1.0)
+        c3 = num / np.where(flat, 1.0, den)
+        reach = ok & np.where(flat, np.abs(num) <= srs.REACH_TOL, np.abs(c3) <= 1.0 + srs.REACH_TOL)
+        a3 = srs.elbow_angle(c3)
+        for i, t3 in enumerate((np.where(flat, free3, a3), np.where(flat, free3, -a3))):
+            a = np.stack([np.cos(t3) * v[:, 0], np.sin(t3) * v[:, 0], v[:, 2]], -1)
+            u = (srs.rot_y(t2) @ a[..., None])[..., 0]
+            t1 = np.where(on_axis, free1, np.arctan2(w[:, 1], w[:, 0]) - np.arctan2(u[:, 1], u[:, 0]))
+            rw = srs._t(srs.zyz_matrix(t1, t2, t3) @ srs.rot_y(t4)) @ rc
+            for i6, g6 in enumerate((1.0, -1.0)):
+                t5, t6, t7, sing_w = srs.zyz(rw, g6, free5)
+                k = 4 * i + 2 * i4 + i6
+                th = np.stack([t1, t2, t3, t4, t5, t6, t7], -1)
+                theta[reach, k] = th[reach]
+                singular[:, k] = reach & (flat | on_axis | sing_w)
+                reach_all[:, k] = reach
+    return theta, singular, reach_all
+
+
+def _srs_joint2(robot, poses, joint, values, q_ref):
+    """All solutions (up to 8) of an SRS arm with joint 2 or 6 given (joint 6 is joint 2 of the
+    reversed chain, :func:`derive.ik.srs._reverse`); the finish step of :mod:`derive.ik.srs`.
+    Branch id 4 i + 2 i4 + i6: i the root of cos t3 (cos t5 for joint 6), i4 the elbow sign, i6
+    the sign of the Euler decomposition solved last (first for joint 6)."""
+    geo = srs.srs_geometry(robot)
+    n = len(poses)
+    rc, w = srs._into_canonical(geo, poses)
+    reason = np.full(n, "", dtype=object)
+    bad = np.abs(srs.elbow_cosine(geo, w)) > 1.0 + srs.REACH_TOL
+    reason[bad] = srs.REASON_REACH
+    tg = geo.signs[joint - 1] * values
+    fr = np.zeros((n, 7)) if q_ref is None else q_ref * geo.signs
+    if joint == 2:
+        theta, singular, reach = _joint2_steps(geo, rc, w, tg, fr[:, 0], fr[:, 2], fr[:, 4])
+    else:
+        rgeo, rrc, rw = srs._reverse(geo, rc, w)
+        phi, singular, reach = _joint2_steps(rgeo, rrc, rw, -tg, fr[:, 6], fr[:, 4], fr[:, 2])
+        theta = phi[..., ::-1] * np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0])
+        flip = np.array([k ^ 2 for k in range(8)])
+        theta, singular = theta[:, flip], singular[:, flip]
+    cand = np.where(bad[:, None, None], np.nan, wrap_angle(theta * geo.signs))
+    reason[~np.any(reach, 1) & (reason == "")] = srs.REASON_JOINT
+    return srs._finish(robot, geo, rc, w, poses, cand, singular & ~bad[:, None], reason, values)
+
+
+# --------------------------------------------------------------------------- #
 # Public interface
 # --------------------------------------------------------------------------- #
 def _joint_values(free, n):
@@ -468,6 +542,8 @@ def solve(robot, poses, joint: int, free, q_ref=None, chunk: int = CHUNK) -> Fre
     qr = None if q_ref is None else redundant._q_ref(q_ref, n)
     if how == "srs":
         r = srs.ik_joint(robot, P, joint, f, q_ref=qr)
+    elif how == "srs-2":
+        r = _srs_joint2(robot, P, joint, f, qr)
     elif how == "panda":
         r = panda.ik_q7(robot, P, f, q_ref=qr)
     else:
