@@ -378,17 +378,19 @@ def _candidates(pl: Plan, poses, values):
 def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
     """The general route: the plan's candidates, checked on the 7R's FK; where a pose looks
     incomplete (an odd number of solutions: the real roots of the eliminant come in pairs but
-    for a root lost to rounding; a real eigenvalue whose candidate failed the check; no
-    solution; the degenerate flag), the rescue plan's candidates (another cut, other offsets)
+    for a root lost to rounding; a real eigenvalue whose candidate failed the check; two
+    candidates that Newton took to one solution; no solution; the degenerate flag), the rescue
+    plan's candidates (another cut, other offsets)
     are added; then merged and padded."""
     n = len(poses)
     k = pl.joint
     ip, q7, degen = _candidates(pl, poses, values)
     cand = _grid(ip, q7, n)
     ok, _ = _check(robot, poses, cand)
-    good = ok & ~finish.duplicates(cand, ok)
-    count = good.sum(1)
-    suspect = (count % 2 == 1) | (count == 0) | degen | np.any(np.all(np.isfinite(cand), -1) & ~ok, 1)
+    dup = finish.duplicates(cand, ok)
+    count = (ok & ~dup).sum(1)
+    suspect = ((count % 2 == 1) | (count == 0) | degen | np.any(dup, 1)
+               | np.any(np.all(np.isfinite(cand), -1) & ~ok, 1))
     if pl.alt is not None and np.any(suspect):
         rows = np.nonzero(suspect)[0]
         ip2, q72, degen2 = _candidates(pl.alt, poses[rows], values[rows])
