@@ -14,6 +14,7 @@ import pytest
 import derive
 from derive import reference
 from derive.errors import DeriveError, InputError
+from derive.codegen.free_joint import free_joint_kernels
 from derive.ik import free_joint, srs
 
 ARMS = ["xarm7", "gen3", "iiwa14", "panda", "fr3"]
@@ -249,7 +250,7 @@ def test_nearest_follows_a_path():
 
 def test_kernels_with_any_joint():
     """derive.kernels(robot, backend, free="qK"): numpy and python give the reference's
-    solutions; fk is the backend's; C has no such kernel yet (DeriveError says so); free= is
+    solutions; fk is the backend's; C has no such kernel yet (InputError says so); free= is
     required; q3 of the SRS class and q7 of the Panda class stay the generated kernels."""
     robot = derive.load_robot("xarm7")
     q = _inside(robot, 8, np.random.default_rng(4))
@@ -269,8 +270,10 @@ def test_kernels_with_any_joint():
     assert s1.shape == (16, 7) and c1 == rc[0]
     with pytest.raises(InputError, match="need free="):
         kn.ik(poses)
-    with pytest.raises(DeriveError, match="no C kernel"):
+    with pytest.raises(InputError, match="no C kernel"):
         derive.kernels("xarm7", "c", free="q5")
+    with pytest.raises(DeriveError, match="no C kernel"):
+        free_joint_kernels(robot, "c", 5, None)
     assert type(derive.kernels("iiwa14", "numpy", free="q3")).__name__ == "Kernels"
     assert type(derive.kernels("panda", "numpy", free="q7")).__name__ == "Kernels"
     sw = kn.ik_sweep(poses[:2], 4)

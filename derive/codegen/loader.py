@@ -863,11 +863,17 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
     if nominal is None and _any_joint(r, free):
-        # any joint K of a 7R arm outside its class's own choices: derive.ik.free_joint
-        from derive.codegen.free_joint import free_joint_kernels
+        # any joint K of a 7R arm outside its class's own choices: derive.ik.free_joint (numpy)
         k = int(free[1:])
+        if backend == "c":
+            choices = redundant.FREE_CHOICES.get(redundant.redundant_kind(r), ())
+            raise InputError(f"free: {r.name} has no C kernels with {free!r} as the free parameter; its "
+                             f"choices: {', '.join(choices) or 'none'}; any joint K is solved by "
+                             f"derive.kernels({r.name!r}, 'numpy', free='q{k}') (derive.ik.free_joint; "
+                             "no C kernel for it yet)")
+        from derive.codegen.free_joint import free_joint_kernels
         return memo("kernels-free-joint", (r.id, r.limits_id, backend, k),
-                    lambda: free_joint_kernels(r, backend, k, None if backend == "c" else kernels(r, backend)))
+                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend)))
     if nominal is None:
         nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)
