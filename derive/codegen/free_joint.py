@@ -4,8 +4,8 @@ The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding
 one, else the general 6R with a numeric per-value construction of the elimination). No code is
 emitted for it yet: the "python" and "numpy" backends run that numpy solver for ``ik``,
 ``ik_sweep`` and ``nearest``, and the backend's generated kernels for ``fk`` (and every other
-kernel: ``with_tool``, ``jacobian``, ...); the "c" backend has no such IK kernel (DeriveError
-saying so). The calling convention is that of :class:`derive.codegen.loader.Kernels` with the
+kernel: ``with_tool``, ``jacobian``, ...); the "c" backend has no such IK kernel
+(``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that of :class:`derive.codegen.loader.Kernels` with the
 7R ``free=`` argument: ``ik(P, free=values)`` -> (solutions (n, 16, 7) NaN-padded, counts (n,)),
 ``ik_sweep(P, n)`` over joint K's range, ``nearest(P, q_seed)`` with joint K chosen for the path.
 """
