@@ -280,3 +280,24 @@ def test_kernels_with_any_joint():
     assert sw.q.shape[:2] == (2, 4)
     nr = kn.nearest(poses[:2], q[:2] + 0.01)
     assert np.all(nr.found) and np.all(nr.max_move <= 0.015 + 1e-9)
+
+
+def test_cli_ik_with_any_joint_given(capsys):
+    """dq-derive ik ARM --q Q --free V --free-joint J (and --seed with --free-joint J): the
+    generating configuration among the solutions, each with joint J = V."""
+    import json
+
+    from derive.cli import main
+
+    q = [0.3, 0.6, -0.2, 1.4, 0.5, 0.8, -0.4]
+    assert main(["ik", "xarm7", "--q", *map(str, q), "--free", "1.4", "--free-joint", "4", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    sols = np.array([s["q"] for s in out["solutions"]])
+    assert out["free_parameter"]["name"] == "q4" and out["count"] == len(sols) >= 2
+    assert np.all(np.abs(sols[:, 3] - 1.4) < 1e-12) and _wrapped(sols - np.array(q)).max(-1).min() < 1e-8
+    seed = [0.31, 0.6, -0.2, 1.4, 0.5, 0.8, -0.4]
+    assert main(["ik", "xarm7", "--q", *map(str, q), "--seed", *map(str, seed), "--free-joint", "2", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["count"] == 1 and _wrapped(np.array(out["solutions"][0]["q"]) - np.array(seed)).max() <= 0.015
+    assert main(["ik", "xarm7", "--q", *map(str, q), "--free-joint", "2"]) == 2
+    assert "give exactly one of --free V" in capsys.readouterr().err
