@@ -154,3 +154,38 @@ def test_tolerances_are_defined_once():
         for n in names:
             assert f"\n{n} = " not in src, f"{mod.__name__} redefines {n}"
     assert tolerances.ACCEPT_POSITION == tolerances.ACCEPT_ANGLE == 1e-8
+
+
+@pytest.mark.parametrize("name, module", [("iiwa14", "srs"), ("panda", "panda"), ("fr3", "panda"),
+                                          ("z1", "parallel3")])
+def test_registry_steps_name_the_subproblems_the_candidates_call(name, module, monkeypatch):
+    """The 7R classes (and the three-parallel class) are compositions of derive.ik.subproblems:
+    the subproblems named in the registry's steps ("sp3: ...") are exactly the ones the class's
+    candidates call, and each call returns exact solutions on most poses."""
+    import importlib
+    import re
+
+    mod = importlib.import_module(f"derive.ik.{module}")
+    called: dict = {}
+    for k in range(1, 7):
+        fn = getattr(mod, f"sp{k}", None)
+        if fn is not None:
+            def spy(*args, _fn=fn, _k=k):
+                out = _fn(*args)
+                called.setdefault(_k, []).append(float(np.mean(out.exact)))
+                return out
+            monkeypatch.setattr(mod, f"sp{k}", spy)
+    cls, geo = classes.detect(name)
+    rng = np.random.default_rng(9)
+    lo, hi = np.asarray(load_robot(name).limits, dtype=float).T
+    q = rng.uniform(np.maximum(lo, -3.0), np.minimum(hi, 3.0), (30, cls.dof))
+    poses = reference.fk(name, q)
+    if cls.dof == 7:
+        free = srs.arm_angle(name, q) if cls.free == "psi" else q[:, 6]
+        cand = cls.candidates(geo, poses, free)[0]
+    else:
+        cand = cls.candidates(geo, poses)[0]
+    named = {int(m) for _, text in cls.steps for m in re.findall(r"\bsp(\d)\b", text)}
+    assert named and set(called) == named, (sorted(called), sorted(named))
+    assert all(max(rates) > 0.5 for rates in called.values()), called
+    assert np.isfinite(cand).any(axis=-1).all(axis=-1).any()

@@ -44,7 +44,7 @@ import pytest
 
 import derive
 from derive import reference
-from derive.ik import srs
+from derive.ik import panda, srs
 from derive.model.geometry import numeric_chain
 
 # both are in the `test` extra (PyPI wheels for cp310 and cp311, manylinux x86_64): no skip
@@ -375,3 +375,110 @@ def test_six_joint_solution_sets_equal_ssik(name):
         _assert_same_set(ours, theirs, f"{name} pose {i}")
         _assert_same_set(r_sols[i, :r_counts[i]], theirs, f"{name} pose {i}, reference")
         assert _contains(ours, q[i]) and _contains(theirs, q[i])
+
+
+# --------------------------------------------------------------------------------------------
+# The numpy solvers of the 7R classes as compositions of subproblems (derive.ik.srs, panda),
+# on random poses and on their singular sets, against ssik and frankik
+# --------------------------------------------------------------------------------------------
+
+def _with_singular_rows(name: str, n: int, seed: int) -> np.ndarray:
+    """n configurations inside the limits; rows 0-3 of every 8 put on a singular set or a double
+    root of the composed steps: q2 = 0 (shoulder), q4 = 0 (SRS elbow stretched; Panda X = 0,
+    q5 free), q6 = 0 (SRS wrist), q5 = +-pi/2 (Panda's wrist double root; SRS with joint 1 or 7
+    given: the sin t3 = +-1 double root)."""
+    q = _configs(name, n, seed)
+    for k, (j, v) in enumerate(((1, 0.0), (3, 0.0), (5, 0.0), (4, math.pi / 2))):
+        q[k::8, j] = v
+    return q
+
+
+def _distinct_within(rows: np.ndarray, width: int, tol: float) -> np.ndarray:
+    out: list = []
+    for x in np.asarray(rows, dtype=float).reshape(-1, width):
+        if not any(np.abs(_wrap(x - u)).max() < tol for u in out):
+            out.append(x)
+    return np.array(out).reshape(-1, width)
+
+
+@pytest.mark.parametrize("name", SRS)
+def test_srs_numpy_composition_equals_ssik(name):
+    """derive.ik.srs (sp3 elbow, sp1 + sp1 reference plane, ZYZ; sp4 + sp1 with a joint given)
+    on 40 poses, half of them on a singular set: with joint 3 given (``ik_joint``) and with
+    joint 1 given, every solution on the pose (FK of ssik's prebuilt arm), the generating
+    configuration among them, and where no joint is free the same solution sets as ssik's 6R arm
+    with that joint locked (distinct within MERGE_TOL on both sides, each solution within 1e-9
+    of one of the other's, 2e-6 on the rows at a double root, where ssik's roots carry the square
+    root of its rounding); at the generating arm angle
+    (``ik_psi``) every solution on the pose, the generating configuration among them, and on
+    the regular rows every solution in ssik's set at its own q3 (1e-9)."""
+    H, P, r0 = _hp(name, 7)
+    q = _with_singular_rows(name, 40, seed=3101)
+    mats = reference.fk_matrix(name, q)
+    poses = reference.fk(name, q)
+    target = mats @ np.linalg.inv(r0)
+    man_fk = ssik.Manipulator.from_prebuilt(f"{name}_ik")
+    by_psi = srs.ik_psi(name, poses, srs.arm_angle(name, q), q_ref=q)
+    compared = 0
+    for joint in (3, 1):
+        res = srs.ik_joint(name, poses, joint, q[:, joint - 1], q_ref=q)
+        for i in range(len(q)):
+            ours = res.q[i, :res.count[i]]
+            assert _contains(ours, q[i]), (name, joint, i)
+            assert max(np.abs(man_fk.fk(x) - mats[i]).max() for x in ours) < POSE
+            if res.singular[i].any():
+                continue          # a free joint (q_ref's value here): a continuum in ssik's set
+            man = _ssik_locked(H, P, joint - 1, float(q[i, joint - 1]))
+            theirs = np.insert(_ssik_set(man, target[i], 6), joint - 1, q[i, joint - 1], axis=1)
+            theirs = _distinct_within(theirs, 7, 1e-6)
+            assert len(ours) == len(theirs), (name, joint, i, ours, theirs)
+            compared += 1
+            d = np.abs(_wrap(ours[:, None] - theirs[None])).max(-1)
+            tol = SAME if i % 8 >= 4 else 2e-6
+            assert d.min(axis=0).max() < tol and d.min(axis=1).max() < tol, (name, joint, i)
+    assert compared >= 55
+    for i in range(len(q)):
+        ours = by_psi.q[i, :by_psi.count[i]]
+        assert _contains(ours, q[i]), (name, i)
+        assert max(np.abs(man_fk.fk(x) - mats[i]).max() for x in ours) < POSE
+        if i % 8 < 4:
+            continue      # ssik's roots at the elbow stretch are off by up to 1e-5 (q4 = 0 rows)
+        for x in ours:
+            theirs = _ssik_set(_ssik_locked(H, P, 2, float(x[2])), target[i], 6)
+            assert _contains(np.insert(theirs, 2, x[2], axis=1), x), (name, i)
+
+
+@pytest.mark.parametrize("name", PANDA)
+def test_panda_numpy_composition_equals_ssik_and_frankik(name):
+    """derive.ik.panda.ik_q7 (sp3 elbow, sp2 wrist, ZYZ shoulder) on 48 poses, half of them on a
+    singular set or a double root (q2 = 0, q4 = 0 with q5 free, q5 = +-pi/2), q7 the generating
+    value: every solution on the pose (FK of ssik's prebuilt arm), the generating configuration
+    among them; where no joint is free the same solution sets as ssik's self-motion charts at q7
+    (distinct within MERGE_TOL; 1e-9, 2e-6 on the rows at a double root); and on the regular
+    rows, inside frankik's domain, frankik's polished solutions equal ours (1e-9)."""
+    fr3 = name == "fr3"
+    man = ssik.Manipulator.from_prebuilt({"panda": "panda_ik", "fr3": "fr3_ik"}[name])
+    q = _with_singular_rows(name, 48, seed=3102)
+    mats = reference.fk_matrix(name, q)
+    res = panda.ik_q7(name, reference.fk(name, q), q[:, 6], q_ref=q)
+    compared = singular = 0
+    for i in range(len(q)):
+        ours = res.q[i, :res.counts[i]]
+        assert _contains(ours, q[i]), (name, i)
+        rows = np.array([c.q(q[i, 6]) for c in man.self_motion(mats[i])], dtype=float).reshape(-1, 7)
+        theirs = _distinct_within(rows[~np.isnan(rows).any(axis=1)], 7, 1e-6)
+        assert max(np.abs(man.fk(x) - mats[i]).max() for x in ours) < POSE
+        if res.singular[i].any():
+            singular += 1
+            continue      # a free joint (q_ref's value here): a continuum in ssik's charts
+        assert len(ours) == len(theirs), (name, i, ours, theirs)
+        d = np.abs(_wrap(ours[:, None] - theirs[None])).max(-1)
+        tol = SAME if i % 8 >= 4 else 2e-6
+        assert d.min(axis=0).max() < tol and d.min(axis=1).max() < tol, (name, i)
+        if i % 8 >= 4:                                   # regular rows: frankik too
+            f = frankik.ik_full(mats[i], None, float(q[i, 6]), fr3)
+            f = f[~np.isnan(f).any(axis=1) & (f[:, 1] != 0.0)]
+            polished = _distinct(np.array([_polish_on_frankik(x, mats[i]) for x in f]), 7)
+            _assert_same_set(ours[_frankik_domain(name, ours)], polished, f"{name} pose {i}")
+            compared += 1
+    assert compared == 24 and singular <= 12

@@ -14,6 +14,7 @@ import pytest
 from scipy.optimize import brentq, minimize
 from scipy.spatial.transform import Rotation
 
+from derive.algebra.angles import wrap_angle
 from derive.errors import InputError
 from derive.ik.subproblems import sp1, sp2, sp3, sp4, sp5, sp6
 from derive.ik.tolerances import SP_EXACT_TOL
@@ -399,7 +400,7 @@ def test_every_residual_is_the_equation():
     assert np.abs(ref - s5.residual)[s5.valid].max() < 1e-13
 
 
-# --- the C twin of sp1-sp4 (templates/subproblems.h.j2) against numpy -------------------------
+# --- the C twin of sp1-sp6 (templates/subproblems.h.j2) against numpy -------------------------
 
 C_WRAPPERS = r"""
 #include "subproblems.h"
@@ -413,6 +414,13 @@ void b_sp3(int n, const double *k, const double *p1, const double *p2, const dou
 { int i; LOOP c[i] = dq_sp3(k + 3 * i, p1 + 3 * i, p2 + 3 * i, d[i], t + 2 * i, r + 2 * i, f + i); }
 void b_sp4(int n, const double *h, const double *k, const double *p, const double *d, double *t, double *r, int *f, int *c)
 { int i; LOOP c[i] = dq_sp4(h + 3 * i, k + 3 * i, p + 3 * i, d[i], t + 2 * i, r + 2 * i, f + i); }
+void b_sp5(int n, const double *p0, const double *p1, const double *p2, const double *p3, const double *k1,
+           const double *k2, const double *k3, double *t1, double *t2, double *t3, double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp5(p0 + 3 * i, p1 + 3 * i, p2 + 3 * i, p3 + 3 * i, k1 + 3 * i, k2 + 3 * i, k3 + 3 * i,
+                            t1 + 4 * i, t2 + 4 * i, t3 + 4 * i, r + 4 * i, f + i); }
+void b_sp6(int n, const double *h, const double *k, const double *p, const double *d, double *t1, double *t2,
+           double *r, int *f, int *c)
+{ int i; LOOP c[i] = dq_sp6(h + 12 * i, k + 12 * i, p + 12 * i, d + 2 * i, t1 + 4 * i, t2 + 4 * i, r + 4 * i, f + i); }
 """
 
 
@@ -524,3 +532,86 @@ def test_sp5_sp6_robot_like_instances():
     v = np.einsum("nqi,nsqi->nsq", h, Rp(k[:, None], tt, p[:, None]))
     err = np.stack([v[..., 0] + v[..., 1] - d[:, None, 0], v[..., 2] + v[..., 3] - d[:, None, 1]], -1)
     assert np.abs(err)[sol.valid].max() < 1e-11
+
+
+def agree_sets(sol, c_angles, c_res, flags, count):
+    """sp5 / sp6: the C twin returns the exact solutions compacted (its slot order may differ from
+    numpy's, whose quartic roots come from an eigen-solver): the same flags and solution sets
+    (each solution matched to the nearest of the other side, angles wrapped). At a tangency (a
+    double root of the quartic, split by rounding into a near-real pair) the two root finders may
+    disagree on whether the pair is real; such an instance may differ in count, but only by
+    solutions whose residual shows the double root (above 1e-11, where a simple root has about
+    1e-15) and in at most 1 % of the instances. Matched solutions agree within 1e-6 rad, and
+    within 1e-10 in at least 99 % of the instances (the rest are ill-conditioned: an angle nearly
+    free, both sides' residuals still within SP_EXACT_TOL). Returns the median difference."""
+    assert np.array_equal(sol.degenerate, (flags & 2) == 2)
+    c = np.stack(c_angles, axis=-1)                                 # (n, 4, j)
+    diffs, tangent = [], 0
+    for i in range(len(count)):
+        mine, theirs = c[i, :count[i]], sol.theta[i][sol.valid[i]]
+        assert np.all(c_res[i, :count[i]] <= SP_EXACT_TOL)
+        if len(mine) != len(theirs):
+            tangent += 1
+            d = np.abs(wrap_angle(mine[:, None] - theirs[None])).max(-1)
+            extra_c = d.min(1, initial=np.inf) > 1e-6 if len(theirs) else np.ones(len(mine), bool)
+            extra_n = d.min(0, initial=np.inf) > 1e-6 if len(mine) else np.ones(len(theirs), bool)
+            assert np.all(c_res[i, :count[i]][extra_c] > 1e-11)
+            assert np.all(sol.residual[i][sol.valid[i]][extra_n] > 1e-11)
+            continue
+        assert sol.exact[i] == bool(flags[i] & 1)
+        if len(mine):
+            d = np.abs(wrap_angle(mine[:, None] - theirs[None])).max(-1)  # (count, count)
+            assert np.array_equal(np.sort(d.argmin(1)), np.arange(count[i]))   # one to one
+            diffs.append(d.min(1).max())
+    diffs = np.array(diffs)
+    assert tangent <= len(count) // 100, tangent
+    assert diffs.max() < 1e-6 and np.mean(diffs > 1e-10) <= 0.01, (diffs.max(), np.mean(diffs > 1e-10))
+    assert np.median(diffs) < 1e-13
+    return np.median(diffs)
+
+
+def test_c_sp5_sp6_agree_with_numpy(c_subproblems):
+    """The C twin of sp5 and sp6 (Durand-Kerner on the same quartic as numpy's eigenvalues, the
+    same rank-one and free-block branches) against numpy: generic instances from known angles,
+    instances with no solution, and robot-like ones (axes along +-x, +-y, +-z, offsets in quarter
+    metres: rank-one blocks, free angles and continua)."""
+    rng = np.random.default_rng(22)
+    n = 600
+    # sp6: generic (two thirds) and shifted right-hand sides (often no solution)
+    h, k, p = rng.normal(size=(n, 4, 3)), unit(rng, n * 4).reshape(n, 4, 3), rng.normal(size=(n, 4, 3))
+    t = rng.uniform(-np.pi, np.pi, (n, 2))
+    val = np.einsum("nqi,nqi->nq", h, Rp(k, t[:, [0, 1, 0, 1]], p))
+    d = np.stack([val[:, 0] + val[:, 1], val[:, 2] + val[:, 3]], axis=-1)
+    d[::3] += rng.normal(size=(len(d[::3]), 2)) * 3
+    sol = sp6(h, k, p, d)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp6", n, 4, h, k, p, d, angles=2)
+    agree_sets(sol, angles, res, flags, count)
+    assert (count == 0).any() and (count == 4).any() and (count == 2).any()
+
+    ax = lambda m: np.eye(3)[rng.integers(0, 3, m)] * rng.choice([-1.0, 1.0], (m, 1))
+    vec = lambda m: rng.integers(-2, 3, (m, 3)) * 0.25
+    h, k, p = ax(4 * n).reshape(n, 4, 3), ax(4 * n).reshape(n, 4, 3), vec(4 * n).reshape(n, 4, 3)
+    val = np.einsum("nqi,nqi->nq", h, Rp(k, t[:, [0, 1, 0, 1]], p))
+    d = np.stack([val[:, 0] + val[:, 1], val[:, 2] + val[:, 3]], axis=-1)
+    sol = sp6(h, k, p, d)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp6", n, 4, h, k, p, d, angles=2)
+    agree_sets(sol, angles, res, flags, count)
+    assert sol.degenerate.any() and (~sol.degenerate & (count > 0)).any()
+
+    # sp5: generic, no solution (p0 moved far), robot-like
+    p1, p2, p3, k1, k2, k3 = (rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), rng.normal(size=(n, 3)),
+                              unit(rng, n), unit(rng, n), unit(rng, n))
+    t = rng.uniform(-np.pi, np.pi, (n, 3))
+    p0 = Rp(k2, t[:, 1], p2 + Rp(k3, t[:, 2], p3)) - Rp(k1, t[:, 0], p1)
+    p0[::4] += 10.0
+    sol = sp5(p0, p1, p2, p3, k1, k2, k3)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp5", n, 4, p0, p1, p2, p3, k1, k2, k3, angles=3)
+    agree_sets(sol, angles, res, flags, count)
+    assert (count == 0).any() and (count >= 2).any()
+
+    p1, p2, p3, k1, k2, k3 = vec(n), vec(n), vec(n), ax(n), ax(n), ax(n)
+    p0 = Rp(k2, t[:, 1], p2 + Rp(k3, t[:, 2], p3)) - Rp(k1, t[:, 0], p1)
+    sol = sp5(p0, p1, p2, p3, k1, k2, k3)
+    angles, res, flags, count = call_c(c_subproblems, "b_sp5", n, 4, p0, p1, p2, p3, k1, k2, k3, angles=3)
+    agree_sets(sol, angles, res, flags, count)
+    assert sol.degenerate.any() and (~sol.degenerate & (count > 0)).any()

@@ -6,18 +6,20 @@ the thesis's (section 4.3.5) and the one the extraction finds (:mod:`derive.ik.e
 
 1. theta1 from W.6 (= 4.9): y5 cos t1 - x5 sin t1 = -d4, with the frame-5 point
    p5 = p + d6 R e_y; two roots (4.11);
-2. theta5: cos t5 from B.13 (= 4.12) and |sin t5| from the rotation, t5 = atan2(+-s5, c5)
-   (the thesis's 4.13 uses acos, which loses accuracy near 0 and pi);
-3. theta6 from the pair B.29-B.32 (= 4.14-4.17): with A = Rz(t1)^T R, row 2 of A is
-   (-s5 c6, c5, s5 s6), so t6 = atan2(s5 A23, -s5 A21) (equivalent to 4.28 without its
-   divisions by cos(t5/2), sin(t5/2) and cos((t2+t3+t4)/2));
-   at the wrist singularity (sin t5 = 0) t6 is free: it is taken from a reference
-   configuration when one is given, else chosen for reach (:func:`_free_theta6`), and the
-   solution is marked singular;
-4. t2 + t3 + t4 from A R_-y(t6)^-1 R_-z(t5)^-1 = R_-y(t2+t3+t4) (exact also when t6 was
+2. theta5 and theta6 from the rotation: with A = Rz(t1)^T R, row 2 of A is
+   (-s5 c6, c5, s5 s6) (B.29-B.32, = 4.14-4.17), a point rotated about axis 6 and e_y about
+   axis 5 to meet; two solutions, the sign of sin t5 (the thesis's 4.13 takes t5 by acos,
+   which loses accuracy near 0 and pi; its 4.28 divides by cos(t5/2), sin(t5/2) and
+   cos((t2+t3+t4)/2)); at the wrist singularity (sin t5 = 0) t6 is free: it is taken from a
+   reference configuration when one is given, else chosen for reach (:func:`_free_theta6`),
+   and the solution is marked singular;
+3. t2 + t3 + t4 from A R_-y(t6)^-1 R_-z(t5)^-1 = R_-y(t2+t3+t4) (exact also when t6 was
    chosen freely);
-5. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
-6. theta2 from C.12, C.14 (4.39-4.41); theta4 = (t2+t3+t4) - t2 - t3 (C.1, C.3, 4.44).
+4. theta3 from C.19, C.21 by the sum of squares (4.37-4.38), two roots;
+5. theta2 from C.12, C.14 (4.39-4.41); theta4 = (t2+t3+t4) - t2 - t3 (C.1, C.3, 4.44).
+
+Each step is one subproblem of :mod:`derive.ik.subproblems` (IK-Geo's naming): sp4, sp2, sp1,
+sp3, sp1 (:func:`solve_batch`).
 
 Every candidate goes through the finish step of all classes (:mod:`derive.ik.finish`): checked
 by the reference forward kinematics, candidates that do not reproduce the pose dropped,
@@ -41,7 +43,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import classes, general6r, panda, parallel3, spherical, srs
 from derive.ik.finish import finish, select_one
 from derive.ik.parallel3 import P3Geometry
-from derive.ik.spherical import SWGeometry, sw_geometry
+from derive.ik.subproblems import rot, sp1, sp2, sp3, sp4
+from derive.ik.spherical import SWGeometry, _slot, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
 from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
 from derive.kinematics.pose import as_pose_batch
@@ -104,13 +107,14 @@ def _ur_geometry(robot) -> URGeometry:
 
 
 # --------------------------------------------------------------------------- #
-# Batch solver
+# Batch solver: a composition of subproblems (derive.ik.subproblems)
 # --------------------------------------------------------------------------- #
-def _rmy(t):
-    """Rotation by t about -y."""
-    c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(t), np.ones_like(t)
-    return np.stack([np.stack([c, z, -s], -1), np.stack([z, o, z], -1), np.stack([s, z, c], -1)], -2)
+#: Unit vectors and the UR axes of the thesis form, as constants of the composition.
+_X, _Y, _Z = np.eye(3)
+
+
+def _b(v, n):
+    return np.broadcast_to(v, (n, 3))
 
 
 def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
@@ -133,8 +137,8 @@ def _free_theta6(geo: URGeometry, wrist1, n: int) -> np.ndarray:
     The coefficients are sampled at theta6 = 0, pi/2, pi (exact: the form is linear).
     """
     def cos3(t):
-        _, x4, z4 = wrist1(np.full(n, t))
-        return (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
+        _, v = wrist1(np.full(n, t))
+        return (v[:, 0] ** 2 + v[:, 2] ** 2 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
 
     v0, v90, v180 = cos3(0.0), cos3(np.pi / 2), cos3(np.pi)
     alpha = 0.5 * (v0 + v180)
@@ -148,60 +152,63 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses: (q (n,8,6), singular (n,8), reason (n,8) codes).
 
-    reason codes: 0 ok, 1 theta1 unreachable, 2 theta3 unreachable. Candidates are not yet
-    checked by FK (see :func:`solve`). Unreachable branches are NaN unless
-    ``keep_unreachable`` (then their square roots are clipped to 0: the nearest the arm
-    comes, used as seeds by :mod:`derive.refinement`).
+    The steps of the module docstring, each a subproblem of :mod:`derive.ik.subproblems` on the
+    thesis-form chain (axes z, -y, -y, -y, -z, -y; A = Rz(t1)^T R):
+
+    1. t1: sp4, e_y^T R(-z, t1) p5 = -d4 (W.6), two roots;
+    2. (t6, t5): sp2, R(-y, t6) u = R(z, t5) e_y with u = A^T e_y (row 2 of A: B.29-B.32), two
+       solutions (the sign of sin t5); at the wrist singularity t6 is free (module docstring);
+    3. t2 + t3 + t4: sp1, R(-y, t234) e_x = A R(-y, t6)^T Rz(t5) e_x;
+    4. t3: sp3, ||R(-y, t3) a3 e_x + a2 e_x|| = ||v||, v the wrist-1 point in the arm plane
+       (C.19, C.21), two roots;
+    5. t2: sp1, R(-y, t2) (a2 e_x + R(-y, t3) a3 e_x) = v (C.12, C.14); t4 by subtraction.
+
+    reason codes: 0 ok, 1 theta1 unreachable, 2 theta3 unreachable (the discriminants of steps 1
+    and 4 below -REACH_TOL, relative). Candidates are not yet checked by FK (see :func:`solve`).
+    Unreachable branches are NaN unless ``keep_unreachable`` (then the subproblems'
+    least-squares roots: the nearest the arm comes, used as seeds by :mod:`derive.refinement`).
     """
     n = poses.shape[0]
     r, p = _chain_pose(geo, poses)
     out = np.full((n, 8, 6), np.nan)
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
+    x, y, z = _b(_X, n), _b(_Y, n), _b(_Z, n)
+    a3x, ma2x = _b(geo.a3 * _X, n), _b(-geo.a2 * _X, n)
+    # the slots of step 4 in the order sin t3 >= 0, < 0 (slot 0 has the sign of -a2 a3)
+    order3 = (0, 1) if geo.a2 * geo.a3 < 0 else (1, 0)
 
-    # theta1 (W.6): y5 cos t1 - x5 sin t1 = -d4
     p5 = p + geo.d6 * r[:, :, 1]
-    x5, y5 = p5[:, 0], p5[:, 1]
-    rr = x5 * x5 + y5 * y5
-    disc = rr - geo.d4 * geo.d4
-    bad1 = disc < -REACH_TOL * max(1.0, geo.d4 * geo.d4)
-    root = np.sqrt(np.clip(disc, 0.0, None))
-    phi = np.arctan2(-x5, y5)
+    bad1 = p5[:, 0] ** 2 + p5[:, 1] ** 2 - geo.d4 ** 2 < -REACH_TOL * max(1.0, geo.d4 ** 2)
+    s1 = sp4(y, -z, p5, np.full(n, -geo.d4))
 
     def wrist1(t1, a, t5, t6):
-        """t2+t3+t4 and the wrist-1 point (x4, z4) in the arm plane (C.19, C.21)."""
-        # R_-z(t5) = Rz(-t5); M = A R_-y(t6)^T R_-z(t5)^T = R_-y(t234)
-        m = a @ np.swapaxes(_rmy(t6), -1, -2) @ np.swapaxes(rot_z(-t5), -1, -2)
-        t234 = np.arctan2(m[:, 2, 0], m[:, 0, 0])
-        p3 = p5 + geo.d5 * np.einsum("nij,nj->ni", rot_z(t1),
-                                     np.stack([-np.sin(t234), np.zeros(n), np.cos(t234)], -1))
-        v = np.einsum("nji,nj->ni", rot_z(t1), p3 - np.array([0.0, 0.0, geo.d1]))
-        return t234, v[:, 0], v[:, 2]
+        """t2+t3+t4 (sp1) and the wrist-1 point v in the arm plane (C.19, C.21)."""
+        m0 = np.einsum("nij,nj->ni", a, rot(-y, -t6, rot(z, t5, x)))
+        t234 = sp1(-y, x, m0).theta[:, 0, 0]
+        p3 = p5 + geo.d5 * rot(z, t1, rot(-y, t234, z))
+        v = rot(z, -t1, p3 - geo.d1 * _Z)
+        v[:, 1] = 0.0
+        return t234, v
 
-    for i1, sgn1 in enumerate((1.0, -1.0)):
-        t1 = phi + sgn1 * np.arctan2(root, -geo.d4)
+    for i1 in range(2):
+        t1 = _slot(s1, i1)[:, 0]
         a = np.einsum("nji,njk->nik", rot_z(t1), r)          # A = Rz(t1)^T R
-        c5 = a[:, 1, 1]
-        s5abs = np.hypot(a[:, 0, 1], a[:, 2, 1])
-        sing = s5abs < WRIST_SINGULAR
-        for i5, sgn5 in enumerate((1.0, -1.0)):
-            s5 = np.where(sing, 0.0, sgn5 * s5abs)
-            t5 = np.arctan2(s5, np.where(sing, np.sign(c5) + (c5 == 0), c5))
-            t6 = np.arctan2(sgn5 * a[:, 1, 2], -sgn5 * a[:, 1, 0])
+        s65 = sp2(-y, z, a[:, 1, :], y)
+        sing = np.hypot(a[:, 0, 1], a[:, 2, 1]) < WRIST_SINGULAR
+        for i5 in range(2):
+            t6, t5 = _slot(s65, i5).T
+            t5 = np.where(sing, np.where(a[:, 1, 1] >= 0, 0.0, np.pi), t5)
             if np.any(sing):
                 free = _free_theta6(geo, lambda t: wrist1(t1, a, t5, t), n) if q6_ref is None else q6_ref
                 t6 = np.where(sing, free, t6)
-            t234, x4, z4 = wrist1(t1, a, t5, t6)
-            c3 = (x4 * x4 + z4 * z4 - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)
-            bad3 = np.abs(c3) > 1 + REACH_TOL
-            c3 = np.clip(c3, -1.0, 1.0)
-            s3abs = np.sqrt(1.0 - c3 * c3)
-            for i3, sgn3 in enumerate((1.0, -1.0)):
-                s3 = sgn3 * s3abs
-                t3 = np.arctan2(s3, c3)
-                k1 = geo.a2 + geo.a3 * c3
-                k2 = geo.a3 * s3
-                t2 = np.arctan2(z4 * k1 - x4 * k2, x4 * k1 + z4 * k2)     # 4.41
+            t234, v = wrist1(t1, a, t5, t6)
+            vv = np.einsum("ni,ni->n", v, v)
+            bad3 = np.abs((vv - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)) > 1 + REACH_TOL
+            s3 = sp3(-y, a3x, ma2x, np.sqrt(vv))
+            for i3 in range(2):
+                t3 = _slot(s3, order3[i3])[:, 0]
+                t2 = sp1(-y, rot(-y, t3, a3x) - ma2x, v).theta[:, 0, 0]
                 t4 = t234 - t2 - t3
                 k = 4 * i1 + 2 * i5 + i3
                 out[:, k] = wrap_angle(np.stack([t1, t2, t3, t4, t5, t6], -1))
@@ -250,12 +257,11 @@ def _ur_class():
     return classes.IKClass(
         name="ur", title="UR family (thesis section 4.3.5)", dof=6,
         detect=classes.quiet_detect(ur_geometry), candidates=candidates,
-        steps=(("theta1", "sp4-type: y5 cos t1 - x5 sin t1 = -d4 (W.6), two roots"),
-               ("theta5", "the rotation: cos t5 = A22, |sin t5| = hypot(A12, A32), two signs"),
-               ("theta6", "the rotation: row 2 of Rz(t1)^T R; free at sin t5 = 0"),
-               ("theta2 + theta3 + theta4", "the rotation, once theta6 is fixed"),
-               ("theta3", "sp3-type: the cosine law in the arm plane (C.19, C.21), two roots"),
-               ("theta2, theta4", "sp1-type: the arm plane (C.12, C.14), then the sum")),
+        steps=(("theta1", "sp4: e_y^T R(-z, t1) p5 = -d4 (W.6), two roots"),
+               ("theta6, theta5", "sp2: R(-y, t6) u = R(z, t5) e_y, u = row 2 of Rz(t1)^T R; free t6 at sin t5 = 0"),
+               ("theta2 + theta3 + theta4", "sp1: R(-y, t234) e_x = Rz(t1)^T R R(-y, t6)^T Rz(t5) e_x"),
+               ("theta3", "sp3: ||R(-y, t3) a3 e_x + a2 e_x|| = |v|, v the wrist-1 point (C.19, C.21), two roots"),
+               ("theta2, theta4", "sp1: R(-y, t2) (a2 e_x + R(-y, t3) a3 e_x) = v (C.12, C.14), then the sum")),
         branch_labels=("theta1 root (+ / -)", "theta5 sign (+ / -)", "theta3 sign (+ / -)"),
         singular_sets=("wrist, sin t5 = 0: theta6 free (from q_ref, else chosen for reach), marked singular",
                        "shoulder: the two theta1 roots meet (merged)",

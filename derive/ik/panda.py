@@ -36,26 +36,30 @@ pose (R7, p):
 1. ``frame6``: O7 = p - d7 z7; R6 = R7 Rz(-q7) Rx(-pi/2) (eq. F7: T7 = T6 Rx(pi/2) Tx(a6)
    Rz(q7)); O6 = O7 - a6 x6. O6 is also the origin of frame 5 (a5 = d6 = 0).
 2. ``shoulder_in_6``: v = R6^T (S - O6), the shoulder in frame 6.
-3. ``elbow`` (q4): the shoulder in frame 5 seen from the arm side is (X c5, -X s5, Z) with
-   X = -(a3 c4 + d3 s4 + a4), Z = a3 s4 - d3 c4 - d5 (eq. E1), so |v|^2 = X^2 + Z^2 gives
-   A c4 + B s4 = K, A = a3 a4 + d3 d5, B = a4 d3 - a3 d5,
-   K = (|v|^2 - a3^2 - d3^2 - a4^2 - d5^2) / 2 (eq. E2); q4 = atan2(B, A) +- acos(K / hypot(A, B)).
+3. ``elbow`` (q4), **subproblem 3**: the shoulder in frame 5 seen from the arm side is
+   (X c5, -X s5, Z) with X = -(a3 c4 + d3 s4 + a4), Z = a3 s4 - d3 c4 - d5 (eq. E1), and
+   (-X, Z) = Rz(q4) p1 - p2 with p1 = (a3, -d3, 0), p2 = (-a4, d5, 0), so |v|^2 = X^2 + Z^2 is
+   ||Rz(q4) p1 - p2|| = |v| (sp3), i.e. A c4 + B s4 = K, A = a3 a4 + d3 d5, B = a4 d3 - a3 d5,
+   K = (|v|^2 - a3^2 - d3^2 - a4^2 - d5^2) / 2 (eq. E2): q4 = atan2(B, A) +- acos(K / hypot(A, B)).
    |K| > hypot(A, B): O6 is outside the elbow's range (unreachable).
-4. ``wrist6`` (q6): the same point from the wrist side is Rx(pi/2) Rz(q6) v =
-   (vx c6 - vy s6, -vz, vx s6 + vy c6) (eq. W1); its third row, vx s6 + vy c6 = Z(q4)
-   (eq. W2), gives q6 = atan2(vx, vy) +- a, cos a = Z / hypot(vx, vy), taken as
-   a = atan2(sqrt(X^2 - vz^2), Z) (eq. W4: hypot(vx, vy) sin a = |X c5|, accurate also where
-   X is small).
-5. ``wrist5`` (q5): rows 1 and 2 of E1 = W1: X c5 = vx c6 - vy s6, X s5 = vz (eq. W3),
-   q5 = atan2(sgn(X) vz, sgn(X) (vx c6 - vy s6)).
-6. ``shoulder`` (q1, q2, q3): R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
+4. ``wrist`` (q5, q6), **subproblem 2**: the same point from the wrist side is Rx(pi/2) Rz(q6) v =
+   (vx c6 - vy s6, -vz, vx s6 + vy c6) (eq. W1) = R(-e_y, q6) (vx, -vz, vy), so
+   Rz(-q5) (X, 0, Z) = R(-e_y, q6) (vx, -vz, vy) (sp2): its height along axis 6 gives q5 from
+   X s5 = vz, with X c5 = +-sqrt(X^2 - vz^2) (eq. W4, accurate where |X| is small), then q6
+   by subproblem 1; the pair with X c5 <= 0 is q6 = atan2(vx, vy) + a, cos a = Z / hypot(vx, vy),
+   the root of the third row vx s6 + vy c6 = Z(q4) (eq. W2) with the + sign, and
+   X c5 = vx c6 - vy s6, X s5 = vz (eq. W3) hold.
+5. ``shoulder`` (q1, q2, q3): R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
    = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (eq. S1), and R3 = Rz(q1) Ry(q2) Rz(q3) (eq. S2; both
    by Rx(-pi/2) Rz(t) Rx(pi/2) = Ry(t)), a ZYZ
    Euler decomposition: q2 = atan2(+-hypot(M13, M23), M33), q1 = atan2(+-M23, +-M13),
    q3 = atan2(+-M32, -+M31).
 
 Branch id b = 4 i4 + 2 i6 + i2, with i = 0 for the + root and 1 for the - root of steps 3,
-4 and 6. Singular sets (the construction's, each a real singularity of the arm with q7 fixed):
+4 and 5. Steps 3 and 4 are subproblems of :mod:`derive.ik.subproblems` (sp3, sp2), step 5 the
+one ZYZ of :mod:`derive.ik.euler`; the class adds its rules for double roots, free joints and
+reach on its own quantities (the cosine K / hypot(A, B), X, hypot(vx, vy)). Singular sets (the
+construction's, each a real singularity of the arm with q7 fixed):
 
 * ``elbow stretched / folded``: |K| = hypot(A, B), the two q4 roots coincide (q4 = atan2(B, A)
   or + pi); the pairs merge, 4 solutions;
@@ -70,7 +74,7 @@ Branch id b = 4 i4 + 2 i6 + i2, with i = 0 for the + root and 1 for the - root o
   determined; q1 is taken from ``q_ref`` (else 0), marked singular.
 
 The wrist centre on axis 1 (O6 on the z axis) is not singular here: q1 comes from the
-orientation of frame 3 (step 6), not from the position of O6 as in He & Liu's q1 step.
+orientation of frame 3 (step 5), not from the position of O6 as in He & Liu's q1 step.
 
 Every candidate is checked by the reference FK (:func:`derive.kinematics.fk.fk`) and dropped
 beyond :data:`~derive.ik.tolerances.ACCEPT_POSITION` (m) / :data:`~derive.ik.tolerances.ACCEPT_ANGLE` (rad); near-duplicates (:data:`MERGE_TOL` in every joint)
@@ -93,6 +97,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import select
 from derive.ik.finish import Solutions, empty, finish
 from derive.ik.euler import zyz
+from derive.ik.subproblems import sp2, sp3
+from derive.ik.subproblems._common import double_root
 from derive.ik.tolerances import (CLASS_DIRECTION, CLASS_DISTANCE, DOUBLE_ROOT,
                                   FREE_JOINT_DISTANCE, MAP_ANGLE, MAP_POSITION, REACH_TOL,
                                   W4_NOISE)
@@ -271,6 +277,7 @@ def _panda_geometry(robot) -> PandaGeometry:
 # --------------------------------------------------------------------------- #
 # The named steps (module docstring), vectorised over poses
 # --------------------------------------------------------------------------- #
+_E = np.eye(3)                      # e_x, e_y, e_z
 #: Rx(-pi/2)
 _RX_M = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]])
 
@@ -290,16 +297,16 @@ def shoulder_in_6(geo: PandaGeometry, r6, o6):
 
 
 def elbow(geo: PandaGeometry, v):
-    """Step 3 (eq. E2): the two roots q4 (n, 2) of A c4 + B s4 = K and the unreachable flag (n,)."""
-    a = geo.a3 * geo.a4 + geo.d3 * geo.d5
-    b = geo.a4 * geo.d3 - geo.a3 * geo.d5
-    k = 0.5 * (np.einsum("ni,ni->n", v, v) - geo.a3 ** 2 - geo.d3 ** 2 - geo.a4 ** 2 - geo.d5 ** 2)
-    r = math.hypot(a, b)
-    c = k / r
-    bad = np.abs(c) > 1.0 + REACH_TOL
-    ang = np.where(np.abs(c) > 1.0 - DOUBLE_ROOT, np.where(c > 0, 0.0, np.pi), np.arccos(np.clip(c, -1.0, 1.0)))
-    phi = math.atan2(b, a)
-    return np.stack([phi + ang, phi - ang], -1), bad
+    """Step 3 (eq. E2) as subproblem 3: |v|^2 = X^2 + Z^2 with (-X, Z) = Rz(q4) p1 - p2,
+    p1 = (a3, -d3, 0), p2 = (-a4, d5, 0) (eq. E1), so ||Rz(q4) p1 - p2|| = |v|: the two roots
+    q4 (n, 2) (atan2(B, A) + acos(c) first) and the unreachable flag (n,). The cosine
+    c = K / hypot(A, B) = (|v|^2 - |p1|^2 - |p2|^2) / (2 |p1| |p2|) decides the reach (beyond
+    1 + REACH_TOL) and the double root (within DOUBLE_ROOT of +-1: both roots its middle)."""
+    p1, p2 = np.array([geo.a3, -geo.d3, 0.0]), np.array([-geo.a4, geo.d5, 0.0])
+    c = 0.5 * (np.einsum("ni,ni->n", v, v) - p1 @ p1 - p2 @ p2) / (np.linalg.norm(p1) * np.linalg.norm(p2))
+    roots = double_root(sp3(_E[2], p1, p2, np.linalg.norm(v, axis=-1)).theta[..., 0],
+                        np.abs(c) > 1.0 - DOUBLE_ROOT)
+    return roots[:, ::-1], np.abs(c) > 1.0 + REACH_TOL
 
 
 def xz(geo: PandaGeometry, q4):
@@ -308,50 +315,39 @@ def xz(geo: PandaGeometry, q4):
     return -(geo.a3 * c4 + geo.d3 * s4 + geo.a4), geo.a3 * s4 - geo.d3 * c4 - geo.d5
 
 
-def wrist6(v, x, z, q6_free):
-    """Step 4 (eq. W2): the two roots q6 (n, 2) of vx s6 + vy c6 = Z, the unreachable flag (n,)
-    and the singular flag (n,) (S on axis 6: q6 free, ``q6_free`` where |Z| allows it).
-
-    The root is q6 = atan2(vx, vy) +- a with cos a = Z / rho, rho = hypot(vx, vy); its sine is
-    not taken from 1 - cos^2 (acos): rho sin a = |vx c6 - vy s6| = |X c5|, and by eq. W3
-    (X c5)^2 = X^2 - vz^2 (eq. W4), a difference of two small numbers where |X| is small (the
-    shoulder near axis 5, q4 near 0 on the Panda), so a = atan2(sqrt(X^2 - vz^2), Z) keeps its
-    relative accuracy there (acos(Z / rho) of a cosine within 1e-13 of 1 lost it, and the
-    snap of such a cosine to 1 moved q6 by up to 5e-7 rad: solutions reproduced the pose only to
-    1e-7). The two roots merge where X^2 - vz^2 = (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
-    (q5 = +-pi/2, the second term the rounding of vz): the pose changes only to second order
-    there, by |X| c5^2 / 2 < (DOUBLE_ROOT |X| + W4_NOISE) / 2."""
+def wrist(v, x, z, q5_free, q6_free):
+    """Steps 4 and 5 (eq. W1-W3) as subproblem 2: the shoulder in frame 5 from the arm side,
+    Rz(-q5) (X, 0, Z) (eq. E1), equals the shoulder in frame 6 turned into frame 5,
+    Rx(pi/2) Rz(q6) v = R(-e_y, q6) (vx, -vz, vy) (eq. W1). sp2 takes q5 from the height along
+    axis 6, X s5 = vz, then q6 by subproblem 1; its two roots (q5, q6) (n, 2) each, X c5 <= 0
+    first (q6 = atan2(vx, vy) + a of eq. W2). The root X c5 = +-sqrt(X^2 - vz^2) (eq. W4) keeps
+    its relative accuracy where |X| is small (the shoulder near axis 5, q4 near 0 on the Panda;
+    the height along axis 5, vx s6 + vy c6 = Z of eq. W2, would lose it: hypot(vx, vy) and |Z|
+    nearly equal). The class's rules: the roots merge (both at their middle) where
+    X^2 - vz^2 = (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (q5 = +-pi/2, the second term the
+    rounding of vz; the pose changes only to second order there); q5 is free (``q5_free``)
+    where |X| < FREE_JOINT_DISTANCE (S on axis 5), q6 (``q6_free``) where
+    hypot(vx, vy) < FREE_JOINT_DISTANCE (S on axis 6); unreachable where |Z| > hypot(vx, vy)
+    (1 + REACH_TOL). Returns q5, q6, unreachable (n,), free5 (n,), free6 (n,)."""
     rho = np.hypot(v[:, 0], v[:, 1])
-    free = rho < FREE_JOINT_DISTANCE
-    c = np.where(free, 0.0, z / np.where(free, 1.0, rho))
-    bad = np.where(free, np.abs(z) > FREE_JOINT_DISTANCE, np.abs(c) > 1.0 + REACH_TOL)
-    x2 = x * x
-    e = x2 - v[:, 2] * v[:, 2]
-    e = np.where(e <= DOUBLE_ROOT * x2 + W4_NOISE * np.abs(x), 0.0, e)
-    ang = np.arctan2(np.sqrt(e), z)
-    psi = np.arctan2(v[:, 0], v[:, 1])
-    roots = np.stack([psi + ang, psi - ang], -1)
-    roots = np.where(free[:, None], q6_free[:, None], roots)
-    return roots, bad, free
-
-
-def wrist5(v, x, q6, q5_free):
-    """Step 5 (eq. W3): q5 from X c5 = vx c6 - vy s6, X s5 = vz; where |X| < FREE_JOINT_DISTANCE
-    (S on axis 5) q5 is free: ``q5_free``. Returns q5 (n,) and the singular flag (n,)."""
-    free = np.abs(x) < FREE_JOINT_DISTANCE
-    sg = np.where(x < 0, -1.0, 1.0)
-    q5 = np.arctan2(sg * v[:, 2], sg * (v[:, 0] * np.cos(q6) - v[:, 1] * np.sin(q6)))
-    return np.where(free, q5_free, q5), free
+    free6, free5 = rho < FREE_JOINT_DISTANCE, np.abs(x) < FREE_JOINT_DISTANCE
+    bad = np.where(free6, np.abs(z) > FREE_JOINT_DISTANCE,
+                   np.abs(np.where(free6, 0.0, z / np.where(free6, 1.0, rho))) > 1.0 + REACH_TOL)
+    double = x * x - v[:, 2] * v[:, 2] <= DOUBLE_ROOT * x * x + W4_NOISE * np.abs(x)
+    sol = sp2(-_E[2], -_E[1], np.stack([x, 0.0 * x, z], -1), v[:, [0, 2, 1]] * [1.0, -1.0, 1.0])
+    q5, q6 = (double_root(sol.theta[..., j], double) for j in (0, 1))
+    return (np.where(free5[:, None], q5_free[:, None], q5),
+            np.where(free6[:, None], q6_free[:, None], q6), bad, free5, free6)
 
 
 def frame3(r6, q4, q5, q6):
-    """Step 6, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
+    """Step 5, eq. S1: R3 = R6 Rz(-q6) Rx(-pi/2) Rz(-q5) Rx(pi/2) Rz(-q4) Rx(-pi/2)
     = R6 Rz(-q6) Ry(-q5) Rz(-q4) Rx(-pi/2) (Rx(-pi/2) Rz(t) Rx(pi/2) = Ry(t))."""
     return r6 @ (rot_z(-q6) @ rot_y(-q5) @ rot_z(-q4)) @ _RX_M
 
 
 def shoulder(m, sign2, q1_free):
-    """Step 6, eq. S2: R3 = Rz(q1) Ry(q2) Rz(q3), the ZYZ decomposition with sin q2 of sign
+    """Step 5, eq. S2: R3 = Rz(q1) Ry(q2) Rz(q3), the ZYZ decomposition with sin q2 of sign
     ``sign2`` (:func:`derive.ik.euler.zyz`); where |sin q2| < WRIST_SINGULAR q1 is ``q1_free`` and
     q3 takes the rest. Returns q1, q2, q3, singular."""
     return zyz(m, sign2, q1_free)
@@ -379,10 +375,9 @@ def canonical_candidates(geo: PandaGeometry, r7: np.ndarray, p: np.ndarray, q7: 
     for i4 in range(2):
         q4 = q4s[:, i4]
         x, z = xz(geo, q4)
-        q6s, bad6, free6 = wrist6(v, x, z, q_free[:, 5])
+        q5s, q6s, bad6, free5, free6 = wrist(v, x, z, q_free[:, 4], q_free[:, 5])
         for i6 in range(2):
-            q6 = q6s[:, i6]
-            q5, free5 = wrist5(v, x, q6, q_free[:, 4])
+            q5, q6 = q5s[:, i6], q6s[:, i6]
             m = frame3(r6, q4, q5, q6)
             for i2, sign2 in enumerate((1.0, -1.0)):
                 q1, q2, q3, free1 = shoulder(m, sign2, q_free[:, 0])

@@ -17,7 +17,7 @@ the robot's numbers substituted, written so that it is total and needs few trans
   Ry(b)^T Rz(a)^T m (:func:`derive.ik.euler.zyz`), so the product stays exact;
 * **double roots snapped**: an acos argument within STRETCH_TOL (SRS elbow) or DOUBLE_ROOT
   (Panda elbow) of +-1 is +-1, so the two roots coincide exactly and merge; the Panda's q6 roots
-  merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (eq. W4 of :func:`derive.ik.panda.wrist6`);
+  merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X| (eq. W4 of :func:`derive.ik.panda.wrist`);
 * reach: an acos argument beyond +-1 by more than :data:`~derive.ik.tolerances.REACH_TOL` drops
   the branch (the pose is out of reach for this value of the free parameter).
 
@@ -357,7 +357,7 @@ def panda_program(robot) -> IKProgram:
     c6a = bld.let("ce6", zz / rho6d)
     bld.require(sp.And(sp.Abs(c6a) <= 1 + REACH_TOL,
                        sp.Or(sp.Not(free6), sp.Abs(zz) <= FREE_JOINT_DISTANCE)))
-    # the root's sine from eq. W4, (X c5)^2 = X^2 - vz^2 (derive.ik.panda.wrist6): accurate where
+    # the root's sine from eq. W4, (X c5)^2 = X^2 - vz^2 (derive.ik.panda.wrist): accurate where
     # X is small; the roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|
     x2 = bld.let("x2e", xx * xx)
     e6 = bld.let("e6", x2 - vv[2] * vv[2])

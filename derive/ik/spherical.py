@@ -33,9 +33,10 @@ once for the class (:mod:`derive.symbolic.equations`, sets P and O), the IK prog
 from them (:func:`derive.ik.program.ik_program`), and each robot's numbers are substituted at
 emission.
 
-This module also holds the numeric reference of the class, written by hand in numpy with
-rotation matrices after the OPW paper's section 3 (independent of the derived program, which
-works on the dual-quaternion equations): :func:`solve_batch`.
+This module also holds the numeric reference of the class, after the OPW paper's section 3
+written as a composition of the subproblems of :mod:`derive.ik.subproblems` (sp4, sp3, sp1,
+sp2, sp1; independent of the derived program, which works on the dual-quaternion equations):
+:func:`solve_batch`.
 """
 
 from __future__ import annotations
@@ -51,9 +52,9 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.euler import zyz
+from derive.ik.subproblems import rot, sp1, sp2, sp3, sp4
 from derive.ik.tolerances import (CLASS_DIRECTION, CLASS_DISTANCE, MAP_ANGLE, MAP_POSITION,
-                                  OFFSET_SNAP, REACH_TOL)
+                                  OFFSET_SNAP, REACH_TOL, WRIST_SINGULAR)
 from derive.kinematics.fk import _pose_error, fk
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot, robot_from_dict
@@ -289,69 +290,79 @@ def _sw_geometry(robot) -> SWGeometry:
 
 
 # --------------------------------------------------------------------------- #
-# Numeric reference solver (rotation matrices, OPW paper section 3)
+# Numeric reference solver: a composition of subproblems (derive.ik.subproblems)
 # --------------------------------------------------------------------------- #
+_X, _Y, _Z = np.eye(3)
+
+
+def _slot(sol, i):
+    """Angles (n, j) of slot i of a two-slot subproblem; a missing second slot (one double,
+    least-squares or free solution) repeats the first."""
+    return np.where(sol.valid[:, i, None], sol.theta[:, i], sol.theta[:, 0])
+
+
 def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
     robot's joint values, singular (n, 8), reason codes (n, 8): 0 ok, 1 theta1 unreachable
     (lateral offset), 2 theta3 unreachable (arm reach)). Not yet checked by FK.
 
-    In the canonical chain (pose B^-1 P T^-1, rotation R, flange position p):
+    In the canonical chain (pose B^-1 P T^-1, rotation R, flange position p), after the OPW
+    paper's section 3, each step a subproblem of :mod:`derive.ik.subproblems`:
 
-    1. wrist centre W = p - c4 R e_z; theta1 puts W in the arm plane (its y coordinate in
-       frame 1 is b): t1 = atan2(Wy, Wx) - atan2(b, +-sqrt(Wx^2 + Wy^2 - b^2)); the square
-       root is the distance X' of W from axis 1 in the arm plane;
-    2. theta3 by the cosine law in the arm plane: with X = X' - a1, Z = Wz - c1, k^2 = a2^2 + c3^2,
-       cos(t3 + psi3) = (X^2 + Z^2 - c2^2 - k^2) / (2 c2 k), psi3 = atan2(a2, c3); two roots;
-    3. theta2 = atan2(u X - v Z, u Z + v X), u = c2 + k cos(t3 + psi3), v = k sin(t3 + psi3);
-    4. the wrist: M = (Rz(t1) Ry(t2 + t3))^T R = Rz(t4) Ry(t5) Rz(t6):
-       t5 = atan2(+-hypot(M13, M23), M33), t4 = atan2(+-M23, +-M13), t6 = atan2(+-M32, -+M31);
-       where |sin t5| < WRIST_SINGULAR only t4 + t6 (t5 = 0) or t4 - t6 (t5 = pi) is
+    1. wrist centre W = p - c4 R e_z; t1, sp4: e_y^T R(-z, t1) W = b (W in the arm plane, at
+       the lateral offset b), two roots, t1 = atan2(Wy, Wx) - atan2(b, +-sqrt(Wx^2 + Wy^2 - b^2));
+       W on axis 1 (b = 0; sp4 degenerate): t1 is free, 0 and pi are taken;
+    2. t3, sp3: ||R(y, t3) (a2, 0, c3) + c2 e_z|| = ||v||, v = R(-z, t1) W - (a1, b, c1) the
+       wrist centre from axis 2 in the arm plane (the cosine law of the paper,
+       cos(t3 + psi3) = (|v|^2 - c2^2 - k^2) / (2 c2 k), k^2 = a2^2 + c3^2), two roots;
+    3. t2, sp1: R(y, t2) (c2 e_z + R(y, t3) (a2, 0, c3)) = v;
+    4. the wrist, M = (Rz(t1) Ry(t2 + t3))^T R = Rz(t4) Ry(t5) Rz(t6) (IK-Geo's spherical
+       wrist): (t4, t5) by sp2, R(-z, t4) M e_z = R(y, t5) e_z, two solutions (the sign of
+       sin t5); t6 by sp1, R(z, t6) e_x = Ry(t5)^T Rz(t4)^T M e_x. Where |sin t5| =
+       hypot(M13, M23) < WRIST_SINGULAR only t4 + t6 (t5 = 0) or t4 - t6 (t5 = pi) is
        determined: t4 is taken from ``q4_ref`` (robot joint values) or as the robot's q4 = 0,
-       and t6 from the rest of the rotation, Rz(t6) = Ry(t5)^T Rz(t4)^T M; such solutions are
-       marked singular (the decomposition: :func:`derive.ik.euler.zyz`).
+       and t6 from the rest of the rotation; such solutions are marked singular.
 
-    Unreachable branches are NaN unless ``keep_unreachable`` (square roots clipped to 0).
+    Branch k = 4 i1 + 2 i3 + i5 (bit 1 the second root). Unreachable branches are NaN unless
+    ``keep_unreachable`` (then the subproblems' least-squares roots: the nearest the arm comes).
     """
     n = poses.shape[0]
     chain = geo.into_canonical(poses)
     r = quat._to_matrix(chain[:, :4])
-    p = dq._translation(chain)
-    w = p - geo.c4 * r[:, :, 2]
+    w = dq._translation(chain) - geo.c4 * r[:, :, 2]
     out = np.full((n, 8, 6), np.nan)
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
-    k = math.hypot(geo.a2, geo.c3)
-    psi3 = math.atan2(geo.a2, geo.c3)
-    disc1 = w[:, 0] ** 2 + w[:, 1] ** 2 - geo.b ** 2
-    bad1 = disc1 < -REACH_TOL * max(1.0, geo.b ** 2)
-    root1 = np.sqrt(np.clip(disc1, 0.0, None))
-    beta = np.arctan2(w[:, 1], w[:, 0])
+    x, y, z = (np.broadcast_to(e, (n, 3)) for e in (_X, _Y, _Z))
+    fore, upper = np.broadcast_to([geo.a2, 0.0, geo.c3], (n, 3)), geo.c2 * z
+    k2 = geo.a2 ** 2 + geo.c3 ** 2
+    bad1 = w[:, 0] ** 2 + w[:, 1] ** 2 - geo.b ** 2 < -REACH_TOL * max(1.0, geo.b ** 2)
     if q4_ref is None:
         t4_free = np.full(n, geo.offsets[3])
     else:
         t4_free = np.broadcast_to(geo.signs[3] * np.asarray(q4_ref, dtype=float) + geo.offsets[3], (n,))
-    for i1, sg1 in enumerate((1.0, -1.0)):
-        t1 = beta - np.arctan2(geo.b, sg1 * root1)
-        x = w[:, 0] * np.cos(t1) + w[:, 1] * np.sin(t1) - geo.a1
-        z = w[:, 2] - geo.c1
-        cg = (x * x + z * z - geo.c2 ** 2 - k * k) / (2.0 * geo.c2 * k)
-        bad3 = np.abs(cg) > 1.0 + REACH_TOL
-        cg = np.clip(cg, -1.0, 1.0)
-        sg_abs = np.sqrt(1.0 - cg * cg)
-        for i3, sg3 in enumerate((1.0, -1.0)):
-            gamma = np.arctan2(sg3 * sg_abs, cg)
-            t3 = gamma - psi3
-            u = geo.c2 + k * np.cos(gamma)
-            v = k * np.sin(gamma)
-            t2 = np.arctan2(u * x - v * z, u * z + v * x)
+    s1 = sp4(y, -z, w, np.full(n, geo.b))
+    for i1 in range(2):
+        # W on axis 1 (b = 0, sp4 degenerate): t1 is free; 0 and pi, the arm and its mirror
+        t1 = np.where(s1.degenerate, i1 * np.pi, _slot(s1, i1)[:, 0])
+        v = rot(-z, t1, w) - [geo.a1, geo.b, geo.c1]
+        vv = v[:, 0] ** 2 + v[:, 2] ** 2
+        bad3 = np.abs((vv - geo.c2 ** 2 - k2) / (2.0 * geo.c2 * math.sqrt(k2))) > 1.0 + REACH_TOL
+        s3 = sp3(y, fore, -upper, np.sqrt(vv))
+        for i3 in range(2):
+            t3 = _slot(s3, 1 - i3)[:, 0]              # slot 1 has sin(t3 + psi3) >= 0
+            t2 = sp1(y, upper + rot(y, t3, fore), v).theta[:, 0, 0]
             m = np.swapaxes(rot_z(t1) @ rot_y(t2 + t3), -1, -2) @ r
-            for i5, sg5 in enumerate((1.0, -1.0)):
-                t4, t5, t6, sing = zyz(m, sg5, t4_free)
+            s45 = sp2(-z, y, m[:, :, 2], z)
+            sing = np.hypot(m[:, 0, 2], m[:, 1, 2]) < WRIST_SINGULAR
+            for i5 in range(2):
+                t4, t5 = _slot(s45, i5).T
+                t4 = np.where(sing, t4_free, t4)
+                t5 = np.where(sing, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), t5)
+                t6 = sp1(z, x, rot(y, -t5, rot(z, -t4, m[:, :, 0]))).theta[:, 0, 0]
                 kk = 4 * i1 + 2 * i3 + i5
-                theta = np.stack([t1, t2, t3, t4, t5, t6], -1)
-                out[:, kk] = geo.from_canonical(theta)
+                out[:, kk] = geo.from_canonical(np.stack([t1, t2, t3, t4, t5, t6], -1))
                 singular[:, kk] = sing
                 code[:, kk] = np.where(bad1, 1, np.where(bad3, 2, 0))
     if not keep_unreachable:

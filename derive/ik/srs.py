@@ -48,9 +48,12 @@ only when d_se = d_ew with the elbow folded) has no solution here: an empty set 
 
 The branches
 ------------
-Per psi: the elbow t4 = GC4 acos(...) (two roots of the cosine law), then the shoulder
-rotation R_s and the wrist rotation R_w = (R_s Ry(t4))^T R each split into two ZYZ Euler
-decompositions (GC2 = sign of sin t2, GC6 = sign of sin t6). Branch id k = 4 i2 + 2 i4 + i6
+Per psi, as a composition of the subproblems of :mod:`derive.ik.subproblems`: the elbow t4 by
+subproblem 3 (the cosine law, two roots GC4 = sign of t4), the reference configuration by two
+subproblems 1 (about axes 1 and 2), the shoulder rotation R_s = R_psi R0 (Rodrigues), then R_s
+and the wrist rotation R_w = (R_s Ry(t4))^T R each split into two ZYZ Euler decompositions
+(:func:`derive.ik.euler.zyz`; GC2 = sign of sin t2, GC6 = sign of sin t6). With a joint given
+instead of psi (:func:`ik_joint`) the shoulder is a subproblem 4 and a subproblem 1. Branch id k = 4 i2 + 2 i4 + i6
 with i = 0 for the + sign, 1 for -. Singular sets: the elbow stretched (t4 = 0: the two elbow
 branches coincide), the shoulder aligned (sin t2 = 0: only t1 + t3 or t1 - t3 is fixed; t1 is
 taken from ``q_ref``, else q1 = 0) and the wrist aligned (sin t6 = 0: q5 from ``q_ref``, else
@@ -86,6 +89,8 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik.euler import zyz, zyz_matrix
 from derive.ik import select
 from derive.ik.finish import Solutions, finish, rotation_angle
+from derive.ik.subproblems import sp1, sp3, sp4
+from derive.ik.subproblems._common import double_root
 from derive.ik.tolerances import (ARC_MERGE, AXIS_TOL, CLASS_DIRECTION, CLASS_DISTANCE,
                                   MAP_ANGLE, MAP_POSITION, REACH_TOL, STRETCH_TOL,
                                   TRIG_DEGENERATE, WRIST_SINGULAR)
@@ -99,6 +104,8 @@ REASON_FOLDED = ("the wrist centre is at the shoulder point (d_se = d_ew, elbow 
 REASON_JOINT = ("unreachable with the given joint value: the shoulder cannot carry the forearm "
                 "onto the shoulder-wrist line")
 REASON_ACCEPT = "no candidate reproduces the pose within ACCEPT_POSITION / ACCEPT_ANGLE"
+
+_E = np.eye(3)                      # e_x, e_y, e_z of the canonical frame
 
 #: Shoulder, elbow and wrist signs (GC2, GC4, GC6) of branch k = 4 i2 + 2 i4 + i6.
 BRANCH_SIGNS = np.array([[1 - 2 * ((k >> 2) & 1), 1 - 2 * ((k >> 1) & 1), 1 - 2 * (k & 1)]
@@ -315,29 +322,34 @@ def _into_canonical(geo: SRSGeometry, poses: np.ndarray):
 # The named closed-form steps
 # --------------------------------------------------------------------------- #
 def elbow_cosine(geo: SRSGeometry, w):
-    """Step 1, the elbow (Shimizu sec. III; Faria, the elbow angle): the triangle S, E, W gives
-    cos t4 = (|W|^2 - d_se^2 - d_ew^2) / (2 d_se d_ew), independent of psi."""
+    """The elbow's reach test (Shimizu sec. III; Faria, the elbow angle): the triangle S, E, W
+    gives cos t4 = (|W|^2 - d_se^2 - d_ew^2) / (2 d_se d_ew), independent of psi; beyond
+    1 + REACH_TOL in size W is out of reach, within STRETCH_TOL of +-1 the arm is stretched or
+    folded (:func:`elbow`)."""
     return (np.sum(w * w, -1) - geo.d_se ** 2 - geo.d_ew ** 2) / (2.0 * geo.d_se * geo.d_ew)
 
 
-def elbow_angle(c4):
-    """|t4| from its cosine; within STRETCH_TOL of +-1 the arm is taken as stretched (t4 = 0)
-    or folded (t4 = pi), so that the two elbow branches coincide exactly there (a rounding of
-    1e-16 in the cosine would otherwise split them by 1e-8 rad; the pose moves by ~1e-15 m)."""
-    c4 = np.clip(c4, -1.0, 1.0)
-    return np.where(c4 >= 1.0 - STRETCH_TOL, 0.0,
-                    np.where(c4 <= -1.0 + STRETCH_TOL, np.pi, np.arccos(c4)))
+def elbow(geo: SRSGeometry, w, c4):
+    """Step 1, the elbow: subproblem 3, ||Ry(t4) d_ew e_z + d_se e_z|| = |W| (the cosine law of
+    the triangle S, E, W), its two roots (..., 2) with t4 >= 0 first. Within STRETCH_TOL of a
+    stretched or folded arm (the cosine ``c4`` of :func:`elbow_cosine` near +-1; beyond 1 sp3
+    returns its least-squares root) both are t4 = 0 or pi, so the two elbow branches coincide
+    exactly there (a rounding of 1e-16 would otherwise split them by 1e-8 rad; the pose moves
+    by ~1e-15 m)."""
+    roots = sp3(_E[1], geo.d_ew * _E[2], -geo.d_se * _E[2], np.linalg.norm(w, axis=-1)).theta[..., ::-1, 0]
+    return np.where((c4 >= 1.0 - STRETCH_TOL)[..., None], 0.0,
+                    np.where((c4 <= -1.0 + STRETCH_TOL)[..., None], np.pi, roots))
 
 
 def reference_shoulder(geo: SRSGeometry, w, t4):
-    """Step 2, the reference configuration (Shimizu sec. III, t3 = 0): R0 = Rz(a) Ry(b - phi)
-    with a = atan2(W_y, W_x) (a = 0 when W is on axis 1), b = atan2(hypot(W_x, W_y), W_z),
-    phi = atan2(v_x, v_z), v = v(t4); R0 v(t4) = W."""
-    rho = np.hypot(w[..., 0], w[..., 1])
-    a = np.where(rho > AXIS_TOL, np.arctan2(w[..., 1], w[..., 0]), 0.0)
-    b = np.arctan2(rho, w[..., 2])
-    v = _forearm(geo, t4)
-    return rot_z(a) @ rot_y(b - np.arctan2(v[..., 0], v[..., 2]))
+    """Step 2, the reference configuration (Shimizu sec. III, t3 = 0), R0 = Rz(a) Ry(b) with
+    R0 v(t4) = W, by two subproblems 1: a = sp1(e_z, e_x -> W), the plane of axis 1 and W
+    (sp1's degenerate case, W on axis 1, gives a = 0), then b = sp1(e_y, v(t4) -> Rz(a)^T W),
+    the forearm turned onto W in that plane."""
+    w = np.broadcast_to(w, np.broadcast_shapes(w.shape, np.shape(t4) + (3,)))
+    a = sp1(_E[2], _E[0], w).theta[..., 0, 0]
+    b = sp1(_E[1], _forearm(geo, t4), np.einsum("...ji,...j->...i", rot_z(a), w)).theta[..., 0, 0]
+    return rot_z(a) @ rot_y(b)
 
 
 def arm_angle_matrices(w, r0):
@@ -376,12 +388,11 @@ def _solve_psi(geo: SRSGeometry, rc, w, psi, q_ref):
     ok = ~(bad | folded)
     if not np.any(ok):
         return out, singular, reason
-    t4abs = elbow_angle(c4[ok])
     rc, w, psi = rc[ok], w[ok], psi[ok]
     free1, free5 = _free_angles(geo, None if q_ref is None else q_ref[ok], int(ok.sum()))
     sign = np.array([1.0, -1.0])
     # axes after the pose: elbow i4, shoulder i2, wrist i6 (signs +, -)
-    t4 = t4abs[:, None] * sign                                   # (m, 2): step 1
+    t4 = elbow(geo, w, c4[ok])                                   # (m, 2): step 1
     r0 = reference_shoulder(geo, w[:, None], t4)                 # step 2
     a_s, b_s, c_s = arm_angle_matrices(w[:, None], r0)
     rs = (a_s * np.sin(psi)[:, None, None, None] + b_s * np.cos(psi)[:, None, None, None]
@@ -428,10 +439,10 @@ def ik_psi(robot, poses, psi, *, q_ref=None) -> SRSSolutions:
     """All solutions (up to 8: GC2, GC4, GC6) of poses (8,) or (n, 8) of the robot's end frame
     at arm angle ``psi`` (a number or one per pose, rad; module docstring for its definition).
 
-    The steps: wrist centre (:func:`_into_canonical`), elbow (:func:`elbow_cosine`), reference
-    configuration (:func:`reference_shoulder`), shoulder as a function of psi
+    The steps: wrist centre (:func:`_into_canonical`), elbow (:func:`elbow`, sp3), reference
+    configuration (:func:`reference_shoulder`, sp1 and sp1), shoulder as a function of psi
     (:func:`arm_angle_matrices`), shoulder and wrist joints by ZYZ decomposition
-    (:func:`_zyz`). ``q_ref`` (7,) or (n, 7) supplies q1 (shoulder aligned) and q5 (wrist
+    (:func:`derive.ik.euler.zyz`). ``q_ref`` (7,) or (n, 7) supplies q1 (shoulder aligned) and q5 (wrist
     aligned) on the singular sets, else they are 0. Joint values are wrapped to (-pi, pi];
     limits are not applied (see :func:`psi_intervals`, :func:`within_limits`). Returns
     :class:`derive.ik.finish.Solutions` (one pose: its rows without the leading axis)."""
@@ -542,14 +553,17 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
     """The closed form with canonical joint t1 (``joint`` 1) or t3 (``joint`` 3) given: canonical
     angles (n, 8, 7) (NaN where a root does not exist), singular (n, 8), root exists (n, 8).
 
-    Steps: the elbow as in :func:`ik_psi` (two signs); then the shoulder carries v(t4) onto W
-    with the given joint (Paden-Kahan subproblem 2 about two of the axes z, y, z):
-    - t3 given: Rz(t1) Ry(t2) u = W with u = Rz(t3) v(t4): t2 = +-acos(W_z / r) - atan2(u_x, u_z),
-      r = hypot(u_x, u_z); t1 = atan2(W_y, W_x) - atan2(u'_y, u'_x), u' = Ry(t2) u (t1 free
-      where W lies on axis 1);
-    - t1 given: Ry(t2) Rz(t3) v = y with y = Rz(t1)^T W: sin t3 = y_y / v_x (two roots), then
-      t2 = atan2(v_z, cos t3 v_x) - atan2(y_z, y_x) (t3 free where the elbow is stretched,
-      v_x = 0);
+    Steps: the elbow as in :func:`ik_psi` (sp3, two signs); then the shoulder carries v(t4)
+    onto W with the given joint (Paden-Kahan subproblem 2 about two of the axes z, y, z, solved
+    as IK-Geo does, a subproblem 4 for the height along the first axis and a subproblem 1):
+    - t3 given: Rz(t1) Ry(t2) u = W with u = Rz(t3) v(t4): t2 by sp4, e_z^T Ry(t2) u = W_z
+      (t2 = +-acos(W_z / r) - atan2(u_x, u_z), r = hypot(u_x, u_z); the double root within
+      STRETCH_TOL of |W_z / r| = 1), t1 by sp1 about axis 1, Ry(t2) u to W (t1 free where W
+      lies on axis 1);
+    - t1 given: Ry(t2) Rz(t3) v = y with y = Rz(t1)^T W: t3 by sp4, e_y^T Rz(t3) v = y_y
+      (sin t3 = y_y / v_x, two roots, asin first; the double root within STRETCH_TOL of
+      |sin t3| = 1), t2 by sp1 about axis 2, Rz(t3) v to y (t3 free where the elbow is
+      stretched, v_x = 0);
     and the wrist joints by the ZYZ decomposition of (R_s Ry(t4))^T R."""
     n = len(w)
     theta = np.full((n, 8, 7), np.nan)
@@ -557,9 +571,9 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
     reach_all = np.zeros((n, 8), dtype=bool)
     c4 = elbow_cosine(geo, w)
     ok = np.abs(c4) <= 1.0 + REACH_TOL
-    t4abs = elbow_angle(c4)
-    for i4, g4 in enumerate((1.0, -1.0)):
-        t4 = g4 * t4abs
+    t4s = elbow(geo, w, c4)
+    for i4 in range(2):
+        t4 = t4s[:, i4]
         v = _forearm(geo, t4)
         if joint == 3:
             t3 = tg
@@ -567,9 +581,9 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
             r = np.hypot(wv[:, 0], wv[:, 2])
             cz = w[:, 2] / np.where(r > 0, r, 1.0)
             reach = (np.abs(cz) <= 1.0 + REACH_TOL) & (r > 0)
-            phi = np.arctan2(wv[:, 0], wv[:, 2])
-            acz = elbow_angle(cz)                 # the same snapping at the double root
-            roots = [acz - phi, -acz - phi]
+            # sp4: e_z^T Ry(t2) wv = W_z; within STRETCH_TOL of |cz| = 1 the double root
+            roots = double_root(sp4(_E[2], _E[1], wv, w[:, 2]).theta[..., 0],
+                                 np.abs(cz) >= 1.0 - STRETCH_TOL)
             on_axis = np.hypot(w[:, 0], w[:, 1]) < AXIS_TOL
         else:
             t1 = tg
@@ -577,18 +591,23 @@ def joint_given_steps(geo: SRSGeometry, rc, w, joint: int, tg, free1, free3, fre
             stretched = np.abs(v[:, 0]) < WRIST_SINGULAR * max(geo.d_ew, 1.0)
             s3 = yv[:, 1] / np.where(stretched, 1.0, v[:, 0])
             reach = np.where(stretched, np.abs(yv[:, 1]) <= REACH_TOL, np.abs(s3) <= 1.0 + REACH_TOL)
-            a3 = np.arcsin(np.clip(s3, -1, 1))
-            roots = [np.where(stretched, free3, a3), np.where(stretched, free3, math.pi - a3)]
+            # sp4: e_y^T Rz(t3) v = (R_z(t1)^T W)_y, root i = 0 first: asin(W_y / v_x) (sp4's slot 1
+            # for v_x > 0, slot 0 else); within STRETCH_TOL of |sin t3| = 1 the double root; t3
+            # free where the elbow is stretched
+            roots = double_root(sp4(_E[1], _E[2], v, yv[:, 1]).theta[..., 0],
+                                np.abs(s3) >= 1.0 - STRETCH_TOL)
+            roots = np.where((v[:, :1] > 0), roots[:, ::-1], roots)
+            roots = np.where(stretched[:, None], free3[:, None], roots)
         reach = reach & ok
-        for i, root in enumerate(roots):
+        for i, root in enumerate(roots.T):
             if joint == 3:
                 t2 = root
                 u = (rot_y(t2) @ wv[..., None])[..., 0]
-                t1 = np.where(on_axis, free1, np.arctan2(w[:, 1], w[:, 0]) - np.arctan2(u[:, 1], u[:, 0]))
+                t1 = np.where(on_axis, free1, sp1(_E[2], u, w).theta[:, 0, 0])     # sp1 about axis 1
                 sing_s = on_axis
             else:
                 t3 = root
-                t2 = np.arctan2(v[:, 2], np.cos(t3) * v[:, 0]) - np.arctan2(yv[:, 2], yv[:, 0])
+                t2 = sp1(_E[1], (rot_z(t3) @ v[..., None])[..., 0], yv).theta[:, 0, 0]   # about axis 2
                 sing_s = stretched
             t1b, t3b = np.broadcast_to(t1, (n,)), np.broadcast_to(t3, (n,))
             rw = _t(zyz_matrix(t1b, t2, t3b) @ rot_y(t4)) @ rc
@@ -629,14 +648,13 @@ def _breakpoints(geo: SRSGeometry, rc, w) -> np.ndarray:
     m = len(w)
     c4 = elbow_cosine(geo, w)
     ok = (np.abs(c4) <= 1.0 + REACH_TOL) & (np.linalg.norm(w, axis=-1) >= CLASS_DISTANCE)
-    t4abs = elbow_angle(np.where(ok, c4, 1.0))
     wk = np.where(ok[:, None], w, 1.0)
+    t4s = elbow(geo, wk, np.where(ok, c4, 1.0))
     tangent = (((0, 1, 2), (0, 0, 2), 0), ((0, 2, 1), (0, 2, 0), 2),
                ((1, 1, 2), (1, 0, 2), 4), ((1, 2, 1), (1, 2, 0), 6))
     cosine = (((0, 2, 2), 1), ((1, 2, 2), 5))
     parts = [np.full((m, 1), -math.pi), np.full((m, 1), math.pi)]
-    for g4 in (1.0, -1.0):
-        t4 = g4 * t4abs
+    for t4 in t4s.T:
         r0 = reference_shoulder(geo, wk, t4)
         shoulder = arm_angle_matrices(wk, r0)                       # A_s, B_s, C_s: (m, 3, 3)
         r4 = rot_y(t4)

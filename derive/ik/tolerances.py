@@ -44,14 +44,17 @@ WRIST_SINGULAR = 1e-11
 #: A Panda joint is free when a point is this close (m) to its axis: |X| (the shoulder on axis
 #: 5, q5 free), hypot(vx, vy) (the shoulder on axis 6, q6 free; then |Z| must be within it too).
 FREE_JOINT_DISTANCE = 1e-11
-#: The SRS wrist centre counts as on axis 1 when it is closer than this to it (m); the reference
-#: plane then uses the canonical x axis.
+#: The SRS wrist centre counts as on axis 1 when it is closer than this to it (m) with joint 3
+#: given (q1 is then free). With psi given the reference plane's subproblem 1 decides it by
+#: SP_FREE_ANGLE (the same 1e-12 m) and the plane then uses the canonical x axis.
 AXIS_TOL = 1e-12
 #: Slack on |cos| <= 1 and on a discriminant before a branch counts as unreachable (relative:
 #: the cosines are ratios, the discriminants compared with max(1, c^2)).
 REACH_TOL = 1e-10
 #: SRS elbow: cos t4 within this of +-1 is +-1 (dimensionless), so the two elbow branches
-#: coincide exactly at the stretch (a rounding of 1e-16 would split them by 1e-8 rad).
+#: coincide exactly at the stretch (a rounding of 1e-16 would split them by 1e-8 rad). The same
+#: for the SRS shoulder's double roots with a joint given: |W_z / r| (q3 given) and |sin t3|
+#: (q1 given) within it of 1.
 STRETCH_TOL = 1e-14
 #: Panda elbow (eq. E2) and q6 roots (eq. W4): a cosine within this of +-1 is +-1
 #: (dimensionless), and the q6 roots merge where (X c5)^2 < DOUBLE_ROOT X^2 + W4_NOISE |X|. It

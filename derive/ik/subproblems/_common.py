@@ -323,3 +323,14 @@ def finish(theta, valid, residual, degenerate) -> SubproblemSolutions:
     residual = np.where(valid, residual, np.nan)
     return SubproblemSolutions(theta=theta, valid=valid, residual=residual, exact=exact,
                                degenerate=np.asarray(degenerate, dtype=bool))
+
+
+def double_root(theta, at):
+    """The two roots (..., 2) of a two-slot subproblem (one angle; slot 1 NaN where it returned
+    one least-squares root) with both slots set to their middle (the double root) where ``at``
+    (...) holds or slot 1 is missing: a class's rule for where two roots are one (the solvers of
+    :mod:`derive.ik.srs` and :mod:`derive.ik.panda` decide it on their own cosines)."""
+    first = theta[..., 0]
+    second = np.where(np.isnan(theta[..., 1]), first, theta[..., 1])
+    mid = first + 0.5 * wrap_angle(second - first)
+    return np.where(at[..., None] | np.isnan(theta[..., 1:]), mid[..., None], theta)
