@@ -470,18 +470,18 @@ def _joint2_steps(geo, rc, w, t2, free1, free3, free5):
     reach_all = np.zeros((n, 8), dtype=bool)
     c4 = srs.elbow_cosine(geo, w)
     ok = np.abs(c4) <= 1.0 + srs.REACH_TOL
-    t4abs = srs.elbow_angle(c4)
+    t4s = srs.elbow(geo, w, c4)                 # the two elbow roots, as srs.ik_joint orders them
     s2, c2 = np.sin(t2), np.cos(t2)
     on_axis = np.hypot(w[:, 0], w[:, 1]) < srs.AXIS_TOL
-    for i4, g4 in enumerate((1.0, -1.0)):
-        t4 = g4 * t4abs
+    for i4 in range(2):
+        t4 = t4s[:, i4]
         v = srs._forearm(geo, t4)
         den = s2 * v[:, 0]
         num = c2 * v[:, 2] - w[:, 2]
         flat = np.abs(den) < srs.WRIST_SINGULAR * max(geo.d_ew, 1.0)
         c3 = num / np.where(flat, 1.0, den)
         reach = ok & np.where(flat, np.abs(num) <= srs.REACH_TOL, np.abs(c3) <= 1.0 + srs.REACH_TOL)
-        a3 = srs.elbow_angle(c3)
+        a3 = np.arccos(np.clip(c3, -1.0, 1.0))
         for i, t3 in enumerate((np.where(flat, free3, a3), np.where(flat, free3, -a3))):
             a = np.stack([np.cos(t3) * v[:, 0], np.sin(t3) * v[:, 0], v[:, 2]], -1)
             u = (srs.rot_y(t2) @ a[..., None])[..., 0]
