@@ -63,20 +63,20 @@ def ours(robot, q):
         print(f"  dq-derive general6r: not solved: {exc}")
         return None
     general6r.solve(robot, P[:50])                       # warm
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     res = general6r.solve(robot, P)
-    dt = time.perf_counter() - t0
-    print(f"  dq-derive general6r (numpy): {dt / len(q) * 1e6:.0f} us/pose over {len(q)} poses "
-          f"(plan {t_plan:.2f} s: derivation or cache)")
+    dt, dc = time.perf_counter() - t0, time.process_time() - c0
+    print(f"  dq-derive general6r (numpy): {dt / len(q) * 1e6:.0f} us/pose wall, {dc / len(q) * 1e6:.0f} us/pose "
+          f"CPU over {len(q)} poses (plan {t_plan:.2f} s: derivation or cache)")
     print(f"    counts: {dist_line(res.counts)}")
     return res
 
 
 def ssik_line(label, solve, T, robot, res):
     counts, missing = [], 0
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     found = [solve(x) for x in T]
-    dt = time.perf_counter() - t0
+    dt, dc = time.perf_counter() - t0, time.process_time() - c0
     for i, sols in enumerate(found):
         qs = distinct([np.asarray(s.q, float) for s in sols])
         counts.append(len(qs))
@@ -84,7 +84,8 @@ def ssik_line(label, solve, T, robot, res):
             mine = res.q[i, :res.counts[i]]
             missing += sum(not np.any(np.all(np.abs(wrap_angle(mine - s)) < 1e-6, axis=1)) for s in qs)
     extra = "" if res is None else f"; ssik solutions missing from ours: {missing}"
-    print(f"  ssik {label}: {dt / len(T) * 1e3:.2f} ms/pose over {len(T)} poses{extra}")
+    print(f"  ssik {label}: {dt / len(T) * 1e3:.2f} ms/pose wall, {dc / len(T) * 1e3:.2f} ms/pose CPU over "
+          f"{len(T)} poses{extra}")
     print(f"    counts: {dist_line(counts)}")
 
 
@@ -96,6 +97,10 @@ def main(argv=None):
     a = ap.parse_args(argv)
     import ssik
     print(f"dq-derive {derive.__version__}, ssik {ssik.__version__}, numpy {np.__version__}")
+    a24 = np.random.default_rng(0).standard_normal((2000, 24, 24))
+    c0 = time.process_time()
+    np.linalg.eigvals(a24)
+    print(f"load calibration: numpy eigvals of a random 24 x 24: {(time.process_time() - c0) / 2000 * 1e6:.0f} us CPU")
     rng = np.random.default_rng(a.seed)
 
     print("general-6r (derive/robots/general-6r.yaml)")

@@ -4,10 +4,14 @@ the latency of one call (the CPython extension's ik), for the UR5 with its twist
 
     python benchmarks/bench_polish.py [n] [repeats]
 
+Times are CPU time of this process (time.process_time), so that other work on the machine
+does not count; the load average is printed with them.
+
 The near-class kernels are derived into the user cache on first use (a minute: the UR5's IK
 program and two C compiles)."""
 
 import math
+import os
 import sys
 import tempfile
 import time
@@ -37,14 +41,14 @@ def measure(k, robot, n, repeats, single=2000, seed=0):
     k.ik(poses[:64])                                           # warm-up
     batch = []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t = time.process_time()
         _, counts = k.ik(poses)
-        batch.append((time.perf_counter() - t) / n)
+        batch.append((time.process_time() - t) / n)
     lat = []
     for p in poses[:single]:
-        t = time.perf_counter()
+        t = time.process_time()
         k.ik(p)
-        lat.append(time.perf_counter() - t)
+        lat.append(time.process_time() - t)
     return min(batch) * 1e9, float(np.median(lat)) * 1e9, float(counts.mean())
 
 
@@ -54,6 +58,7 @@ def main(argv):
     robot, nominal = decimal_ur5()
     near = derive.kernels(robot, "c", nominal=nominal)
     exact = derive.kernels("ur5", "c")
+    print(f"load average {os.getloadavg()[0]:.2f} (CPU time per pose, time.process_time)")
     print(f"{'kernels':<28} {'batch ns/pose':>14} {'one call ns':>12} {'solutions':>10}")
     for name, k, r in (("ur5 (exact)", exact, derive.load_robot("ur5")), ("ur5-decimal (near-class)", near, robot),
                        ("ur5 (exact, again)", exact, derive.load_robot("ur5"))):

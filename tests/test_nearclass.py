@@ -288,3 +288,83 @@ def test_reference_ik_names_the_polish_and_drops_nothing_on_a_regular_pose():
     assert s[2:4].residual.shape == (2,)
     with pytest.raises(derive.errors.InputError, match="free_name"):
         reference.ik(IIWA_OFF, reference.fk(IIWA_OFF, np.zeros(7) + 0.3), free=0.3)
+
+
+# Configurations near the arms' singular sets where two solutions of the arm share one candidate
+# of the nominal (from benchmarks/bench_nearclass.py's 10^4, seed 1, where the polish from the
+# nominal's candidates alone missed the generating configuration), rounded to 1e-6 rad.
+IIWA_NEAR_STRETCH = [[-1.328964, 0.068092, 0.73613, -0.031866, 0.102064, -0.410462, 1.206704],
+                     [0.820108, 0.206692, -2.364527, -0.03677, 2.234695, 0.821703, -0.694989],
+                     [-2.284568, 1.102894, 0.539379, -0.005546, -2.0501, 0.577474, -0.711924],
+                     [1.490743, -0.612949, -2.755621, -0.003147, -1.752741, -0.911356, 0.129208]]
+UR5C_NEAR_SINGULAR = [[-3.525719, 2.001173, 0.033737, 3.207359, 6.259682, 4.78339],
+                      [0.875428, 2.332131, 6.123766, 3.563334, -0.012587, 4.734843],
+                      [-2.347739, 2.840296, 0.946978, 5.772024, -0.007114, -6.071419],
+                      [5.550009, -0.988035, 3.132833, 4.342754, -3.092702, -2.280536],
+                      [-4.763362, 3.102915, -2.902773, 5.597953, 3.27891, -2.114756]]
+
+
+def _has(sols, q) -> bool:
+    d = np.abs((np.asarray(sols) - np.asarray(q) + math.pi) % (2 * math.pi) - math.pi)
+    return bool((d.max(axis=-1) < 1e-6).any())
+
+
+def test_iiwa14_nearly_stretched_elbow_keeps_both_elbow_roots():
+    """The iiwa14 with axes 0.44 mm off, elbow within 0.03 rad of its stretch (the nominal cannot
+    reach these poses with joint 3 given): both elbow roots of the arm are found, seeded on both
+    sides of the singular direction, so the count is the SRS class's 8 and the generating
+    configuration is among them; every solution's reference FK within 1e-10 of the pose."""
+    robot = derive.load_robot(DATA / "iiwa14-off.urdf")
+    q = np.array(IIWA_NEAR_STRETCH)
+    P = reference.fk(robot, q)
+    r = nearclass.ik_batch(robot, P, free=q[:, 2], free_name="q3")
+    assert r.counts.tolist() == [8, 8, 8, 8]
+    for i in range(len(q)):
+        sols = r.q[i, :r.counts[i]]
+        assert _has(sols, q[i])
+        dp, dr = pose_error(reference.fk(robot, sols), np.repeat(P[i:i + 1], len(sols), axis=0))
+        assert max(dp.max(), dr.max()) < 1e-10
+        assert (np.abs(sols[:, 3]) > 1e-3).all()             # two distinct elbow roots, off the stretch
+        assert (sols[:, 3] > 0).sum() == (sols[:, 3] < 0).sum() == 4
+
+
+def test_calibrated_ur5_near_its_singular_sets_equals_the_general_6r_elimination():
+    """ur5-calibrated (0.016 from the UR5) near the wrist singular set and the elbow's stretch,
+    where it has 2 to 10 solutions: the near-class solutions equal those of the general 6R
+    elimination (derive.ik.general6r, Raghavan-Roth / Manocha-Canny: an independent solver), the
+    generating configuration among them; a pose with 10 solutions keeps all 10."""
+    from derive.ik import general6r
+
+    robot = derive.load_robot("ur5-calibrated")
+    q = np.array(UR5C_NEAR_SINGULAR)
+    P = reference.fk(robot, q)
+    r = nearclass.ik_batch(robot, P)
+    g = general6r.solve(robot, P)
+    assert r.counts.tolist() == g.counts.tolist()
+    assert max(r.counts) == 10 and r.q.shape[1] == 10
+    for i in range(len(q)):
+        ours, theirs = r.q[i, :r.counts[i]], g.q[i, :g.counts[i]]
+        assert _has(ours, q[i])
+        assert all(_has(ours, s) for s in theirs) and all(_has(theirs, s) for s in ours)
+
+
+def test_gen3_gets_an_srs_nominal_and_is_solved_with_joint3_given():
+    """The Kinova Gen3 (its shoulder axes miss a common point by 5.9 mm, its axis points step by
+    6.4 mm sideways): no nominal within NEAR_POINT_TOL, an SRS one from the seven-joint
+    projection (all axis points on one line, 0.049 m / rad off). With joint 3 given, on 30 random
+    configurations within the limits, the generating configuration is among the solutions and
+    every solution's reference FK is within 1e-10 of the pose."""
+    robot = derive.load_robot("gen3")
+    nom = nearclass.nominal(robot)
+    assert nom is not None and nearclass.nominal_class(robot) == "SRS"
+    assert 0.04 < nom.deviation < 0.06
+    lo, hi = np.maximum(robot.limits[:, 0], -math.pi), np.minimum(robot.limits[:, 1], math.pi)
+    q = np.random.default_rng(5).uniform(lo, hi, size=(30, 7))
+    P = reference.fk(robot, q)
+    r = nearclass.ik_batch(robot, P, free=q[:, 2], free_name="q3")
+    for i in range(len(q)):
+        sols = r.q[i, :r.counts[i]]
+        assert _has(sols, q[i])
+        dp, dr = pose_error(reference.fk(robot, sols), np.repeat(P[i:i + 1], len(sols), axis=0))
+        assert max(dp.max(), dr.max()) < 1e-10
+        assert np.allclose(sols[:, 2], q[i, 2])

@@ -135,17 +135,22 @@ def _edited(tmp_path, old, new):
     return derive.load_robot(str(path))
 
 
-def test_an_offset_between_axes_5_and_6_leaves_the_class(tmp_path):
+def test_an_offset_between_axes_5_and_6_moves_it_to_the_sp6_layout(tmp_path):
     r = _edited(tmp_path, "link: [0.0492, 0, 0]", "link: [0.0492, 0.02, 0]")
     c = derive.classify(r)
-    assert c.cls == "general" and not c.closed_form
+    assert c.cls == "three parallel" and c.closed_form and "neither intersecting" in c.test
     with pytest.raises(DeriveError, match="axes 5 and 6 do not intersect"):
         parallel3.p3_geometry(r)
-    # outside every special class, the general 6R elimination (derive.ik.general6r) solves it
+    assert parallel3.p3_sp6_geometry(r).layout == "sp6"
+    # IK-Geo's three parallel (subproblem 6) solves it; the general 6R elimination agrees
+    from derive.ik import general6r
     q0 = np.array([0.3, -0.4, 0.5, 0.2, -0.6, 0.7])
-    sols = reference.ik(r, reference.fk(r, q0))
-    assert len(sols) >= 1 and _wrapped(np.asarray(sols), q0).max(-1).min() < 1e-9
-    assert np.abs(reference.fk_matrix(r, np.asarray(sols)) - reference.fk_matrix(r, q0)).max() < 1e-10
+    pose = reference.fk(r, q0)
+    sols = np.asarray(reference.ik(r, pose))
+    assert len(sols) >= 1 and _wrapped(sols, q0).max(-1).min() < 1e-9
+    assert np.abs(reference.fk_matrix(r, sols) - reference.fk_matrix(r, q0)).max() < 1e-10
+    g = general6r.solve(r, pose[None])
+    assert _same_set(sols, g.q[0, :g.counts[0]], 1e-6)
 
 
 # --------------------------------------------------------------------------- #

@@ -615,3 +615,60 @@ def test_c_sp5_sp6_agree_with_numpy(c_subproblems):
     angles, res, flags, count = call_c(c_subproblems, "b_sp5", n, 4, p0, p1, p2, p3, k1, k2, k3, angles=3)
     agree_sets(sol, angles, res, flags, count)
     assert sol.degenerate.any() and (~sol.degenerate & (count > 0)).any()
+
+
+def test_rot_components_against_scipy():
+    """The per-component Rodrigues ``rot`` (a constant axis (3,) or a batch of axes, slot axes
+    broadcast) against scipy's rotations."""
+    from derive.ik.subproblems import rot
+    rng = np.random.default_rng(31)
+    k, t, p = unit(rng, N), rng.uniform(-np.pi, np.pi, N), rng.normal(size=(N, 3))
+    assert np.abs(rot(k, t, p) - Rp(k, t, p)).max() < 1e-14
+    z = np.array([0.0, 0.0, -1.0])
+    assert np.abs(rot(z, t, p) - Rp(np.broadcast_to(z, (N, 3)), t, p)).max() < 1e-14
+    assert np.abs(rot(z, t, [1.0, 2.0, 3.0]) - Rp(np.broadcast_to(z, (N, 3)), t, np.array([1.0, 2.0, 3.0]))).max() < 1e-13
+    t2 = rng.uniform(-np.pi, np.pi, (N, 2))
+    assert np.abs(rot(k[:, None], t2, p[:, None]) - Rp(k[:, None], t2, p[:, None])).max() < 1e-14
+    assert np.abs(rot(list(k[0]), 0.3, list(p[0])) - Rp(k[0], 0.3, p[0])).max() < 1e-14
+
+
+def test_private_steps_are_the_public_solutions():
+    """The compositions' private steps (_sp1.._sp4: constant axes (3,), no input checks, no
+    residuals) return the public functions' angles, slot 1 repeating slot 0 where there is one
+    root, on exact, least-squares and degenerate instances; and the angles solve the equations
+    by scipy's rotations where they are exact."""
+    from derive.ik.subproblems.sp1 import _sp1
+    from derive.ik.subproblems.sp2 import _sp2
+    from derive.ik.subproblems.sp3 import _sp3
+    from derive.ik.subproblems.sp4 import _sp4
+    rng = np.random.default_rng(32)
+    y, z = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, -1.0])
+    yb, zb = np.broadcast_to(y, (N, 3)), np.broadcast_to(z, (N, 3))
+    p1, p2 = rng.normal(size=(2, N, 3))
+    p1[:10] = 0.7 * z                                       # on the axis: degenerate
+    d = np.abs(rng.normal(size=N)) * 2                      # some distances out of reach: ls
+
+    def slots(sol):
+        return np.where(sol.valid[..., None], sol.theta, sol.theta[:, :1])
+
+    s = sp1(zb, p1, p2)
+    assert np.array_equal(_sp1(z, p1, p2), s.theta[:, 0, 0])
+    s = sp4(yb, zb, p1, d - 1)
+    t4, free = _sp4(y, z, p1, d - 1)
+    assert np.array_equal(t4, slots(s)[:, :, 0]) and np.array_equal(free, s.degenerate)
+    assert s.ls.any() and s.degenerate.any() and s.exact.any()
+    ex = s.exact
+    assert np.abs(Rp(zb[ex, None], t4[ex], p1[ex, None]) @ y - (d - 1)[ex, None]).max() < 1e-12
+    s = sp3(yb, p1, p2, d)
+    t3 = _sp3(y, p1, p2, d)
+    assert np.array_equal(t3, slots(s)[:, :, 0]) and s.ls.any() and s.exact.any()
+    ex = s.exact
+    dist = np.linalg.norm(Rp(yb[ex, None], t3[ex], p1[ex, None]) - p2[ex, None], axis=-1)
+    assert np.abs(dist - d[ex, None]).max() < 1e-12
+    u = p1 / np.linalg.norm(p1, axis=-1, keepdims=True)
+    s = sp2(-yb, zb, u, y)
+    t2 = _sp2(-y, z, u, y)
+    assert np.array_equal(t2, slots(s)) and s.exact.any()
+    ex = s.exact
+    left = Rp(-yb[ex, None], t2[ex, :, 0], u[ex, None])
+    assert np.abs(left - Rp(zb[ex, None], t2[ex, :, 1], np.broadcast_to(y, (ex.sum(), 2, 3)))).max() < 1e-12

@@ -36,6 +36,7 @@ from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.bench.machine import best_time as _time
 from derive.bench.machine import machine
+from derive.bench.general6r import bench_general, general_report, is_general
 from derive.bench.redundant import bench_redundant, redundant_report
 from derive.codegen.emit import identifier
 from derive.codegen.loader import c_compiler, c_flags, kernel_folder, kernels
@@ -250,6 +251,8 @@ def bench_kernels(robot: str = "ur5", n: int = 100_000, repeats: int = 5, seed: 
                   singular: int = 2000) -> dict:
     if redundant_kind(robot) is not None:
         return bench_redundant(robot, repeats)
+    if is_general(robot):                  # a general 6R arm: its own benchmark (vs ssik)
+        return bench_general(robot, repeats=repeats, seed=seed)
     rng = np.random.default_rng(seed)
     geo = spherical_class(robot)
     q = rng.uniform(-np.pi, np.pi, size=(n, 6))
@@ -337,6 +340,8 @@ def _spherical_peers(out, robot, geo, poses, mats, spose, smats, m_peer) -> dict
 def report(r: dict) -> str:
     if r.get("kind") == "redundant":
         return redundant_report(r)
+    if r.get("kind") == "general6r":
+        return general_report(r)
     h = r["harness"]
     lines = [f"generated kernels of {r['robot']}, {r['n']} poses, {r['machine']}, {r['date']}",
              f"C flags: {h.get('flags', '?')}",

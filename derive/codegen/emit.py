@@ -18,6 +18,7 @@ from sympy.printing.pycode import PythonCodePrinter
 from derive._version import __version__
 from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
+from derive.codegen.general6r import general_context as general6r_context
 from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key  # defined there for the loader
 from derive.codegen.polish import held_joint, nominal_program, polish_context
 from derive.codegen.templates import template_environment
@@ -246,7 +247,8 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
         try:
             prog = ik_program(robot, free)
         except DeriveError as exc:
-            return {"ik": None, "ik_missing": str(exc)}
+            general = _general_ik_context(robot, free)
+            return general or {"ik": None, "ik_missing": str(exc)}
     # the branching program is printed for the Python kernels; the C kernels run the flat one
     printers = {"py": _Py(), "np": _Np()}
 
@@ -307,6 +309,26 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
                    "free": prog.free, "free_doc": prog.free_doc,
                    "singular_doc": prog.singular_doc or "sin theta5 = 0",
                    "steps_source": prog.steps_source or "from the derived equations"},
+            "ik_missing": ""}
+
+
+def _general_ik_context(robot, free=None):
+    """The IK context of a six-revolute arm without a closed-form class: the general 6R solver
+    (:mod:`derive.codegen.general6r`), or None when it does not apply (not a 6R, a 7-joint arm's
+    free parameter, or no elimination for this geometry)."""
+    if free is not None or robot.dof != 6 or not all(robot.revolute.tolist()):
+        return None
+    try:
+        g = general6r_context(robot)
+    except DeriveError:
+        return None
+    return {"ik": {"general": g, "branches": g["max_solutions"], "free": None, "free_joint": 0,
+                   "free_rule": "one of its values (a continuum of solutions is not enumerated)",
+                   "singular_doc": "the Jacobian's smallest singular value below "
+                                   f"{g['singular']} of its largest",
+                   "branch_doc": "no branches: the index of the solution in the order of joint 1",
+                   "branch_labels": [], "merge_tol": repr(MERGE_TOL), "singular_flag": True,
+                   "steps": [f"general 6R: {g['how']}"], "steps_source": "derive.ik.general6r"},
             "ik_missing": ""}
 
 
@@ -620,6 +642,9 @@ def kernel_manifest(robot, free: str | None = None, nominal=None) -> dict:
     out = {"id": robot.id, "limits": robot.limits_id, "robot": robot.name, "prefix": _prefix(robot, free),
            "dof": robot.dof, "dq_derive": __version__, "format": KERNEL_FORMAT,
            "branch_labels": list(prog.branch_labels) if prog else []}
+    if prog is None and nominal is None and _general_ik_context(robot, free) is not None:
+        out["max_solutions"] = general6r_context(robot)["max_solutions"]
+        out["ik"] = "general6r"
     if prog is not None and prog.free:
         out["free"] = prog.free            # the IK functions take the free parameter fv
     if nominal is not None:

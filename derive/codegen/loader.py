@@ -314,7 +314,7 @@ def _discard(name: str, why: str) -> None:
 Q_MAX = 1e6
 
 
-def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None = None):
+def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None = None, max_solutions: int = 8):
     # prefix: the kernels' identifier stem from the manifest (emit.identifier, not called here:
     # the load path does no code generation)
     """The CPython extension module of a C kernel source (templates/pyext.c.j2: input checks in
@@ -328,7 +328,7 @@ def _extension(robot, source: Path, prefix: str, has_ik: bool, free: str | None 
         return None
     context = dict(
         version=__version__, robot=robot.name, kernel_name=source.name, kernel_path=str(source),
-        prefix=prefix, dof=robot.dof, max_solutions=8, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
+        prefix=prefix, dof=robot.dof, max_solutions=max_solutions, has_ik=has_ik, free=free, q_max=repr(Q_MAX),
         revolute=robot.revolute.tolist(),
         unit_tol=repr(UNIT_TOL), module="MODULE")
     ext_suffix = sysconfig.get_config_var("EXT_SUFFIX")
@@ -437,6 +437,8 @@ class Kernels:
         ident = manifest["prefix"]
         self.folder = folder
         self.free = manifest.get("free")   # the free parameter of a 7-joint arm's IK, else None
+        #: the most solutions one pose has (8 for the closed forms, 16 for a general 6R)
+        self.max_solutions = int(manifest.get("max_solutions", 8))
         if backend == "python":
             self._mod = _import(folder / files["python"],
                                 f"{ident}_kinematics_{self.robot.id}_{self.robot.limits_id}")
@@ -453,7 +455,8 @@ class Kernels:
             self._has_ik_c = "_ik_batch(" in text
             # kernels of an older dq-derive (no _ik_batch_ex) load through ctypes only
             if not self._has_ik_c or "_ik_batch_ex(" in text:
-                self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c, self.free)
+                self._ext = _extension(self.robot, self._c_source, ident, self._has_ik_c, self.free,
+                                       self.max_solutions)
             if self._ext is None:
                 self._load_ctypes()
             else:
@@ -627,7 +630,7 @@ class Kernels:
         n = poses.shape[0]
         fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
         if self.backend == "python":
-            sols = np.full((n, 8, self.dof), np.nan)
+            sols = np.full((n, self.max_solutions, self.dof), np.nan)
             counts = np.zeros(n, dtype=np.int64)
             for i, row in enumerate(poses.tolist()):
                 found = self._mod.ik(row) if fv is None else self._mod.ik(row, float(fv[i]))
@@ -637,7 +640,7 @@ class Kernels:
         elif self.backend == "numpy":
             sols, counts = self._mod.ik(poses) if fv is None else self._mod.ik(poses, fv)
         else:
-            sols = np.empty((n, 8, self.dof))
+            sols = np.empty((n, self.max_solutions, self.dof))
             c = np.empty(n, dtype=np.intc)
             if fv is None:
                 self._ik_batch(n, poses.ctypes.data, sols.ctypes.data, c.ctypes.data)

@@ -58,6 +58,10 @@ POLISH_MAX_STEP = 0.5
 #: FK and Jacobian (quadratic convergence leaves an error of the order of its square); the
 #: residual of the kernels' own FK checks it, and where it fails the steps go on.
 POLISH_LAST_STEP = 1e-9
+#: Newton steps the C kernels take for every candidate of a block at once, vectorised over the
+#: block's poses (no early exit), before the residual decides which candidates go on one at a
+#: time: two steps take a mismatch of 1e-5 (decimal DH, a URDF's printed constants) to rounding.
+POLISH_VEC_STEPS = 2
 #: The one metric of the residual each solution reports.
 RESIDUAL_METRIC = ("max(|t_fk - t_pose| (m), rotation angle between fk and pose (rad)), fk the "
                    "kernels' own fk of the solution")
@@ -305,7 +309,7 @@ def polish_context(robot, nominal: Nominal, printers: dict, hold: int | None = N
     return {"lines": lines, "R": [pr(e) for e in code["R"]], "t": [pr(e) for e in code["t"]],
             "cols": cols, "lets": sorted(used), "prismatic_vars": prismatic_vars,
             "max_iter": POLISH_MAX_ITER, "stop": repr(POLISH_STOP), "accept": repr(POLISH_ACCEPT),
-            "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "metric": RESIDUAL_METRIC,
+            "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "vec_steps": POLISH_VEC_STEPS, "metric": RESIDUAL_METRIC,
             "nominal": nominal.robot.name, "nominal_id": nominal.robot.id, "key": nominal_key(nominal),
             "deviation": f"{nominal.deviation:.3g}", "how": _comment_safe(nominal.how),
             "revolute": robot.revolute.tolist(), "hold": hold}

@@ -110,6 +110,28 @@ def _parallel3():
         reasons=(p3.REASON_SHOULDER, p3.REASON_REACH), free_joint=slice(None))
 
 
+def _parallel3_sp6():
+    from derive.ik import parallel3 as p3
+
+    def candidates(geo, poses, free=None):
+        return p3.solve_batch_sp6(geo, poses, free)
+
+    return IKClass(
+        name="parallel3-sp6", title="three parallel axes, axes 5 and 6 not meeting (IK-Geo's three parallel)",
+        dof=6, detect=quiet_detect(p3.p3_sp6_geometry), candidates=candidates,
+        steps=(("q1, q5", "sp6: the point of axis 6 and axis 6 itself, both projected on the parallel "
+                          "axes, up to 4 solutions"),
+               ("q6", "sp1: R(-h6, q6) R5^T h2 = R_t^T h2; free where axis 6 is parallel to axes 2-4"),
+               ("q2 + q3 + q4", "sp1: the rotation about the parallel axes"),
+               ("q3", "sp3: the cosine law in the plane of the parallel axes, two roots"),
+               ("q2, q4", "sp1 in that plane, then the sum")),
+        branch_labels=("sp6 solution (bit 2 of 2)", "sp6 solution (bit 1 of 2)", "q3 root (+ / -)"),
+        singular_sets=("wrist: axis 6 parallel to axes 2-4, q6 free (from q_ref, else 0), marked singular",
+                       "sp6 degenerate: an angle in neither equation, returned as 0, marked singular",
+                       "elbow stretched or folded: the q3 roots meet (merged)"),
+        reasons=(p3.REASON_SP6, p3.REASON_REACH), free_joint=slice(None))
+
+
 def _panda():
     from derive.ik import panda as pd
 
@@ -167,8 +189,9 @@ def _srs():
 
 _BUILT: dict = {}
 #: Names of the classes in the order of detection.
-ORDER = ("ur", "spherical", "parallel3", "panda", "srs")
-_MAKERS = {"spherical": _spherical, "parallel3": _parallel3, "panda": _panda, "srs": _srs}
+ORDER = ("ur", "spherical", "parallel3", "parallel3-sp6", "panda", "srs")
+_MAKERS = {"spherical": _spherical, "parallel3": _parallel3, "parallel3-sp6": _parallel3_sp6,
+           "panda": _panda, "srs": _srs}
 
 
 def register(cls: IKClass) -> None:

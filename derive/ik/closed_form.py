@@ -43,8 +43,12 @@ from derive.errors import DeriveError, InputError, as_finite_array
 from derive.ik import classes, general6r, panda, parallel3, spherical, srs
 from derive.ik.finish import finish, select_one
 from derive.ik.parallel3 import P3Geometry
-from derive.ik.subproblems import rot, sp1, sp2, sp3, sp4
-from derive.ik.spherical import SWGeometry, _slot, sw_geometry
+from derive.ik.subproblems import rot
+from derive.ik.subproblems.sp1 import _sp1
+from derive.ik.subproblems.sp2 import _sp2
+from derive.ik.subproblems.sp3 import _sp3
+from derive.ik.subproblems.sp4 import _sp4
+from derive.ik.spherical import SWGeometry, sw_geometry
 from derive.ik.tolerances import MERGE_TOL  # noqa: F401  (read here by derive.codegen.emit)
 from derive.ik.tolerances import REACH_TOL, UR_AXIS_TOL, UR_LINK_TOL, WRIST_SINGULAR
 from derive.kinematics.pose import as_pose_batch
@@ -113,10 +117,6 @@ def _ur_geometry(robot) -> URGeometry:
 _X, _Y, _Z = np.eye(3)
 
 
-def _b(v, n):
-    return np.broadcast_to(v, (n, 3))
-
-
 def _chain_pose(geo: URGeometry, poses: np.ndarray) -> tuple:
     """Rotation matrices (n,3,3) and translations (n,3) of the chain end frame (pose * G^-1)."""
     chain = dq._mul(poses, dq.conj_quaternion(geo.g))
@@ -173,31 +173,33 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
     out = np.full((n, 8, 6), np.nan)
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
-    x, y, z = _b(_X, n), _b(_Y, n), _b(_Z, n)
-    a3x, ma2x = _b(geo.a3 * _X, n), _b(-geo.a2 * _X, n)
+    # constant vectors stay (3,): the subproblems' private steps (no input checks, no residuals)
+    # broadcast them, and a constant axis enters their products as three numbers
+    x, y, z = _X, _Y, _Z
+    a3x, ma2x = geo.a3 * _X, -geo.a2 * _X
     # the slots of step 4 in the order sin t3 >= 0, < 0 (slot 0 has the sign of -a2 a3)
     order3 = (0, 1) if geo.a2 * geo.a3 < 0 else (1, 0)
 
     p5 = p + geo.d6 * r[:, :, 1]
     bad1 = p5[:, 0] ** 2 + p5[:, 1] ** 2 - geo.d4 ** 2 < -REACH_TOL * max(1.0, geo.d4 ** 2)
-    s1 = sp4(y, -z, p5, np.full(n, -geo.d4))
+    s1, _free1 = _sp4(y, -z, p5, np.full(n, -geo.d4))
 
     def wrist1(t1, a, t5, t6):
         """t2+t3+t4 (sp1) and the wrist-1 point v in the arm plane (C.19, C.21)."""
         m0 = np.einsum("nij,nj->ni", a, rot(-y, -t6, rot(z, t5, x)))
-        t234 = sp1(-y, x, m0).theta[:, 0, 0]
+        t234 = _sp1(-y, x, m0)
         p3 = p5 + geo.d5 * rot(z, t1, rot(-y, t234, z))
         v = rot(z, -t1, p3 - geo.d1 * _Z)
         v[:, 1] = 0.0
         return t234, v
 
     for i1 in range(2):
-        t1 = _slot(s1, i1)[:, 0]
+        t1 = s1[:, i1]
         a = np.einsum("nji,njk->nik", rot_z(t1), r)          # A = Rz(t1)^T R
-        s65 = sp2(-y, z, a[:, 1, :], y)
+        s65 = _sp2(-y, z, a[:, 1, :], y)
         sing = np.hypot(a[:, 0, 1], a[:, 2, 1]) < WRIST_SINGULAR
         for i5 in range(2):
-            t6, t5 = _slot(s65, i5).T
+            t6, t5 = s65[:, i5].T
             t5 = np.where(sing, np.where(a[:, 1, 1] >= 0, 0.0, np.pi), t5)
             if np.any(sing):
                 free = _free_theta6(geo, lambda t: wrist1(t1, a, t5, t), n) if q6_ref is None else q6_ref
@@ -205,10 +207,10 @@ def solve_batch(geo: URGeometry, poses: np.ndarray, q6_ref: np.ndarray | None = 
             t234, v = wrist1(t1, a, t5, t6)
             vv = np.einsum("ni,ni->n", v, v)
             bad3 = np.abs((vv - geo.a2 ** 2 - geo.a3 ** 2) / (2 * geo.a2 * geo.a3)) > 1 + REACH_TOL
-            s3 = sp3(-y, a3x, ma2x, np.sqrt(vv))
+            s3 = _sp3(-y, a3x, ma2x, np.sqrt(vv))
             for i3 in range(2):
-                t3 = _slot(s3, order3[i3])[:, 0]
-                t2 = sp1(-y, rot(-y, t3, a3x) - ma2x, v).theta[:, 0, 0]
+                t3 = s3[:, order3[i3]]
+                t2 = _sp1(-y, rot(-y, t3, a3x) - ma2x, v)
                 t4 = t234 - t2 - t3
                 k = 4 * i1 + 2 * i5 + i3
                 out[:, k] = wrap_angle(np.stack([t1, t2, t3, t4, t5, t6], -1))
@@ -231,7 +233,8 @@ def solve(robot, geo, poses: np.ndarray, q_free: np.ndarray | None = None,
     The candidates go through the finish step (:func:`derive.ik.finish.finish`: FK check, merge,
     compaction)."""
     cls = classes.find("spherical" if isinstance(geo, SWGeometry) else
-                       "parallel3" if isinstance(geo, P3Geometry) else "ur")
+                       ("parallel3-sp6" if geo.layout == "sp6" else "parallel3")
+                       if isinstance(geo, P3Geometry) else "ur")
     batch, why = cls.candidates, cls.reasons
     n = poses.shape[0]
     q_all = np.full((n, 8, 6), np.nan)
@@ -431,6 +434,9 @@ def classify(robot) -> Classification:
             + parallel3.describe(p3)])
     rel = closed_form_relation(robot)
     if rel is None:
+        if robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints):
+            why = general6r.describe(robot)
+            return dataclasses.replace(c, general6r=why, notes=c.notes + [why])
         return c
     notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n]
     return dataclasses.replace(
@@ -512,10 +518,12 @@ def parallel3_class(robot) -> P3Geometry | None:
     robot = load_robot(robot)
     if spherical_class(robot) is not None or _is_ur(robot):
         return None
-    try:
-        return parallel3.p3_geometry(robot)
-    except DeriveError:
-        return None
+    for geometry in (parallel3.p3_geometry, parallel3.p3_sp6_geometry):   # axes 5, 6 meeting or not
+        try:
+            return geometry(robot)
+        except DeriveError:
+            pass
+    return None
 
 
 def spherical_reason(robot) -> str:

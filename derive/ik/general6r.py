@@ -24,13 +24,20 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   x4^i x5^j (i <= 3, j <= 2): ``M(x3) v = 0`` with M quadratic in x3 = tan((q3 - d3)/2), d3 a
   random offset chosen per pose from a few so that the leading matrix is best conditioned (the
   Moebius substitution of Manocha-Canny). det M has degree 24 (8 spurious roots at +-i).
-* ``M(x3) v = 0`` is the 24 x 24 companion eigenproblem ``[[0, I], [-M2^-1 M0, -M2^-1 M1]]``
-  (numpy.linalg.eig); real eigenvalues give q3, their eigenvectors q4 and q5 (ratios of the
-  monomials), the 14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the
-  same SVD), the remaining rotation q6.
+* ``M(x3) v = 0`` is the 24 x 24 companion eigenproblem ``C = [[0, I], [-M2^-1 M0, -M2^-1 M1]]``.
+  The roots every pose shares (x3 = +-i, the factor (1 + x3^2)^4 of det M, and a cut arm's
+  constant spurious roots) have the same eigenvectors for every pose, found once per robot
+  (:func:`_deflation`); in an orthonormal basis [W V] with V spanning them C is block
+  triangular, so numpy.linalg.eigvals of W^T C W (16 x 16) gives the other roots. Real
+  eigenvalues give q3, the null vectors of M(x3) q4 and q5 (ratios of the monomials), the
+  14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the same QR), the
+  remaining rotation q6.
 * Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
   Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`G6_ACCEPT` m and
   rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
+* A pose whose elimination degenerates (the leading matrix ill-conditioned for every offset, or
+  Q rank-deficient there) is solved at nearby poses and Newton carries their solutions back
+  (:func:`_perturbed`); a pose with a (near-)singular solution is flagged ``degenerate``.
 
 A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
 geometry) is tried in reverse order (the IK of T^-1 for the reversed chain, where q4 is the
@@ -42,6 +49,7 @@ Fanuc CRX-10iA, whose standard pencil has rank 10 for every q3); when all degene
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 from dataclasses import dataclass
@@ -54,7 +62,8 @@ from derive.algebra.angles import wrap_angle
 from derive.cache import find_artifact, memo, step, store_artifacts, task
 from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
-                                  G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+                                  G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
+                                  G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -80,6 +89,16 @@ def _frame(axis, point):
     f = np.eye(4)
     f[:3, 0], f[:3, 1], f[:3, 2], f[:3, 3] = x, np.cross(z, x), z, point
     return f
+
+
+def _inv_rigid(t):
+    """Batched inverse of rigid transforms (..., 4, 4)."""
+    out = np.zeros_like(t)
+    rt = np.swapaxes(t[..., :3, :3], -1, -2)
+    out[..., :3, :3] = rt
+    out[..., :3, 3] = -(rt @ t[..., :3, 3, None])[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
 
 
 def _inv(t):
@@ -128,17 +147,21 @@ def _rz(t):
 
 def _chain_frames(c, q):
     """The frames A_i = C1 Rz(q1) ... C_i (i = 1..6, before joint i's rotation) and the end
-    pose, for q (m, 6): (frames (m, 6, 4, 4), end (m, 4, 4))."""
+    pose, for q (m, 6): (frames (m, 6, 4, 4), end (m, 4, 4)). A right factor Rz(q) mixes only
+    the first two columns (done as such); a constant C_i is one matrix product of all rows."""
     m = q.shape[0]
+    cq, sq = np.cos(q), np.sin(q)
+    frames = np.empty((m, 6, 4, 4))
     a = np.broadcast_to(c[0], (m, 4, 4)).copy()
-    rz = _rz(q)
-    frames = []
     for i in range(6):
         if i:
-            a = a @ c[i]
-        frames.append(a)
-        a = a @ rz[:, i]
-    return np.stack(frames, 1), a @ c[6]
+            a = (a.reshape(4 * m, 4) @ c[i]).reshape(m, 4, 4)
+        frames[:, i] = a
+        a0, a1 = a[:, :, 0].copy(), a[:, :, 1]
+        ci, si = cq[:, i, None], sq[:, i, None]
+        a[:, :, 0] = ci * a0 + si * a1
+        a[:, :, 1] = ci * a1 - si * a0
+    return frames, (a.reshape(4 * m, 4) @ c[6]).reshape(m, 4, 4)
 
 
 # --------------------------------------------------------------------------- #
@@ -277,6 +300,16 @@ class Plan:
     d3: np.ndarray          # (K,) candidate offsets of q3
     notes: tuple
     cut: dict | None = None  # the loop cut at another joint (see _check_cut), or None
+    #: (len(d3), 24, k): per offset of the eigen-variable, an orthonormal basis of the complement
+    #: of the pencil's pose-independent eigenvectors (the roots every pose shares: x = +-i, the
+    #: spurious factor (1 + x^2)^4 of det M, and for a cut the constant real roots of its
+    #: special geometry); None: no deflation (see :func:`_deflation`).
+    deflate: np.ndarray | None = None
+    #: The number of columns of ``deflate`` that span the complement (24 less the removed roots).
+    deflate_keep: int = 24
+    #: The eigen-variable's pose-independent real roots (rad, in the joint's own angle), removed
+    #: by the deflation; a pose whose own root falls on one gets the null-space search there.
+    spurious: tuple = ()
 
 
 def _seeded(robot_id: str) -> np.random.Generator:
@@ -347,6 +380,29 @@ def _plan(robot, progress):
     return _plan_from(robot, c, scale, data)
 
 
+def describe(robot) -> str:
+    """Why and how the general 6R elimination solves a robot of no special class, for classify:
+    the formulation its cached derivation chose (forward or reversed chain, or the loop cut and
+    why), without deriving (a robot not derived yet says so)."""
+    robot = load_robot(robot)
+    head = ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
+            "applies, so derive.reference.ik solves it by the general 6R elimination "
+            "(derive.ik.general6r: Raghavan-Roth's 14 equations derived with sympy for this arm, "
+            "solved per pose as Manocha-Canny's eigenproblem in numpy; every solution, up to 16)")
+    found = find_artifact(robot.id, "general6r")
+    data = json.loads(found.read_text()) if found is not None else None
+    if data is None or data.get("format") != FORMAT:
+        return head + "; derived on first use (a few seconds, then cached)"
+    if data.get("cut"):
+        how = (f"its standard elimination degenerates ({'; '.join(data['notes'][:-1])}), so the loop is "
+               f"{data['notes'][-1]}")
+    else:
+        how = data["notes"][-1] if data.get("notes") else ""
+        how = ("solved as the reversed chain (the forward one degenerates): " if data["reverse"] else
+               "solved as the forward chain: ") + how.split(": ", 1)[-1]
+    return head + "; " + how
+
+
 def info_rank(info: str) -> int:
     return int(info.split("rank Q = ")[1].split(",")[0])
 
@@ -356,9 +412,9 @@ def _plan_from(robot, c, scale, data):
         rng = _seeded(robot.id)
         offsets = rng.uniform(-np.pi, np.pi, 3)
         empty = Elimination(pl=np.zeros((14, 3, 9)), r0=np.zeros((14, 0)), q=np.zeros((14, 8, 0)), monomials=())
-        return Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8, mix=np.eye(6),
-                    offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]), notes=tuple(data["notes"]),
-                    cut=data["cut"])
+        return _with_deflation(Plan(robot=robot.name, c=c, scale=scale, reverse=False, elim=empty, rank_q=8,
+                                    mix=np.eye(6), offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]),
+                                    notes=tuple(data["notes"]), cut=data["cut"]))
     elim = Elimination(pl=np.array(data["pl"]), r0=np.array(data["r0"]).reshape(14, -1),
                        q=np.array(data["q"]).reshape(14, 8, -1),
                        monomials=tuple(tuple(m) for m in data["monomials"]))
@@ -367,8 +423,101 @@ def _plan_from(robot, c, scale, data):
     mix = np.linalg.qr(rng.standard_normal((14 - rank_q, 6)))[0].T if rank_q < 8 else np.eye(6)
     offsets = rng.uniform(-np.pi, np.pi, 3)
     d3 = offsets[2] + np.array([0.0, 2.0, 4.0])
-    return Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
-                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None)
+    return _with_deflation(Plan(robot=robot.name, c=c, scale=scale, reverse=bool(data["reverse"]), elim=elim,
+                                rank_q=rank_q, mix=mix, offsets=offsets, d3=d3, notes=tuple(data["notes"]), cut=None))
+
+
+def _with_deflation(pl: Plan) -> Plan:
+    """The plan with its deflation (:func:`_deflation`), or unchanged when there is none."""
+    found = _deflation(pl)
+    if found is None:
+        return pl
+    basis, keep, spurious = found
+    return dataclasses.replace(pl, deflate=basis, deflate_keep=keep, spurious=spurious)
+
+
+def _pencil_samples(pl: Plan, m: int = 4, seed: int = 17):
+    """The pencil's coefficients (m, 3, 12, 12) at m random configurations' poses."""
+    q = np.random.default_rng(seed).uniform(-np.pi, np.pi, (m, 6))
+    _, target = _chain_frames(pl.c, q)
+    return _cut_front(pl, target)[-1] if pl.cut else _standard_front(pl, target)[5]
+
+
+def _constant_null(ms):
+    """The common null space (12, k) of the matrices ms (m, 12, 12) when every one has the same
+    null space (to rounding), else None."""
+    u, sv, vh = np.linalg.svd(ms)
+    k = np.sum(sv < 1e-10 * sv[:, :1], axis=1)
+    if k.min() == 0 or k.min() != k.max():
+        return None
+    k = int(k[0])
+    bases = np.concatenate([vh[i, -k:].conj().T for i in range(len(ms))], axis=1)
+    s2 = np.linalg.svd(bases, compute_uv=False)
+    if np.sum(s2 > 1e-8 * s2[0]) != k:
+        return None
+    return vh[0, -k:].conj().T
+
+
+def _deflation(pl: Plan):
+    """The pencil's pose-independent eigenvectors, removed before the eigenvalues are taken.
+
+    det M(x) has the factor (1 + x^2)^4 for every pose (x = +-i: (s, c) of the eigen-variable
+    with s^2 + c^2 = 0); a loop cut of a special arm can add real roots that every pose shares
+    (the CRX's q3 = -pi/2 of the cut at joint 2, a 4-fold spurious root). When M's null space
+    there is the same for every pose (checked on random poses), the companion matrix C has the
+    invariant subspace V spanned by [u; x u] (u in that null space) for every pose, so in an
+    orthonormal basis [W V] C is block triangular and the other eigenvalues are those of
+    W^T C W: 16 x 16 for a general arm instead of 24 x 24 (the eigen-solver's work falls by
+    (24/16)^3), and no spurious candidate. Returns (bases (len(d3), 24, 24) with W first, the
+    number of W's columns, the spurious real roots in rad), or None."""
+    mats = _pencil_samples(pl)
+    # real roots every sample shares (in the eigen-variable's angle)
+    d0 = pl.d3[0]
+    mk = np.einsum("ak,naij->nkij", _half(d0), mats)
+    comp = np.zeros((len(mats), 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    inv = _inv_safe(mk[:, 2])
+    comp[:, 12:, :12] = -inv @ mk[:, 0]
+    comp[:, 12:, 12:] = -inv @ mk[:, 1]
+    if not np.all(np.isfinite(comp)):
+        return None
+    lam = np.linalg.eigvals(comp)
+    # roots every sample shares (x at the offset d0; x = +-i is known), one of each conjugate pair
+    common = []
+    for x in lam[0]:
+        if abs(abs(x.imag) - 1) < 1e-6 and abs(x.real) < 1e-6 or x.imag < -1e-9 * (1 + abs(x)):
+            continue
+        if all(np.min(np.abs(r - x)) < 1e-7 * (1 + abs(x)) for r in lam[1:]) and \
+                not any(abs(x - y) < 1e-7 * (1 + abs(x)) for y in common):
+            common.append(complex(x.real, x.imag) if abs(x.imag) > 1e-9 * (1 + abs(x)) else complex(x.real, 0))
+    cols = {k: [] for k in range(len(pl.d3))}
+    spurious = []
+    u = _constant_null(1j * mats[:, 0] + mats[:, 1])       # x = i: (s, c, 1) ~ (i, 1, 0)
+    if u is not None:
+        for k in range(len(pl.d3)):                         # [u; i u], real and imaginary parts
+            cols[k] += [np.concatenate([u.real, -u.imag]), np.concatenate([u.imag, u.real])]
+    for x in common:
+        u = _constant_null(mk[:, 0] + x * mk[:, 1] + x * x * mk[:, 2])
+        if u is None:
+            continue
+        t = d0 + 2 * np.arctan(x)                           # the eigen-variable's (complex) angle
+        if x.imag == 0:
+            spurious.append(float(wrap_angle(t.real)))
+        for k, d in enumerate(pl.d3):                       # [cos h u; sin h u], h = (t - d) / 2
+            h = 0.5 * (t - d)
+            w = np.concatenate([np.cos(h) * u, np.sin(h) * u])
+            cols[k] += [w.real] + ([w.imag] if x.imag != 0 else [])
+    if not cols[0]:
+        return None
+    bases = []
+    for k in range(len(pl.d3)):
+        v = np.concatenate(cols[k], axis=1)
+        qv, rv = np.linalg.qr(v, mode="complete")
+        r = v.shape[1]
+        if np.sum(np.abs(np.diag(rv[:r])) > 1e-8 * np.abs(rv).max()) != r:
+            return None
+        bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+    return np.array(bases), 24 - r, tuple(spurious)
 
 
 def _check_generic(robot, cc, elim):
@@ -481,8 +630,60 @@ def solve(robot, poses, chunk: int = 2048) -> General6RSolutions:
         e = min(n, s + chunk)
         q[s:e], counts[s:e], sing[s:e], degen[s:e] = (_solve_chunk_cut if pl.cut else _solve_chunk)(
             robot, pl, poses[s:e])
-    reason = ["" if k else "unreachable: no real root of the eliminant reproduces the pose" for k in counts]
+    todo = np.nonzero(degen)[0]
+    for s in range(0, len(todo), chunk):
+        t = todo[s:s + chunk]
+        q[t], counts[t], sing[t], degen[t] = _perturbed(robot, pl, poses[t], q[t], counts[t])
+    # a singular solution: the pose is on the singular set's image, where solutions can merge or
+    # form a continuum (then only points of it are returned): flagged
+    degen |= np.any(sing, axis=1)
+    # off the singular set a 6R has an even number of solutions: an odd count lost or merged one
+    degen |= counts % 2 == 1
+    reason = ["" if k else ("degenerate: the elimination degenerates at this pose and at the nearby poses "
+                            "tried; no solution found" if d else
+                            "unreachable: no real root of the eliminant reproduces the pose")
+              for k, d in zip(counts, degen)]
     return General6RSolutions(q=q, counts=counts, singular=sing, degenerate=degen, reason=reason)
+
+
+#: Unit twists (rotation vector, translation / size) to the nearby poses of a degenerate pose.
+_TWISTS = np.random.default_rng(20261205).standard_normal((8, 6))
+_TWISTS /= np.linalg.norm(_TWISTS, axis=1, keepdims=True)
+
+
+def _perturbed(robot, pl: Plan, poses, q0, counts0):
+    """The poses whose elimination degenerates (the pencil singular or Q rank-deficient at that
+    pose, though its solutions may be isolated and regular: e.g. axis-aligned configurations of
+    the CRX), solved again at G6_PERTURB_TRIALS nearby poses (each moved by a random twist of
+    G6_PERTURB rad and G6_PERTURB times the arm's size), whose solutions Newton carries back onto
+    the pose (a regular solution moves continuously with the pose). Returns (q, counts,
+    singular, degenerate) as :func:`_collect`; degenerate stays set where every nearby pose was
+    degenerate too or a solution found is singular (a continuum of solutions, or a multiple root:
+    some may be missing)."""
+    n = len(poses)
+    target = _to_matrix(poses)
+    ips = [np.repeat(np.arange(n), counts0)]
+    qs = [q0[np.arange(MAX_SOLUTIONS)[None, :] < counts0[:, None]]]
+    every = np.ones(n, dtype=bool)
+    solver = _solve_chunk_cut if pl.cut else _solve_chunk
+    for k in range(G6_PERTURB_TRIALS):
+        # the same twists for every pose (a pose's result does not depend on its batch)
+        tw = np.broadcast_to(_TWISTS[k % len(_TWISTS)] * G6_PERTURB, (n, 6))
+        moved = target.copy()
+        ang = np.linalg.norm(tw[:, :3], axis=1)
+        rot = quat._to_matrix(quat._from_axis_angle(tw[:, :3] / np.maximum(ang, 1e-300)[:, None], ang))
+        moved[:, :3, :3] = target[:, :3, :3] @ rot
+        moved[:, :3, 3] += tw[:, 3:] * pl.scale
+        qp, cp, _, dp = solver(robot, pl, as_pose_batch(moved)[0])
+        every &= dp
+        ips.append(np.repeat(np.arange(n), cp))
+        qs.append(qp[np.arange(MAX_SOLUTIONS)[None, :] < cp[:, None]])
+    ip, qc = np.concatenate(ips), np.concatenate(qs)
+    scaled = target.copy()
+    scaled[:, :3, 3] /= pl.scale
+    qc, err, jac = _newton(pl.c, qc, scaled[ip], with_error=True)
+    q, counts, sing, degen = _collect(robot, pl, poses, ip, wrap_angle(qc), n, every, err, jac)
+    return q, counts, sing, degen | np.any(sing, axis=1)
 
 
 def _to_matrix(poses):
@@ -507,7 +708,8 @@ def _pencil_roots(pl, mats, degen):
     mk = np.zeros((n, 3, 12, 12))
     todo = np.arange(n)
     for k, d3 in enumerate(pl.d3):
-        cand = np.einsum("ak,naij->nkij", _half(d3), mats[todo])   # M0, M1, M2
+        sub = mats if len(todo) == n else mats[todo]
+        cand = (_half(d3).T @ sub.reshape(len(todo), 3, 144)).reshape(len(todo), 3, 12, 12)   # M0, M1, M2
         lead = cand[:, 2]
         inv = _inv_safe(lead)
         with np.errstate(all="ignore"):
@@ -515,25 +717,27 @@ def _pencil_roots(pl, mats, degen):
         cond = np.where(np.isfinite(cond), cond, np.inf)
         better = cond < best_cond[todo]
         idx = todo[better]
-        best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
+        if len(idx) == n:
+            best[:], best_cond[:], lead_inv, mk = k, cond, inv, cand
+        else:
+            best[idx], best_cond[idx], lead_inv[idx], mk[idx] = k, cond[better], inv[better], cand[better]
         todo = todo[~(best_cond[todo] < G6_GOOD_COND)]
         if len(todo) == 0:
             break
     degen = degen | ~(best_cond < G6_LEADING_COND)
-    comp = np.zeros((n, 24, 24))
-    comp[:, :12, 12:] = np.eye(12)
-    comp[:, 12:, :12] = -lead_inv @ mk[:, 0]
-    comp[:, 12:, 12:] = -lead_inv @ mk[:, 1]
-    comp = np.where(np.isfinite(comp), comp, 0.0)
-    lam = np.linalg.eigvals(comp)                            # (n, 24)
+    lower = np.concatenate([-lead_inv @ mk[:, 0], -lead_inv @ mk[:, 1]], axis=2)   # C's lower rows
+    if not np.all(np.isfinite(lower)):
+        lower[~np.isfinite(lower)] = 0.0
+    lam = _eigvals(pl, lower, best)                          # (n, 24), NaN-padded
     real = np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)
     return pl.d3[best], mk, lam, real, degen
 
 
-def _solve_chunk(robot, pl: Plan, poses):
-    n = poses.shape[0]
-    target = _to_matrix(poses)
-    target[:, :3, 3] /= pl.scale
+def _standard_front(pl: Plan, target):
+    """The pencil of each pose (target: (n, 4, 4) scaled matrices of the forward chain): (c,
+    target in the solved direction, the complete QR of Q, degenerate flags, the pencil's
+    coefficients of (s3, c3, 1) (n, 3, 12, 12), P with the pose terms (n, 14, 3, 9))."""
+    n = target.shape[0]
     c = _reverse(pl.c) if pl.reverse else pl.c
     if pl.reverse:
         target = np.linalg.inv(target)
@@ -557,6 +761,57 @@ def _solve_chunk(robot, pl: Plan, poses):
     mats = _twelve(sig)                                      # (n, 3, 12, 12)
     pa = np.broadcast_to(el.pl, (n, 14, 3, 9)).copy()
     pa[:, :, 2, 8] -= r0
+    return c, target, qq, rr, degen, mats, pa
+
+
+#: The deflation is used for a pose when the block it drops, W^T C V, is below this relative
+#: to C's largest entry (it is zero to rounding: the removed eigenvectors are the same for every
+#: pose); else that pose's 24 x 24 companion is solved whole.
+DEFLATE_LEAK = 1e-9
+
+
+def _eigvals(pl: Plan, lower, best):
+    """The eigenvalues of the companion matrices C = [[0, I], lower] (lower (n, 12, 24), offset
+    index best (n,)): those of the deflated block W^T C W (:func:`_deflation`), NaN-padded to
+    24, where the deflation holds; the whole matrix's elsewhere. With [W V] = B = [B1; B2]
+    (rows 1-12 and 13-24), C B = [B2; lower B], so W^T C B = W1^T B2 + W2^T (lower B): no 24 x 24
+    product per pose."""
+    n = len(lower)
+
+    def whole_matrix(idx):
+        comp = np.zeros((len(idx), 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:] = lower[idx]
+        return comp
+
+    if pl.deflate is None:
+        return np.linalg.eigvals(whole_matrix(np.arange(n)))
+    keep = pl.deflate_keep
+    lam = np.full((n, 24), np.nan + 0j)
+    whole = np.zeros(n, dtype=bool)
+    for k in np.unique(best):
+        idx = np.nonzero(best == k)[0]
+        m = len(idx)
+        b = pl.deflate[k]
+        w1, w2 = b[:12, :keep], b[12:, :keep]
+        low = lower[idx]
+        cb = (low.reshape(12 * m, 24) @ b).reshape(m, 12, 24)                 # lower B
+        t = w1.T @ b[12:] + w2.T @ cb                                         # W^T C B (m, keep, 24)
+        leak = np.abs(t[:, :, keep:]).max(axis=(1, 2))                        # W^T C V
+        good = leak <= DEFLATE_LEAK * np.maximum(1.0, np.abs(low).max(axis=(1, 2)))
+        if np.any(good):
+            lam[idx[good], :keep] = np.linalg.eigvals(t[good, :, :keep])
+        whole[idx[~good]] = True
+    if np.any(whole):
+        lam[whole] = np.linalg.eigvals(whole_matrix(np.nonzero(whole)[0]))
+    return lam
+
+
+def _solve_chunk(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c, target, qq, rr, degen, mats, pa = _standard_front(pl, target)
     # the offset of q3: the first whose leading matrix is well conditioned, else the best of
     # those tried (the Moebius substitution against a singular leading matrix)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
@@ -566,6 +821,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     # the null vector of M(x3) (the monomials x4^i x5^j) by one step of inverse iteration from a
     # fixed vector: M(x3) is singular to rounding, so its solution is the null vector
     v = _monomial_vectors(mk, ip, x3)
+    ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
@@ -578,7 +834,7 @@ def _solve_chunk(robot, pl: Plan, poses):
     x1 = np.einsum("ma,mb->mab", np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
                    np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 9)
     rhs = np.einsum("mej,mj->me", p3, x1)
-    y = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    y = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
     r8 = rr[ip, :8]
     ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
@@ -589,11 +845,12 @@ def _solve_chunk(robot, pl: Plan, poses):
     frames, _ = _chain_frames(c, qc)
     r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
     qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc = _newton(c, qc, target[ip])
+    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
     if pl.reverse:
         qc = -qc[:, ::-1]
+        jac = None                     # the reversed chain's Jacobian: the forward one is made again
     qc = wrap_angle(qc)
-    return _collect(robot, pl, poses, ip, qc, n, degen)
+    return _collect(robot, pl, poses, ip, qc, n, degen, err, jac)
 
 
 #: Rows of the 12 monomials x4^i x5^j (index 3 i + j) and their shifts by x4 and by x5.
@@ -603,6 +860,11 @@ _BASE5 = [3 * i + j for i in range(4) for j in range(2)]
 _SHIFT5 = [3 * i + j + 1 for i in range(4) for j in range(2)]
 #: Eigenvalues x3 of one pose closer than this (relative to 1 + |x3|) are one multiple root.
 CLUSTER_TOL = 1e-6
+#: Two eigenvalues of one pose closer than this (relative to 1 + |x3|), but apart by more than
+#: CLUSTER_TOL, are a near pair: two solutions with almost the same q3 (near a fold of the
+#: pose's solutions). Their null vectors are nearly parallel; extra candidates are made from
+#: the two-dimensional near-null space (:func:`_near_pair_candidates`).
+NEAR_PAIR_TOL = 1e-4
 
 
 def _monomial_vectors(mk, ip, x3):
@@ -612,7 +874,8 @@ def _monomial_vectors(mk, ip, x3):
     monomial vectors in the null space V are found by the shift structure of the monomials
     (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
     (Stetter's eigenvector method)."""
-    mx = mk[ip, 0] + x3[:, None, None] * mk[ip, 1] + (x3 * x3)[:, None, None] * mk[ip, 2]
+    powers = np.stack([np.ones_like(x3), x3, x3 * x3], 1)[:, None, :]            # (k, 1, 3)
+    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip]).reshape(len(ip), 12, 12)
     scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
     mx = mx / np.where(scale_m > 0, scale_m, 1.0)
     v = _null_vectors(mx + _NUDGE * np.eye(12))
@@ -650,6 +913,43 @@ def _monomial_vectors(mk, ip, x3):
         if np.all(np.isfinite(vecs)):
             v[members[:d]] = vecs.reshape(d, 4, 3)
     return v
+
+
+def _near_pair_candidates(mk, ip, x3, v):
+    """Extra candidates for near pairs of eigenvalues (:data:`NEAR_PAIR_TOL`): for the pair's
+    two members, the two monomial vectors in the span of M(x)'s two smallest right singular
+    vectors (x the pair's mean) found by the shift structure as in :func:`_monomial_vectors`,
+    each with each member's x3. They only add candidates (Newton and the FK check decide), so a
+    solution the single null vectors missed (the two nearly parallel) is found. Returns (ip,
+    x3, v) with the extra candidates appended."""
+    if len(ip) < 2:
+        return ip, x3, v
+    order = np.lexsort((x3, ip))
+    ips, xs = ip[order], x3[order]
+    gap = np.abs(xs[1:] - xs[:-1])
+    pair = (ips[1:] == ips[:-1]) & (gap > CLUSTER_TOL * (1 + np.abs(xs[1:]))) & \
+        (gap <= NEAR_PAIR_TOL * (1 + np.abs(xs[1:])))
+    k = np.nonzero(pair)[0]
+    if len(k) == 0:
+        return ip, x3, v
+    a, b = order[k], order[k + 1]
+    xm = 0.5 * (x3[a] + x3[b])
+    powers = np.stack([np.ones_like(xm), xm, xm * xm], 1)[:, None, :]
+    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip[a]]).reshape(len(a), 12, 12)
+    basis = np.swapaxes(np.linalg.svd(mx)[2][:, -2:], 1, 2)                 # (p, 12, 2)
+    with np.errstate(all="ignore"):
+        mult = (np.linalg.pinv(basis[:, _BASE4]) @ basis[:, _SHIFT4]
+                + 0.7071 * np.linalg.pinv(basis[:, _BASE5]) @ basis[:, _SHIFT5])
+        _, cvec = np.linalg.eig(mult)
+        vecs = np.swapaxes(basis @ cvec, 1, 2)                                # (p, 2, 12)
+        big = np.take_along_axis(vecs, np.argmax(np.abs(vecs), axis=2)[..., None], axis=2)
+        vecs = (vecs / np.where(big != 0, big, 1.0)).real
+    ok = np.all(np.isfinite(vecs), axis=(1, 2))
+    a, b, vecs = a[ok], b[ok], vecs[ok]
+    # each vector with each member's x3: 4 candidates per pair
+    idx = np.concatenate([a, a, b, b])
+    extra = np.concatenate([vecs[:, 0], vecs[:, 1], vecs[:, 0], vecs[:, 1]]).reshape(-1, 4, 3)
+    return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, extra])
 
 
 def _null_vectors(m):
@@ -807,15 +1107,15 @@ def _check_cut(c, e):
         {"e": e, "ev": best[0], "y": y.tolist()}
 
 
-def _solve_chunk_cut(robot, pl: Plan, poses):
-    n = poses.shape[0]
-    target = _to_matrix(poses)
-    target[:, :3, 3] /= pl.scale
-    c = pl.c
+def _cut_front(pl: Plan, target):
+    """The pencil of each pose for the loop cut (target: (n, 4, 4) scaled): (the pair's
+    coefficients (n, 14, 9), the complete QR of their Q, degenerate flags, the triple side with
+    the pose terms (n, 14, 27), the triple's joints in the pencil's order, the pencil's
+    coefficients (n, 3, 12, 12))."""
+    n = target.shape[0]
     e, ev = pl.cut["e"], pl.cut["ev"]
     y = np.array(pl.cut["y"])
-    triple, (f, h) = _cut_joints(e)
-    x = _pair_coefs(c, e, target)                           # (n, 14, 9)
+    x = _pair_coefs(pl.c, e, target)                        # (n, 14, 9)
     qx = x[:, :, :8]
     qq, rr = np.linalg.qr(qx, mode="complete")
     diag = np.abs(np.diagonal(rr[:, :8], axis1=1, axis2=2))
@@ -826,11 +1126,22 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     order = [ev] + [i for i in range(3) if i != ev]         # eigen joint, then the vector's two
     ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
     sig = (ten.reshape(n, 6, 3, 9) @ _t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
-    mats = _twelve(sig)
+    return x, qq, rr, degen, yy, order, _twelve(sig)
+
+
+def _solve_chunk_cut(robot, pl: Plan, poses):
+    n = poses.shape[0]
+    target = _to_matrix(poses)
+    target[:, :3, 3] /= pl.scale
+    c = pl.c
+    e = pl.cut["e"]
+    triple, (f, h) = _cut_joints(e)
+    x, qq, rr, degen, yy, order, mats = _cut_front(pl, target)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
     ip, ie = np.nonzero(real)
     x3 = lam[ip, ie].real
     v = _monomial_vectors(mk, ip, x3)
+    ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
     den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
     num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
@@ -842,7 +1153,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
     ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
     rhs = np.einsum("mek,mk->me", yy[ip], ym)
-    yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
+    yv = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
     r8 = rr[ip, :8]
     ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
     r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
@@ -852,16 +1163,14 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
         qc[:, j - 1] = t
     qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
     qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
-    # joint e from the rest: Rz(q_e) = (C1 Rz1 .. C_e)^-1 T (C_{e+1} Rz_{e+1} .. C7)^-1
-    frames, _ = _chain_frames(c, qc)
-    after = np.broadcast_to(c[6], (len(ip), 4, 4))
-    rz = _rz(qc)
-    for j in range(6, e, -1):                               # joints 6 .. e+1
-        after = c[j - 1] @ rz[:, j - 1] @ after
-    rel = np.linalg.inv(frames[:, e - 1]) @ target[ip] @ np.linalg.inv(after)
+    # joint e from the rest: with q_e = 0 the chain is A_e B (A_e = C1 Rz1 .. C_e, B the rest),
+    # so Rz(q_e) = A_e^-1 T B^-1 = A_e^-1 T (A_e B)^-1 A_e
+    frames, end0 = _chain_frames(c, qc)
+    a_e = frames[:, e - 1]
+    rel = _inv_rigid(a_e) @ target[ip] @ _inv_rigid(end0) @ a_e
     qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
-    qc = wrap_angle(_newton(c, qc, target[ip]))
-    return _collect(robot, pl, poses, ip, qc, n, degen)
+    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
 def _errors(c, q, target):
@@ -882,16 +1191,24 @@ def _errors(c, q, target):
     return err, jac
 
 
-def _newton(c, q, target, steps=None):
+def _newton(c, q, target, steps=None, with_error=False):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
-    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done."""
+    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done. With
+    ``with_error``, also the last error measured per candidate (max of scaled position and
+    rotation) and the Jacobian there (at the returned q: the loop measures before it steps)."""
     q = q.copy()
+    last = np.full(len(q), np.inf)
+    last_jac = np.zeros((len(q), 6, 6))
     idx = np.arange(len(q))
-    for _ in range(G6_NEWTON_MAX):
+    for k in range(G6_NEWTON_MAX + 1):
         err, jac = _errors(c, q[idx], target[idx])
-        todo = np.max(np.abs(err), axis=1) > 1e-13
+        size = np.max(np.abs(err), axis=1)
+        last[idx] = size
+        if with_error:
+            last_jac[idx] = jac
+        todo = size > 1e-13
         idx, err, jac = idx[todo], err[todo], jac[todo]
-        if len(idx) == 0:
+        if len(idx) == 0 or k == G6_NEWTON_MAX:
             break
         jt = np.swapaxes(jac, 1, 2)
         a = jt @ jac
@@ -902,14 +1219,22 @@ def _newton(c, q, target, steps=None):
         dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
         new = q[idx] + dq_
         q[idx] = np.where(np.isfinite(new), new, q[idx])
-    return q
+    return (q, last, last_jac) if with_error else q
 
 
-def _collect(robot, pl, poses, ip, qc, n, degen):
-    """Check every candidate on derive's exact FK, merge duplicates, pad."""
+def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
+    """Check every candidate on derive's exact FK, merge duplicates, pad. ``err``: the
+    product-form error Newton left (scaled lengths and rad); a candidate whose error is surely
+    past G6_ACCEPT (1e-9 in metres and rad, 10 times the acceptance) is dropped before the exact
+    FK (the two FKs agree to rounding). ``jac``: the forward chain's Jacobians (m, 6, 6) at qc
+    (Newton's last), else made here."""
     q = np.full((n, MAX_SOLUTIONS, 6), np.nan)
     counts = np.zeros(n, dtype=np.int64)
     sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
+    if err is not None:
+        near = err <= 10 * G6_ACCEPT * max(1.0, 1.0 / pl.scale)
+        ip, qc = ip[near], qc[near]
+        jac = None if jac is None else jac[near]
     if len(ip) == 0:
         return q, counts, sing, degen
     dpos, drot = _pose_error(fk(robot, qc), poses[ip])
@@ -918,24 +1243,38 @@ def _collect(robot, pl, poses, ip, qc, n, degen):
     if len(ip) == 0:
         return q, counts, sing, degen
     # singular flag: the Jacobian's relative smallest singular value
-    c = pl.c
-    frames, end = _chain_frames(c, qc)
-    axes = frames[:, :, :3, 2]
-    jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
-    jac = jac.transpose(0, 2, 1)
-    ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)     # squared singular values, ascending
-    is_sing = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
+    if jac is None:
+        frames, end = _chain_frames(pl.c, qc)
+        axes = frames[:, :, :3, 2]
+        jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
+        jac = jac.transpose(0, 2, 1)
+    else:
+        jac = jac[ok]
+    # sigma_min / sigma_max >= |det J| / |J|_F^6 (sigma_min >= |det J| / sigma_max^5 and
+    # sigma_max <= |J|_F): where that bound already clears G6_SINGULAR the Jacobian is regular;
+    # the others get the singular values (eigenvalues of J^T J)
+    with np.errstate(all="ignore"):
+        bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+    is_sing = ~(bound >= G6_NEAR_SINGULAR)
+    near_sing = is_sing.copy()
+    if np.any(is_sing):
+        ev = np.linalg.eigvalsh(np.swapaxes(jac[is_sing], 1, 2) @ jac[is_sing])   # ascending
+        is_sing[is_sing] = ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
+        near_sing[near_sing] = ev[:, 0] < G6_NEAR_SINGULAR ** 2 * ev[:, -1]
+    # near the singular set (solutions merging: one of a merged pair can be lost): flagged
+    degen[ip[near_sing]] = True
     order = np.lexsort((qc[:, 0], ip))
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
-    # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint
-    starts = np.searchsorted(ip, ip)
-    rank = np.arange(len(ip)) - starts
-    width = int(rank.max()) + 1
-    grid = np.full((n, width, 6), np.nan)
-    grid[ip, rank] = qc
-    diff = np.abs(wrap_angle(grid[:, :, None, :] - grid[:, None, :, :]))
-    close = np.all(diff < MERGE_TOL, axis=-1) & np.tril(np.ones((width, width), dtype=bool), -1)
-    dup = np.any(close, axis=-1)[ip, rank]
+    # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
+    # pairs (j, j + d) of one pose, d = 1, 2, ...)
+    dup = np.zeros(len(ip), dtype=bool)
+    for d in range(1, len(ip)):
+        same = ip[d:] == ip[:-d]
+        if not np.any(same):
+            break
+        j = np.nonzero(same)[0]
+        close = np.all(np.abs(wrap_angle(qc[j + d] - qc[j])) < MERGE_TOL, axis=1)
+        dup[j[close] + d] = True
     ip, qc, is_sing = ip[~dup], qc[~dup], is_sing[~dup]
     starts = np.searchsorted(ip, ip)
     rank = np.arange(len(ip)) - starts

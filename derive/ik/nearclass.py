@@ -42,11 +42,14 @@ from derive.ik.tolerances import (
            HOMOTOPY_STEPS,
            NEAR_AXIS_TOL,
            NEAR_DEVIATION_MAX,
+           NEAR_DEVIATION_MAX_7R,
            NEAR_POINT_TOL,
+           NEAR_POINT_TOL_7R,
            POLISH_MAX_ITER,
            POLISH_MAX_STEP,
            POLISH_TOL,
            SEED_REACH,
+           SEED_SINGULAR,
 )
 from derive.kinematics.fk import _joint_values, _op_dq, _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
@@ -154,6 +157,10 @@ def _nominal(robot) -> Nominal | None:
                            rel.error, f"the description's nominal: {lib.name} (relation fitted by "
                            f"the hand-eye equation, largest mismatch {rel.error:.2g} m / rad)")
     nom = _projected(robot)
+    if nom is None and robot.dof == 7:
+        # a seven-joint arm whose shoulder or wrist axes miss by millimetres (the Kinova Gen3's
+        # shoulder by 5.9 mm): the wider projection; it is polished with a joint given
+        nom = _projected(robot, NEAR_POINT_TOL_7R, NEAR_DEVIATION_MAX_7R)
     if nom is not None:
         return nom
     if robot.dof == 6:
@@ -194,8 +201,10 @@ def _canonical_rotation(axes: np.ndarray) -> np.ndarray | None:
     return None
 
 
-def _projected(robot) -> Nominal | None:
-    """Route 2 of :func:`nominal`: the axes projected onto the class."""
+def _projected(robot, point_tol: float = NEAR_POINT_TOL,
+               deviation_max: float = NEAR_DEVIATION_MAX) -> Nominal | None:
+    """Route 2 of :func:`nominal`: the axes projected onto the class, axis points within
+    ``point_tol`` (m) merged, the relation's mismatch at most ``deviation_max`` (m, rad)."""
     try:
         chain = numeric_chain(robot)
     except DeriveError:
@@ -222,7 +231,7 @@ def _projected(robot) -> Nominal | None:
     pts = (chain.start + np.vstack([np.zeros(3), np.cumsum(chain.links, axis=0)])[:n] - chain.start) @ r0
     pts[0] = 0.0
     for c in range(3):
-        pts[:, c] = _clusters(pts[:, c], NEAR_POINT_TOL)
+        pts[:, c] = _clusters(pts[:, c], point_tol)
     links = np.vstack([np.diff(pts, axis=0), np.zeros(3)])
     params, joints = {}, []
     for i in range(n):
@@ -254,11 +263,11 @@ def _projected(robot) -> Nominal | None:
     f_n0 = fk(nrob, np.zeros(n))
     tool = dq._mul(dq._mul(dq.conj_quaternion(f_n0), dq.conj_quaternion(base)), fk(robot, np.zeros(n)))
     dev = _deviation(robot, nrob, base, tool, signs, offsets)
-    if not dev <= NEAR_DEVIATION_MAX:
+    if not dev <= deviation_max:
         return None
     return Nominal(nrob, base, tool, signs, offsets, dev,
                    f"axes projected onto the class (axes within {worst_axis:.2g} rad of the nominal's, "
-                   f"axis points within {NEAR_POINT_TOL:g} m merged)")
+                   f"axis points within {point_tol:g} m merged)")
 
 
 def _deviation(robot, nrob, base, tool, signs, offsets, samples: int = 64, seed: int = 11) -> float:
@@ -394,8 +403,16 @@ def polish(robot, poses, q, fixed=None, *, tol: float = POLISH_TOL,
     iters = np.zeros(m, dtype=np.int64)
     idx = np.nonzero(np.all(np.isfinite(x), axis=1))[0]
     if len(idx):
-        x[idx], residual[idx], iters[idx] = _newton(lambda z, t: _model(robot, z, t), target[idx],
-                                                    x[idx], free, tol, max_iter)
+        model = lambda z, t: _model(robot, z, t)  # noqa: E731
+        x0 = x[idx].copy()
+        x[idx], residual[idx], iters[idx] = _newton_free(model, target[idx], x0, free, tol, max_iter)
+        again = idx[~(residual[idx] <= tol)]
+        if len(again):      # the monotone iteration from the same starts where that one failed
+            sub = np.searchsorted(idx, again)
+            xa, ra, ia = _newton(model, target[again], x0[sub], free, tol, max_iter)
+            better = ra < residual[again]
+            x[again[better]], residual[again[better]] = xa[better], ra[better]
+            iters[again] += ia
     return Polished(x.reshape(shape), residual.reshape(shape[:-1]), iters.reshape(shape[:-1]),
                     (residual <= tol).reshape(shape[:-1]))
 
@@ -415,6 +432,47 @@ def _model(robot, x, target):
     """(twist error (m, 6), Jacobian (m, 6, dof), residual (m,)) of the robot at x."""
     pose, jac = fk_jacobian(robot, x)
     return _twist_error(target, pose), jac, _residual(target, pose)
+
+
+def _newton_free(model, target, x, free, tol, max_iter):
+    """The first pass of :func:`polish`: Newton steps that are always taken (no test that |e|
+    falls), damped by mu = |e|^2 (Yamashita and Fukushima, "On the rate of convergence of the
+    Levenberg-Marquardt method", Computing Suppl. 15, 2001: quadratic convergence kept) and
+    clipped to POLISH_MAX_STEP in their largest joint, as the emitted kernels do
+    (:mod:`derive.codegen.polish`). Near a singular set the way to a solution often climbs
+    before it falls, which the monotone iteration (:func:`_newton`) refuses. (x, residual,
+    iterations)."""
+    xs = x.copy()
+    it = np.zeros(len(xs), dtype=np.int64)
+    res = np.full(len(xs), np.inf)
+    active = np.ones(len(xs), dtype=bool)
+    nfree = int(free.sum())
+    eye = np.eye(nfree)
+    for k in range(max_iter + 1):
+        a = np.nonzero(active)[0]
+        if len(a) == 0:
+            break
+        err, jac, r = model(xs[a], target[a])
+        res[a] = r
+        go = (r > tol) & np.isfinite(r)
+        active[a[~go]] = False
+        if k == max_iter or not go.any():
+            break
+        a, err, jac = a[go], err[go], jac[go]
+        jf = jac[:, :, free]
+        jt = np.swapaxes(jf, 1, 2)
+        mu = np.einsum("ij,ij->i", err, err)
+        step = np.linalg.solve(jt @ jf + mu[:, None, None] * eye, (jt @ err[..., None]))[..., 0]
+        big = np.abs(step).max(axis=1, initial=0.0)
+        step *= np.minimum(1.0, POLISH_MAX_STEP / np.where(big > 0, big, 1.0))[:, None]
+        ok = np.all(np.isfinite(step), axis=1)
+        active[a[~ok]] = False
+        rows = a[ok]
+        sub = xs[rows]
+        sub[:, free] += step[ok]
+        xs[rows] = sub
+        it[rows] += 1
+    return xs, res, it
 
 
 def _newton(model, target, x, free, tol, max_iter):
@@ -532,10 +590,11 @@ def _residual(target, pose) -> np.ndarray:
 # Solving a near-class arm
 # --------------------------------------------------------------------------- #
 class NearSolutions(NamedTuple):
-    """:func:`solve` for n poses: ``q`` (n, 8, dof) NaN-padded (valid rows first), ``counts``
-    (n,), ``singular`` (n, 8) (the nominal's candidate lay on its singular set), ``residual``
-    (n, 8) the residual after the polish (max of position error m and rotation angle rad; NaN in
-    the padding), ``iterations`` (n, 8) the Newton steps (-1 in the padding), ``dropped`` (n,)
+    """:func:`solve` for n poses: ``q`` (n, w, dof) NaN-padded (valid rows first; w = 8, or the
+    largest count where a pose has more: near its singular sets an arm off its class can have
+    more solutions than the class, at most 16), ``counts`` (n,), ``singular`` (n, w) (the nominal's candidate lay on its singular set), ``residual``
+    (n, w) the residual after the polish (max of position error m and rotation angle rad; NaN in
+    the padding), ``iterations`` (n, w) the Newton steps (-1 in the padding), ``dropped`` (n,)
     candidates the nominal closed form gave that did not converge, ``reasons`` (n,) why a pose
     has no solution ('' when it has)."""
 
@@ -547,6 +606,10 @@ class NearSolutions(NamedTuple):
     dropped: np.ndarray
     reasons: list
 
+
+#: The most solutions kept per pose: an arm a little off its class is a general 6R (or, with a
+#: joint given, a general 6R sub-chain), which has at most 16; the nominal class has 8.
+_MAX_SOLUTIONS = 16
 
 REASON_NOT_CONVERGED = ("no solution found: no candidate of the nominal closed form converged under "
                         "the Newton polish on this arm's FK (near a singular set of the nominal two "
@@ -616,11 +679,56 @@ def _candidates(nom: Nominal, pn: np.ndarray, qr_n, given):
     return q, (code == 0) & np.all(np.isfinite(q), -1), sing, reasons
 
 
+def _singular_seeds(robot, start: np.ndarray, fixed, deviation: float) -> np.ndarray:
+    """Extra seeds (n, m, dof) for the candidates (n, k, dof) that lie near a singular set of the
+    arm: where the smallest singular value of the Jacobian of the free joints over the largest
+    is below SEED_SINGULAR sqrt(deviation) (Newton from a candidate off by deviation / s_min
+    stays on its root while that is small against the root's basin, about s_min / curvature:
+    s_min^2 against the deviation), two of the arm's solutions can lie within one candidate's deviation
+    (the two elbow roots of a nearly stretched arm, the two wrist roots where sin q5 is about
+    the deviation; a nearly free joint along the whole circle), and Newton from the one
+    candidate finds one of them. Seeds on both sides along the singular direction v (the right
+    singular vector of the smallest singular value, unit in rad): q + t v for t in +-sqrt(dev),
+    +-3 sqrt(dev) (a fold: the roots part as the square root of the offset) and +-pi/4, +-pi/2,
+    +-3 pi/4, pi (a joint pair that is nearly free). NaN where no seed is needed."""
+    n, k, dof = start.shape
+    free = _free_mask(dof, fixed)
+    flat = start.reshape(-1, dof)
+    rows = np.nonzero(np.all(np.isfinite(flat), axis=1))[0]
+    if len(rows) == 0:
+        return np.full((n, 0, dof), np.nan)
+    _, jac = fk_jacobian(robot, flat[rows])
+    u, sv, vt = np.linalg.svd(jac[:, :, free])
+    r = np.sqrt(max(deviation, 1e-12))
+    near = sv[:, -1] < SEED_SINGULAR * r * sv[:, 0]
+    if not near.any():
+        return np.full((n, 0, dof), np.nan)
+    ts = np.array([r, -r, 3 * r, -3 * r, np.pi / 4, -np.pi / 4, np.pi / 2, -np.pi / 2,
+                   3 * np.pi / 4, -3 * np.pi / 4, np.pi])
+    v = np.zeros((int(near.sum()), dof))
+    v[:, free] = vt[near, -1, :]
+    which = rows[near]
+    seeds = flat[which][:, None, :] + ts[None, :, None] * v[:, None, :]
+    pose_of, cand_of = np.divmod(which, k)
+    # per pose, its near-singular candidates' seeds side by side
+    slot = np.zeros(len(which), dtype=np.int64)
+    order = np.argsort(pose_of, kind="stable")
+    _, first, cnt = np.unique(pose_of[order], return_index=True, return_counts=True)
+    slot[order] = np.arange(len(which)) - np.repeat(first, cnt)
+    width = int(slot.max()) + 1
+    out = np.full((n, width, len(ts), dof), np.nan)
+    out[pose_of, slot] = seeds
+    return out.reshape(n, width * len(ts), dof)
+
+
 def _near_reach(nrob, pn, q, code, deviation):
     """The seeds of branches the nominal does not reach (code > 0, square roots clipped) kept
     only where the nominal comes within SEED_REACH * deviation of the pose (m, rad): only there
-    can the arm, which deviates by at most ``deviation``, reach on that branch."""
-    far = (code > 0) & np.all(np.isfinite(q), -1)
+    can the arm, which deviates by at most ``deviation``, reach on that branch. Seeds whose
+    wrist (joint 5, the middle angle of the nominal's wrist decomposition) is within that of its
+    singular set are kept too: there the nominal's joint 6, and so its arm plane, moves by
+    about deviation / |sin q5|, so its miss says nothing about the arm."""
+    far = (code > 0) & np.all(np.isfinite(q), -1) & ~(np.abs(np.sin(q[..., 4])) < SEED_REACH * deviation)
     if not np.any(far):
         return q
     n, k = code.shape
@@ -719,10 +827,11 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
         raise DeriveError(f"{robot.name}: no nominal robot of a class with a closed form")
     P, _ = as_pose_batch(poses)
     n, dof = len(P), robot.dof
-    q_all = np.full((n, 8, dof), np.nan)
-    sing_all = np.zeros((n, 8), dtype=bool)
-    res_all = np.full((n, 8), np.nan)
-    it_all = np.full((n, 8), -1, dtype=np.int64)
+    width = _MAX_SOLUTIONS
+    q_all = np.full((n, width, dof), np.nan)
+    sing_all = np.zeros((n, width), dtype=bool)
+    res_all = np.full((n, width), np.nan)
+    it_all = np.full((n, width), -1, dtype=np.int64)
     counts = np.zeros(n, dtype=np.int64)
     dropped = np.zeros(n, dtype=np.int64)
     reasons = [""] * n
@@ -744,28 +853,44 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
             start[..., given[0]] = np.where(np.isfinite(start[..., given[0]]), given[1][s:e, None], np.nan)
         if nom.deviation > HOMOTOPY_FROM:
             start = track(robot, nom, P[s:e], start, fixed=fixed)
+        extra = _singular_seeds(robot, start, fixed, nom.deviation)
+        if extra.shape[1]:
+            start = np.concatenate([start, extra], axis=1)
+            sing = np.concatenate([sing, np.zeros(extra.shape[:2], dtype=bool)], axis=1)
+            reached = np.concatenate([reached, np.zeros(extra.shape[:2], dtype=bool)], axis=1)
+            k = start.shape[1]
         pol = polish(robot, P[s:e], start, fixed=fixed)
-        q = np.where(rev, wrap_angle(pol.q), pol.q)
-        ok = pol.converged
+        dropped[s:e] = (reached & ~pol.converged).sum(1)
+        # the converged candidates first (in candidate order), the columns no pose fills cut
+        front = np.argsort(~pol.converged, axis=1, kind="stable")
+        kc = max(1, int(pol.converged.sum(1).max(initial=0)))
+        front = front[:, :kc]
+        ok = np.take_along_axis(pol.converged, front, 1)
+        sing = np.take_along_axis(sing, front, 1)
+        residual = np.take_along_axis(pol.residual, front, 1)
+        iterations = np.take_along_axis(pol.iterations, front, 1)
+        q = np.take_along_axis(pol.q, front[..., None], 1)
+        q = np.where(rev, wrap_angle(q), q)
+        k = kc
         q[~ok] = np.nan
         keep = ok.copy()
         for i in np.nonzero(ok.any(axis=0))[0]:
             if i == 0:
                 continue
-            d = q[:, i:i + 1] - q[:, :i]
+            rows = np.nonzero(ok[:, i])[0]
+            d = q[rows, i:i + 1] - q[rows, :i]
             d = np.abs(np.where(rev, wrap_angle(d), d))
-            keep[:, i] &= ~np.any(np.all(d < MERGE_TOL, axis=-1) & keep[:, :i], axis=1)
+            keep[rows, i] &= ~np.any(np.all(d < MERGE_TOL, axis=-1) & keep[rows, :i], axis=1)
         order = np.argsort(~keep, axis=1, kind="stable")
         kept = np.take_along_axis(keep, order, 1)
         q = np.take_along_axis(q, order[..., None], 1)
         q[~kept] = np.nan
-        m = min(k, 8)
+        m = min(k, width)
         q_all[s:e, :m] = q[:, :m]
         sing_all[s:e, :m] = (np.take_along_axis(sing, order, 1) & kept)[:, :m]
-        res_all[s:e, :m] = np.where(kept, np.take_along_axis(pol.residual, order, 1), np.nan)[:, :m]
-        it_all[s:e, :m] = np.where(kept, np.take_along_axis(pol.iterations, order, 1), -1)[:, :m]
+        res_all[s:e, :m] = np.where(kept, np.take_along_axis(residual, order, 1), np.nan)[:, :m]
+        it_all[s:e, :m] = np.where(kept, np.take_along_axis(iterations, order, 1), -1)[:, :m]
         counts[s:e] = kept.sum(1)
-        dropped[s:e] = (reached & ~ok).sum(1)
         for i in range(e - s):
             if counts[s + i] == 0:
                 # the nominal's reason says why the nominal misses the pose; the arm itself is only
@@ -773,7 +898,8 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
                 reasons[s + i] = (why[i] if why[i] and not reached[i].any() and not np.isfinite(start[i]).any()
                                   else (f"{why[i]} for the nominal robot, and no candidate converged on this arm"
                                         if why[i] and not reached[i].any() else REASON_NOT_CONVERGED))
-    return NearSolutions(q_all, counts, sing_all, res_all, it_all, dropped, reasons)
+    w = max(8, int(counts.max(initial=0)))
+    return NearSolutions(q_all[:, :w], counts, sing_all[:, :w], res_all[:, :w], it_all[:, :w], dropped, reasons)
 
 
 def classify(robot):

@@ -43,6 +43,19 @@ k = 4 i1 + 2 i5 + i3, bit 1 for the second root of each subproblem).
 
 The UR layout (axes 4 and 5 meeting too, thesis section 4.3) is of this class as well, but keeps
 its own closed form (:mod:`derive.ik.closed_form`): :func:`p3_geometry` refuses it.
+
+**Axes 5 and 6 not meeting** (``layout="sp6"``, :func:`p3_sp6_geometry`): IK-Geo's "three
+parallel" solver (``IK_3_parallel``), with p_5 the vector from a point of axis 5 to a point of
+axis 6 (not 0). Steps 1 and 2 become one subproblem 6 for (q1, q5): projected on h_2,
+
+    h_2^T R(-h_1, q1) p_16 + h_2^T R(h_5, q5) (-p_5) = h_2^T (p_1 + p_2 + p_3 + p_4),
+    h_2^T R(-h_1, q1) R_06 h_6 + h_2^T R(h_5, q5) (-h_6) = 0
+
+(p_16 = t - p_0 - R_06 p_6 now a point of axis 6; R_1^T p_16 = p_1 + R_2 p_2 + R_23 p_3 + R_234 p_4
++ R_2345 p_5 and R_1^T R_06 h_6 = R_234 R_5 h_6, and rotations about h_2 keep h_2^T), up to 4
+solutions (the two high bits of the branch). Steps 3 and 4 are as above; step 5 takes
+v = R_1^T p_16 - p_1 - R(h_2, theta) (p_4 + R_5 p_5); steps 5 and 6 are as above (the low bit).
+Where subproblem 6 leaves an angle free (``degenerate``) the candidate is marked singular.
 """
 
 from __future__ import annotations
@@ -57,7 +70,7 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.subproblems import rot, sp1, sp3, sp4
+from derive.ik.subproblems import rot, sp1, sp3, sp4, sp6
 from derive.ik.tolerances import SP_EXACT_TOL, WRIST_SINGULAR
 from derive.kinematics.fk import _pose_error, fk
 from derive.model.classify import classify as geometric_classify
@@ -71,6 +84,9 @@ MAP_TOL = 1e-10
 
 REASON_SHOULDER = ("unreachable: no turn of joint 1 brings the wrist point (where axes 5 and 6 "
                    "meet) to the offset along the parallel axes that the arm has")
+REASON_SP6 = ("unreachable: no turn of joints 1 and 5 brings the point of axis 6 to the offset "
+              "along the parallel axes that the arm has with axis 6 across them as the pose needs "
+              "(subproblem 6 has no solution)")
 REASON_REACH = ("unreachable: the distance from axis 2 to the wrist point is outside the range "
                 "the upper arm and the forearm can span")
 
@@ -88,6 +104,9 @@ class P3Geometry:
     order: tuple
     error: float
     ortho_wrist: bool = False
+    #: "intersecting" (axes 5 and 6 meet: p[5] = 0) or "sp6" (they do not: IK-Geo's three
+    #: parallel with subproblem 6, module docstring)
+    layout: str = "intersecting"
 
     # ortho_wrist: axis 5 perpendicular to axes 4 and 6 (the Z1): the root of step 2 is taken as
     # |h_2 x R_t h_6| (accurate at the wrist singularity) instead of sqrt(1 - d^2)
@@ -102,9 +121,12 @@ def describe(geo: P3Geometry) -> str:
     """One line: the axes and the vectors (m) of the product-of-exponentials form."""
     def vec(v):
         return "(" + ", ".join(f"{x:.12g}" for x in np.asarray(v) + 0.0) + ")"
-    return ("axes 2, 3, 4 parallel, axes 5 and 6 meeting at the wrist point; IK-Geo's three "
+    head = ("axes 2, 3, 4 parallel, axes 5 and 6 meeting at the wrist point; IK-Geo's three "
             "parallel, two intersecting: subproblems 4 (q1), 4 (q5), 1 (q6), 1 (q2 + q3 + q4), "
-            "3 (q3), 1 (q2); axes " + ", ".join(vec(h) for h in geo.h) + "; vectors p0 ... p6 "
+            "3 (q3), 1 (q2)" if geo.layout == "intersecting" else
+            "axes 2, 3, 4 parallel, axes 5 and 6 not meeting; IK-Geo's three parallel: "
+            "subproblems 6 (q1, q5), 1 (q6), 1 (q2 + q3 + q4), 3 (q3), 1 (q2)")
+    return (head + "; axes " + ", ".join(vec(h) for h in geo.h) + "; vectors p0 ... p6 "
             + ", ".join(vec(p) for p in geo.p) + " m")
 
 
@@ -115,12 +137,22 @@ def p3_geometry(robot) -> P3Geometry:
     return memo("p3-geometry", robot.id, lambda: _p3_geometry(robot))
 
 
+def p3_sp6_geometry(robot) -> P3Geometry:
+    """The three-parallel form of a robot whose axes 5 and 6 do not meet (``layout="sp6"``,
+    module docstring), or DeriveError naming the property it lacks; cached per robot identity."""
+    robot = load_robot(robot)
+    return memo("p3-sp6-geometry", robot.id, lambda: _p3_geometry(robot, layout="sp6"))
+
+
 def is_parallel3(robot) -> bool:
-    try:
-        p3_geometry(robot)
-        return True
-    except DeriveError:
-        return False
+    """Whether the robot is of the three-parallel class in either layout."""
+    for geometry in (p3_geometry, p3_sp6_geometry):
+        try:
+            geometry(robot)
+            return True
+        except DeriveError:
+            pass
+    return False
 
 
 def _fk_poe(geo: P3Geometry, q: np.ndarray):
@@ -143,12 +175,13 @@ def _line_distance(p1, h1, p2, h2) -> float:
     return float(abs(np.dot(p2 - p1, n / np.linalg.norm(n))))
 
 
-def _p3_geometry(robot) -> P3Geometry:
+def _p3_geometry(robot, layout: str = "intersecting") -> P3Geometry:
     name = robot.name
+    sp6_layout = layout == "sp6"
 
     def fail(why):
         raise DeriveError(f"{name}: not of the three-parallel class (axes 2, 3, 4 parallel, axes "
-                          f"5 and 6 intersecting): {why}")
+                          f"5 and 6 {'not intersecting' if sp6_layout else 'intersecting'}): {why}")
 
     if robot.dof != 6:
         fail(f"{robot.dof} joints, the class has 6")
@@ -164,28 +197,35 @@ def _p3_geometry(robot) -> P3Geometry:
     h[3] = h[1] * np.sign(h[1] @ h[3])
     if np.linalg.norm(np.cross(h[4], h[5])) <= tol:
         fail("axes 5 and 6 are parallel")
-    if _line_distance(pts[4], h[4], pts[5], h[5]) > tol:
+    meet56 = _line_distance(pts[4], h[4], pts[5], h[5]) <= tol
+    if meet56 and sp6_layout:
+        fail("axes 5 and 6 intersect (the two-intersecting layout, p3_geometry)")
+    if not meet56 and not sp6_layout:
         fail("axes 5 and 6 do not intersect")
     for i, j, what in ((0, 1, "axes 1 and 2 are parallel (joint 1 would not move the arm plane)"),
                        (1, 4, "axis 5 is parallel to the parallel axes")):
         if np.linalg.norm(np.cross(h[i], h[j])) <= tol:
             fail(what)
-    if geometric_classify(robot).cls == "UR":
+    if not sp6_layout and geometric_classify(robot).cls == "UR":
         fail("it is of the UR layout (axes 4 and 5 meet as well), which has its own closed form "
              "(derive.ik.closed_form, thesis section 4.3)")
-    # the point where axes 5 and 6 meet
-    d56 = pts[5] - pts[4]
-    c56 = h[4] @ h[5]
-    wrist = pts[4] + h[4] * (d56 @ h[4] - (d56 @ h[5]) * c56) / (1.0 - c56 * c56)
     end0 = pts[6] + chain.end_translation
-    p = np.array([pts[0], pts[1] - pts[0], pts[2] - pts[1], pts[3] - pts[2], wrist - pts[3],
-                  np.zeros(3), end0 - wrist])
+    if sp6_layout:      # points of axes 5 and 6 as the chain gives them, p5 between them
+        p = np.array([pts[0], pts[1] - pts[0], pts[2] - pts[1], pts[3] - pts[2], pts[4] - pts[3],
+                      pts[5] - pts[4], end0 - pts[5]])
+    else:
+        # the point where axes 5 and 6 meet
+        d56 = pts[5] - pts[4]
+        c56 = h[4] @ h[5]
+        wrist = pts[4] + h[4] * (d56 @ h[4] - (d56 @ h[5]) * c56) / (1.0 - c56 * c56)
+        p = np.array([pts[0], pts[1] - pts[0], pts[2] - pts[1], pts[3] - pts[2], wrist - pts[3],
+                      np.zeros(3), end0 - wrist])
     for k, what in ((2, "upper arm"), (3, "forearm")):
         if np.linalg.norm(np.cross(h[1], p[k])) <= 1e-9:
             fail(f"no {what}: axes {k} and {k + 1} coincide")
     order = tuple(int(v) for v in chain.variables)
     geo = P3Geometry(name, h=h, p=p, r6t=np.asarray(chain.end_rotation, dtype=float), order=order,
-                     error=0.0)
+                     error=0.0, layout=layout)
     rng = np.random.default_rng(13)
     q = rng.uniform(-math.pi, math.pi, size=(24, 6))
     r, t = _fk_poe(geo, q)
@@ -195,8 +235,9 @@ def _p3_geometry(robot) -> P3Geometry:
     err = float(max(dp.max(), dr.max()))
     if not err <= MAP_TOL:
         fail(f"its product-of-exponentials form reproduces the FK only to {err:.3g} (m, rad)")
-    ortho = bool(abs(h[1] @ h[4]) <= tol and abs(h[4] @ h[5]) <= tol)
-    return P3Geometry(name, h=h, p=p, r6t=geo.r6t, order=order, error=err, ortho_wrist=ortho)
+    ortho = bool(abs(h[1] @ h[4]) <= tol and abs(h[4] @ h[5]) <= tol) and not sp6_layout
+    return P3Geometry(name, h=h, p=p, r6t=geo.r6t, order=order, error=err, ortho_wrist=ortho,
+                      layout=layout)
 
 
 # --------------------------------------------------------------------------- #
@@ -223,7 +264,10 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
     configurations whose q1 (shoulder singularity) and q6 (wrist singularity) are used where
     those joints are free (else 0). Unreachable branches are NaN unless ``keep_unreachable``
     (then the least-squares roots of the subproblems: the nearest the arm comes).
-    Steps as in the module docstring."""
+    Steps as in the module docstring; the layout with axes 5 and 6 not meeting goes to
+    :func:`solve_batch_sp6`."""
+    if geo.layout == "sp6":
+        return solve_batch_sp6(geo, poses, q_ref, keep_unreachable)
     n = poses.shape[0]
     h, p = geo.h, geo.p
     hb = [np.broadcast_to(v, (n, 3)) for v in h]
@@ -302,3 +346,68 @@ def _rotm(k, theta) -> np.ndarray:
     """R(k, theta) (n, 3, 3) for axes k (n, 3) and angles theta (n,)."""
     n = k.shape[0]
     return np.stack([rot(k, theta, np.broadcast_to(e, (n, 3))) for e in np.eye(3)], axis=-1)
+
+
+def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = None,
+                    keep_unreachable: bool = False):
+    """:func:`solve_batch` for the layout with axes 5 and 6 not meeting (IK-Geo's
+    ``IK_3_parallel``, module docstring): (q (n, 8, 6), singular (n, 8), reason codes (n, 8): 0
+    ok, 1 subproblem 6 without a solution in that slot (``REASON_SP6``), 2 q3 unreachable
+    (``REASON_REACH``)); branch k = 2 i6 + i3 with i6 the slot of subproblem 6 (0-3) and i3 the
+    root of q3. ``q_ref``: its q6 is used where q6 is free (R_5^T h_2 along h_6), else 0.
+    Subproblem 6 returns no least-squares solution, so ``keep_unreachable`` keeps only the q3
+    roots of the slots it solved."""
+    n = poses.shape[0]
+    h, p = geo.h, geo.p
+    hb = [np.broadcast_to(v, (n, 3)) for v in h]
+    r = quat._to_matrix(poses[:, :4])
+    t = dq._translation(poses)
+    r06 = r @ geo.r6t.T
+    p16 = t - p[0] - np.einsum("nij,j->ni", r06, p[6])               # a point of axis 6
+    free6 = np.zeros(n) if q_ref is None else q_ref[:, geo.order[5]]
+    x = np.cross(h[1], h[0])
+    x = np.broadcast_to(x / np.linalg.norm(x), (n, 3))
+    out = np.full((n, 8, 6), np.nan)
+    singular = np.zeros((n, 8), dtype=bool)
+    code = np.ones((n, 8), dtype=np.int8)
+    # 1-2. (q1, q5), subproblem 6: rows (h2, -h1, p16), (h2, h5, -p5); (h2, -h1, R06 h6), (h2, h5, -h6)
+    r06h6 = np.einsum("nij,j->ni", r06, h[5])
+    hh = np.broadcast_to(h[1], (n, 4, 3))
+    kk = np.stack([-hb[0], hb[4], -hb[0], hb[4]], axis=1)
+    pp = np.stack([p16, np.broadcast_to(-p[5], (n, 3)), r06h6, -hb[5]], axis=1)
+    d = np.stack([np.full(n, geo.d1), np.zeros(n)], axis=-1)
+    s6 = sp6(hh, kk, pp, d)
+    for i6 in range(4):
+        ok6 = _ok(s6)[:, i6]
+        q1 = np.where(ok6, s6.theta[:, i6, 0], 0.0)
+        q5 = np.where(ok6, s6.theta[:, i6, 1], 0.0)
+        r1 = _rotm(hb[0], q1)
+        rt = np.einsum("nji,njk->nik", r1, r06)                          # R_1^T R_06
+        u = rot(hb[4], -q5, hb[1])                                       # R_5^T h_2
+        # 3. q6 (subproblem 1), free where R_5^T h_2 is along h_6
+        sing6 = np.linalg.norm(np.cross(h[5], u), axis=-1) < WRIST_SINGULAR
+        q6 = np.where(sing6, free6, sp1(-hb[5], u, np.einsum("nji,j->ni", rt, h[1])).theta[:, 0, 0])
+        # 4. theta = q2 + q3 + q4 (subproblem 1 on x)
+        y = np.einsum("nij,nj->ni", rt, rot(hb[5], -q6, rot(hb[4], -q5, x)))
+        theta = sp1(hb[1], x, y).theta[:, 0, 0]
+        # 5. q3 (subproblem 3): v = R_2 (p_2 + R_3 p_3)
+        v = (np.einsum("nji,nj->ni", r1, p16) - p[1]
+             - rot(hb[1], theta, np.broadcast_to(p[4], (n, 3)) + rot(hb[4], q5, np.broadcast_to(p[5], (n, 3)))))
+        s3 = sp3(hb[1], np.broadcast_to(p[3], (n, 3)), np.broadcast_to(-p[2], (n, 3)),
+                 np.linalg.norm(v, axis=-1))
+        ok3 = _ok(s3)
+        q3s = _first_if_missing(s3)
+        for i3 in range(2):
+            q3 = q3s[:, i3]
+            # 6. q2 (subproblem 1), q4 by subtraction
+            w = p[2] + rot(hb[1], q3, np.broadcast_to(p[3], (n, 3)))
+            q2 = sp1(hb[1], w, v).theta[:, 0, 0]
+            q4 = theta - q2 - q3
+            k = 2 * i6 + i3
+            theta_k = np.stack([q1, q2, q3, q4, q5, q6], axis=-1)
+            out[:, k, list(geo.order)] = np.where(ok6[:, None], wrap_angle(theta_k), np.nan)
+            singular[:, k] = s6.degenerate | sing6
+            code[:, k] = np.where(~ok6, 1, np.where(~ok3[:, i3], 2, 0))
+    if not keep_unreachable:
+        out[code > 0] = np.nan
+    return out, singular, code

@@ -27,6 +27,7 @@ import numpy as np
 import sympy as sp
 
 from derive.algebra.quaternion import hamilton
+from derive.errors import DeriveError
 from derive.ik.extract import _rot
 from derive.ik.ir import Builder, IKProgram, Op, pos
 from derive.ik.parallel3 import P3Geometry
@@ -109,6 +110,10 @@ def parallel3_program(robot, geo: P3Geometry) -> IKProgram:
        two roots;
     6. q2, subproblem 1: R(h_2, q2)(p_2 + R(h_2, q3) p_3) = v; q4 = theta - q2 - q3.
     """
+    if geo.layout != "intersecting":
+        raise DeriveError(f"{robot.name}: no IK program for the three-parallel layout with axes 5 and 6 "
+                          "not meeting (subproblem 6) yet: derive.reference.ik solves it "
+                          "(derive.ik.parallel3.solve_batch_sp6); the kernels have FK only")
     h = [_vec(v) for v in geo.h]
     p = [_vec(v) for v in geo.p]
     r6t = [_vec(row) for row in geo.r6t]

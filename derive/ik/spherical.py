@@ -52,7 +52,11 @@ from derive.algebra.angles import wrap_angle
 from derive.algebra.rotations import rot_y, rot_z
 from derive.cache import memo
 from derive.errors import DeriveError
-from derive.ik.subproblems import rot, sp1, sp2, sp3, sp4
+from derive.ik.subproblems import rot
+from derive.ik.subproblems.sp1 import _sp1
+from derive.ik.subproblems.sp2 import _sp2
+from derive.ik.subproblems.sp3 import _sp3
+from derive.ik.subproblems.sp4 import _sp4
 from derive.ik.tolerances import (CLASS_DIRECTION, CLASS_DISTANCE, MAP_ANGLE, MAP_POSITION,
                                   OFFSET_SNAP, REACH_TOL, WRIST_SINGULAR)
 from derive.kinematics.fk import _pose_error, fk
@@ -295,12 +299,6 @@ def _sw_geometry(robot) -> SWGeometry:
 _X, _Y, _Z = np.eye(3)
 
 
-def _slot(sol, i):
-    """Angles (n, j) of slot i of a two-slot subproblem; a missing second slot (one double,
-    least-squares or free solution) repeats the first."""
-    return np.where(sol.valid[:, i, None], sol.theta[:, i], sol.theta[:, 0])
-
-
 def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -334,33 +332,35 @@ def solve_batch(geo: SWGeometry, poses: np.ndarray, q4_ref: np.ndarray | None = 
     out = np.full((n, 8, 6), np.nan)
     singular = np.zeros((n, 8), dtype=bool)
     code = np.zeros((n, 8), dtype=np.int8)
-    x, y, z = (np.broadcast_to(e, (n, 3)) for e in (_X, _Y, _Z))
-    fore, upper = np.broadcast_to([geo.a2, 0.0, geo.c3], (n, 3)), geo.c2 * z
+    # constant vectors stay (3,): the subproblems' private steps (no input checks, no residuals)
+    # broadcast them, and a constant axis enters their products as three numbers
+    x, y, z = _X, _Y, _Z
+    fore, upper = np.array([geo.a2, 0.0, geo.c3]), geo.c2 * z
     k2 = geo.a2 ** 2 + geo.c3 ** 2
     bad1 = w[:, 0] ** 2 + w[:, 1] ** 2 - geo.b ** 2 < -REACH_TOL * max(1.0, geo.b ** 2)
     if q4_ref is None:
         t4_free = np.full(n, geo.offsets[3])
     else:
         t4_free = np.broadcast_to(geo.signs[3] * np.asarray(q4_ref, dtype=float) + geo.offsets[3], (n,))
-    s1 = sp4(y, -z, w, np.full(n, geo.b))
+    s1, s1_free = _sp4(y, -z, w, np.full(n, geo.b))
     for i1 in range(2):
         # W on axis 1 (b = 0, sp4 degenerate): t1 is free; 0 and pi, the arm and its mirror
-        t1 = np.where(s1.degenerate, i1 * np.pi, _slot(s1, i1)[:, 0])
+        t1 = np.where(s1_free, i1 * np.pi, s1[:, i1])
         v = rot(-z, t1, w) - [geo.a1, geo.b, geo.c1]
         vv = v[:, 0] ** 2 + v[:, 2] ** 2
         bad3 = np.abs((vv - geo.c2 ** 2 - k2) / (2.0 * geo.c2 * math.sqrt(k2))) > 1.0 + REACH_TOL
-        s3 = sp3(y, fore, -upper, np.sqrt(vv))
+        s3 = _sp3(y, fore, -upper, np.sqrt(vv))
         for i3 in range(2):
-            t3 = _slot(s3, 1 - i3)[:, 0]              # slot 1 has sin(t3 + psi3) >= 0
-            t2 = sp1(y, upper + rot(y, t3, fore), v).theta[:, 0, 0]
+            t3 = s3[:, 1 - i3]                        # slot 1 has sin(t3 + psi3) >= 0
+            t2 = _sp1(y, upper + rot(y, t3, fore), v)
             m = np.swapaxes(rot_z(t1) @ rot_y(t2 + t3), -1, -2) @ r
-            s45 = sp2(-z, y, m[:, :, 2], z)
+            s45 = _sp2(-z, y, m[:, :, 2], z)
             sing = np.hypot(m[:, 0, 2], m[:, 1, 2]) < WRIST_SINGULAR
             for i5 in range(2):
-                t4, t5 = _slot(s45, i5).T
+                t4, t5 = s45[:, i5].T
                 t4 = np.where(sing, t4_free, t4)
                 t5 = np.where(sing, np.where(m[:, 2, 2] >= 0, 0.0, np.pi), t5)
-                t6 = sp1(z, x, rot(y, -t5, rot(z, -t4, m[:, :, 0]))).theta[:, 0, 0]
+                t6 = _sp1(z, x, rot(y, -t5, rot(z, -t4, m[:, :, 0])))
                 kk = 4 * i1 + 2 * i3 + i5
                 out[:, kk] = geo.from_canonical(np.stack([t1, t2, t3, t4, t5, t6], -1))
                 singular[:, kk] = sing

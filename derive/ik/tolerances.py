@@ -139,6 +139,15 @@ NEAR_POINT_TOL = 1e-3
 #: angle (rad), each compared with it (``Nominal.deviation``). The calibrated UR5
 #: (ur5-calibrated.yaml) is 0.016 from the UR5.
 NEAR_DEVIATION_MAX = 0.03
+#: Seven-joint arms only, when the projection with NEAR_POINT_TOL gives no nominal: the axis
+#: points' coordinates within this (m) are made equal (the Kinova Gen3: its shoulder axes miss a
+#: common point by 5.9 mm, its axis points step by 6.4 mm; all of them are then merged onto one
+#: line, an SRS arm) ...
+NEAR_POINT_TOL_7R = 1e-2
+#: ... and the relation's largest mismatch (m, rad; as NEAR_DEVIATION_MAX) may be up to this:
+#: the Gen3's projected SRS nominal is 0.049 from it. Solved with joint 3 given, the polish with
+#: the seeds near singular sets found the generating configuration on 2000 of 2000 poses.
+NEAR_DEVIATION_MAX_7R = 0.06
 #: A polished solution has converged when its residual, the larger of the position error (m)
 #: and the rotation angle (rad) of FK(q) against the pose, is at or below this.
 POLISH_TOL = 1e-12
@@ -159,6 +168,17 @@ HOMOTOPY_STEPS = 4
 #: when the nominal's FK at the seed is within this multiple of the nominal's deviation of the
 #: pose (dimensionless; the comparison is in m and rad, max of the two).
 SEED_REACH = 4.0
+#: A candidate of the nominal closed form whose Jacobian on the arm (the free joints' columns,
+#: rows metres per rad and rad per rad) has its smallest singular value below this fraction of
+#: its largest times the square root of the nominal's deviation (this factor in 1 / sqrt(m or
+#: rad)) lies near a singular set of the arm: extra seeds on both sides along the singular
+#: direction are polished too (derive.ik.nearclass._singular_seeds). The calibrated UR5
+#: (deviation 0.016) seeds below a ratio of 0.032, the iiwa14 with axes 0.44 mm off (8.8e-4)
+#: below 0.0074 (about a tenth of its candidates), the Gen3 (0.049) below 0.055, a URDF's
+#: printed constants (1e-8) below 2.5e-5. At 0.1 the Gen3 missed the generating configuration on
+#: 4 of 2000 poses (a fold its seeds did not reach), at 1 a third of the iiwa14's candidates
+#: were seeded (three times the time).
+SEED_SINGULAR = 0.25
 
 # --- General 6R (derive.ik.general6r): the Raghavan-Roth / Manocha-Canny elimination.
 
@@ -181,3 +201,14 @@ G6_LEADING_COND = 1e12
 G6_GOOD_COND = 1e6
 #: Relative singular value below which Q (14 x 8) or the pencil is rank-deficient.
 G6_RANK_TOL = 1e-9
+#: A pose whose elimination degenerates is solved again at nearby poses, each moved by a random
+#: twist of this size (rad, and this times the arm's size in m), and Newton carries their
+#: solutions back onto it.
+G6_PERTURB = 1e-4
+#: Nearby poses tried for a degenerate pose.
+G6_PERTURB_TRIALS = 3
+#: A pose with a solution whose Jacobian's smallest singular value over its largest is below this
+#: is flagged degenerate (near the singular set's image two solutions merge, and one of a nearly
+#: merged pair can be lost; at a singular solution the joints are only determined to about the
+#: square root of G6_ACCEPT).
+G6_NEAR_SINGULAR = 1e-6

@@ -38,7 +38,8 @@ Classes (checked in this order, every property within EXACT_TOL; 1-based axis nu
   intersecting (axis 1 not parallel to axis 2, axis 5 not parallel to axis 4): the Unitree Z1,
   whose axes 4 and 5 do not meet (IK-Geo's "three parallel, two intersecting": Elias & Wen,
   arXiv:2211.05737, 2022; solved by :mod:`derive.ik.parallel3`). The UR layout has this
-  structure too and stays ``"UR"``.
+  structure too and stays ``"UR"``. Axes 5 and 6 not meeting (and not parallel) is of the class too
+  (IK-Geo's "three parallel" with subproblem 6, :func:`derive.ik.parallel3.solve_batch_sp6`).
 * ``"SRS"``: 7R with a spherical shoulder (axes 1-2-3 meet in one point) and a spherical wrist
   (axes 5-6-7), the shoulder-revolute-spherical arms such as the KUKA LBR iiwa.
 * ``"general"``: anything else, any number and kind of joints.
@@ -192,6 +193,9 @@ class Classification:
     pieper: list = field(default_factory=list)     # [(axes, "parallel" | "meet in one point")]
     notes: list = field(default_factory=list)
     closed_form_through: dict | None = None       # set by derive.ik.closed_form.classify
+    #: why and how the general 6R elimination solves this arm (set by
+    #: derive.ik.closed_form.classify for a 6R arm of no special class), else None
+    general6r: str | None = None
 
     def to_dict(self) -> dict:
         return {"robot": self.robot, "n": self.n, "types": list(self.types),
@@ -203,7 +207,8 @@ class Classification:
                 "nominal_class": self.nominal_cls, "nominal_test": self.nominal_test,
                 "near_misses": list(self.near_misses), "closed_form": self.closed_form,
                 "pieper": [{"axes": list(a), "kind": k} for a, k in self.pieper],
-                "notes": list(self.notes), "closed_form_through": self.closed_form_through}
+                "notes": list(self.notes), "closed_form_through": self.closed_form_through,
+                "general6r": self.general6r}
 
     def report(self) -> str:
         """The text ``dq-derive classify ROBOT`` prints."""
@@ -232,7 +237,9 @@ class Classification:
         lines += ["", f"class: {self.cls} ({self.test})",
                   f"nominal class (within NEAR_TOL): {self.nominal_cls}"
                   + ("" if self.nominal_cls == self.cls else f" ({self.nominal_test})"),
-                  f"closed form in dq-derive: {'yes' if self.closed_form else 'no'}"]
+                  f"closed form in dq-derive: {'yes' if self.closed_form else 'no'}"
+                  + (" (no special class: the general 6R elimination solves it, every solution)"
+                     if self.general6r and not self.closed_form else "")]
         lines.append("near misses:" + ("" if self.near_misses else " none"))
         lines += [f"  - {m}" for m in self.near_misses]
         if self.notes:
@@ -397,6 +404,9 @@ def _class(n, types, pairs, wrist, shoulder, tol) -> tuple[str, str]:
         if par(2) and par(3) and meet(5) and not par(5) and not par(1) and not par(4):
             return "three parallel", ("6R: axes 2, 3, 4 parallel, axes 5 and 6 intersecting, not "
                                       "the UR layout (IK-Geo's three parallel, two intersecting)")
+        if par(2) and par(3) and not meet(5) and not par(5) and not par(1) and not par(4):
+            return "three parallel", ("6R: axes 2, 3, 4 parallel, axes 5 and 6 neither intersecting "
+                                      "nor parallel (IK-Geo's three parallel, with subproblem 6)")
     if n == 7 and all_r and concurrent(shoulder) and concurrent(wrist):
         return "SRS", "7R: axes 1, 2, 3 meet in one point and axes 5, 6, 7 meet in one point"
     why = ("none of the UR, OPW, spherical-wrist, three-parallel or SRS structures"
@@ -436,7 +446,7 @@ def _near_misses(pairs, concurrency) -> list:
     return out
 
 
-def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list:
+def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper, structure: str = "") -> list:
     notes = []
     six_r = chain.n == 6 and all(t == "revolute" for t in chain.types)
     if closed_form:
@@ -447,8 +457,11 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper) -> list
                      f"derive.ik.closed_form.ur_geometry accepts ({why_not}): derive.refine "
                      "solves its IK numerically")
     elif cls == "three parallel":
-        notes.append("Pieper's criterion holds (axes 2, 3, 4 parallel) and axes 5 and 6 intersect: "
-                     "the three-parallel class, solved in closed form by derive.ik.parallel3 "
+        meet56 = "neither intersecting nor parallel" not in structure
+        notes.append("Pieper's criterion holds (axes 2, 3, 4 parallel)"
+                     + (" and axes 5 and 6 intersect" if meet56 else
+                        ", axes 5 and 6 do not meet (IK-Geo's subproblem 6)")
+                     + ": the three-parallel class, solved in closed form by derive.ik.parallel3 "
                      "(derive.reference.ik) where its geometry holds within 1e-10")
     elif cls in ("OPW", "spherical wrist"):
         opw = " (the OPW solution of Brandstoetter et al. 2014)" if cls == "OPW" else ""
@@ -525,4 +538,4 @@ def classify(robot) -> Classification:
         cls=cls, test=test + f", within EXACT_TOL = {EXACT_TOL:g}",
         nominal_cls=nominal_cls, nominal_test=nominal_test + f", within NEAR_TOL = {NEAR_TOL:g}",
         near_misses=_near_misses(pairs, (shoulder, wrist)), closed_form=closed_form,
-        pieper=pieper, notes=_notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper))
+        pieper=pieper, notes=_notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper, test))

@@ -262,6 +262,11 @@ def _derive_equations(robot, progress: bool, symbolic: bool) -> tuple:
     _say(progress, f"[{chain.robot}] chain in thesis form: {chain.n} joints ({time.perf_counter() - t0:.2f} s)")
     sets = []
     for key, first, last, zero in set_specs(chain):
+        clash = sorted({p.name for p in chain.parameters} & {s.name for s in POSES[key]})
+        if clash:
+            raise DeriveError(f"{chain.robot}: the parameter name(s) {', '.join(clash)} are also the pose "
+                              f"symbols of equation set {key} ({' '.join(s.name for s in POSES[key])}); "
+                              "rename them in the robot file (for example a5 -> a_5)")
         t = time.perf_counter()
         eset = derive_set(chain, key, first, last, zero)
         _say(progress, f"[{chain.robot}] set {key}: {len(eset.equations)} equations derived and "

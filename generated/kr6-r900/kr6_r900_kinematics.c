@@ -48,6 +48,22 @@
 #define DQ_SCHED
 #endif
 
+/* The vectorised IK block is compiled once (DQ_NOINLINE), not once per batch function that
+ * calls it: the compile of a new robot's kernels (gcc at -O3) is the most of its first use. The
+ * scalar pass over the rare singular poses is compiled at -O1 (DQ_COLD, gcc): the same
+ * operations in the same order (no contraction either way), so the same results, in a third of
+ * its compile time. */
+#if defined(__GNUC__)
+#define DQ_NOINLINE __attribute__((noinline))
+#else
+#define DQ_NOINLINE
+#endif
+#if defined(__GNUC__) && !defined(__clang__)
+#define DQ_COLD __attribute__((optimize("O1")))
+#else
+#define DQ_COLD
+#endif
+
 /* c ? a : b as a bitwise blend of a and b (both evaluated), with no branch. A plain `c ? a : b`
  * is a branch in the compiler's intermediate code, and it moves a computation used only by one
  * arm into that arm; a floating-point operation there may trap, so the loop is not if-converted
@@ -566,8 +582,8 @@ DQ_INLINE double dq_max(double a, double b)
 
 /* The whole unrolled program on one pose (the singular arms of the selects included): every
  * leaf's candidate, valid or not, as the vectorised loop writes it. */
-static void dq_ik_full(const double *DQ_RESTRICT pose, double cand[8][6],
-                       int valid[8], int sing[8])
+static DQ_COLD void dq_ik_full(const double *DQ_RESTRICT pose, double cand[8][6],
+                               int valid[8], int sing[8])
 {
     const double p0 = pose[0], p1 = pose[1], p2 = pose[2], p3 = pose[3];
     const double p4 = pose[4], p5 = pose[5], p6 = pose[6], p7 = pose[7];
@@ -899,19 +915,26 @@ static void dq_pack_block(size_t m, double cb[][6][DQ_BLOCK], int kb[][DQ_BLOCK]
     }
 }
 
-/* One block of m <= DQ_BLOCK poses, transposed (pb[k][j]): the IK program with its branches
- * unrolled runs over the poses with unit stride (vectorisable), the singular poses are done again
- * by the full program (dq_singular_block), then a second vectorisable loop marks the candidates
- * to keep (kb: valid and no earlier valid candidate within the merge tolerance, as above).
- * cb[b][k][j] is joint k of leaf b of pose j, vb its validity and sb its singular flag. Inlined
- * into each batch function, where the arrays are local (as parameters gcc does not vectorise the
- * loops over them). */
-DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6][DQ_BLOCK],
-                        int vb[][DQ_BLOCK], int sb[][DQ_BLOCK], int kb[][DQ_BLOCK])
+/* The arrays of one block of m <= DQ_BLOCK poses, transposed (pb[k][j]): cb[b][k][j] is joint k
+ * of leaf b of pose j, vb its validity, sb its singular flag and kb whether it is kept. */
+struct dq_block {
+    double pb[8][DQ_BLOCK];
+    double cb[8][6][DQ_BLOCK];
+    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
+};
+
+/* One block of m poses: the IK program with its branches unrolled runs over the poses with unit
+ * stride (vectorisable), the singular poses are done again by the full program
+ * (dq_singular_block), then a second vectorisable loop marks the candidates to keep (kb: valid
+ * and no earlier valid candidate within the merge tolerance, as above). The arrays are one
+ * struct behind a restrict pointer (as separate array parameters gcc does not vectorise the
+ * loops over them). Inlined into dq_ik_block (the batch functions' one compiled copy, with the
+ * scheduling of DQ_SCHED) and into the single-pose function (m = 1, without). */
+DQ_INLINE void dq_ik_block_body(size_t m, struct dq_block *DQ_RESTRICT blk)
 {
     for (size_t j = 0; j < m; ++j) {   /* vectorised: ik batch */
-        const double p0 = pb[0][j], p1 = pb[1][j], p2 = pb[2][j], p3 = pb[3][j];
-        const double p4 = pb[4][j], p5 = pb[5][j], p6 = pb[6][j], p7 = pb[7][j];
+        const double p0 = blk->pb[0][j], p1 = blk->pb[1][j], p2 = blk->pb[2][j], p3 = blk->pb[3][j];
+        const double p4 = blk->pb[4][j], p5 = blk->pb[5][j], p6 = blk->pb[6][j], p7 = blk->pb[7][j];
         int ok = 1;
         const double x_w = -0.18*p0*p2 + 2.0*p0*p5 - 0.18*p1*p3 - 2.0*p1*p4 + 2.0*p2*p7 - 2.0*p3*p6;
         const double y_w = 0.18*p0*p1 + 2.0*p0*p6 - 2.0*p1*p7 - 0.18*p2*p3 - 2.0*p2*p4 + 2.0*p3*p5;
@@ -965,28 +988,28 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         const double h22_000 = h19_00 - 1.5707963267948966*sg3_000 + 1.5707963267948966;
         const double theta4_000 = h17_00 + h22_000;   /* singular_00 is 0 here (dq_singular_block) */
         const double theta6_000 = h17_00 - h22_000;   /* singular_00 is 0 here (dq_singular_block) */
-        cb[0][0][j] = dq_wrap(-theta1_0);
-        cb[0][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
-        cb[0][2][j] = dq_wrap(theta3_00);
-        cb[0][3][j] = dq_wrap(-theta4_000);
-        cb[0][4][j] = theta5_000;   /* in [-pi, pi] already */
-        cb[0][5][j] = dq_wrap(-theta6_000);
-        vb[0][j] = ok_000;
-        sb[0][j] = singular_00;
+        blk->cb[0][0][j] = dq_wrap(-theta1_0);
+        blk->cb[0][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
+        blk->cb[0][2][j] = dq_wrap(theta3_00);
+        blk->cb[0][3][j] = dq_wrap(-theta4_000);
+        blk->cb[0][4][j] = theta5_000;   /* in [-pi, pi] already */
+        blk->cb[0][5][j] = dq_wrap(-theta6_000);
+        blk->vb[0][j] = ok_000;
+        blk->sb[0][j] = singular_00;
         int ok_001 = ok_00;
         const double sg3_001 = -1.0;
         const double theta5_001 = 2.0*h20_00*sg3_001;   /* singular_00 is 0 here (dq_singular_block) */
         const double h22_001 = h19_00 - 1.5707963267948966*sg3_001 + 1.5707963267948966;
         const double theta4_001 = h17_00 + h22_001;   /* singular_00 is 0 here (dq_singular_block) */
         const double theta6_001 = h17_00 - h22_001;   /* singular_00 is 0 here (dq_singular_block) */
-        cb[1][0][j] = dq_wrap(-theta1_0);
-        cb[1][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
-        cb[1][2][j] = dq_wrap(theta3_00);
-        cb[1][3][j] = dq_wrap(-theta4_001);
-        cb[1][4][j] = theta5_001;   /* in [-pi, pi] already */
-        cb[1][5][j] = dq_wrap(-theta6_001);
-        vb[1][j] = ok_001;
-        sb[1][j] = singular_00;
+        blk->cb[1][0][j] = dq_wrap(-theta1_0);
+        blk->cb[1][1][j] = dq_wrap(theta2_00 - 1.5707963267948966);
+        blk->cb[1][2][j] = dq_wrap(theta3_00);
+        blk->cb[1][3][j] = dq_wrap(-theta4_001);
+        blk->cb[1][4][j] = theta5_001;   /* in [-pi, pi] already */
+        blk->cb[1][5][j] = dq_wrap(-theta6_001);
+        blk->vb[1][j] = ok_001;
+        blk->sb[1][j] = singular_00;
         int ok_01 = ok_0;
         const double sg2_01 = -1.0;
         const double theta3_01 = k13_0 + k14_0*sg2_01;
@@ -1013,28 +1036,28 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         const double h22_010 = h19_01 - 1.5707963267948966*sg3_010 + 1.5707963267948966;
         const double theta4_010 = h17_01 + h22_010;   /* singular_01 is 0 here (dq_singular_block) */
         const double theta6_010 = h17_01 - h22_010;   /* singular_01 is 0 here (dq_singular_block) */
-        cb[2][0][j] = dq_wrap(-theta1_0);
-        cb[2][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
-        cb[2][2][j] = dq_wrap(theta3_01);
-        cb[2][3][j] = dq_wrap(-theta4_010);
-        cb[2][4][j] = theta5_010;   /* in [-pi, pi] already */
-        cb[2][5][j] = dq_wrap(-theta6_010);
-        vb[2][j] = ok_010;
-        sb[2][j] = singular_01;
+        blk->cb[2][0][j] = dq_wrap(-theta1_0);
+        blk->cb[2][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
+        blk->cb[2][2][j] = dq_wrap(theta3_01);
+        blk->cb[2][3][j] = dq_wrap(-theta4_010);
+        blk->cb[2][4][j] = theta5_010;   /* in [-pi, pi] already */
+        blk->cb[2][5][j] = dq_wrap(-theta6_010);
+        blk->vb[2][j] = ok_010;
+        blk->sb[2][j] = singular_01;
         int ok_011 = ok_01;
         const double sg3_011 = -1.0;
         const double theta5_011 = 2.0*h20_01*sg3_011;   /* singular_01 is 0 here (dq_singular_block) */
         const double h22_011 = h19_01 - 1.5707963267948966*sg3_011 + 1.5707963267948966;
         const double theta4_011 = h17_01 + h22_011;   /* singular_01 is 0 here (dq_singular_block) */
         const double theta6_011 = h17_01 - h22_011;   /* singular_01 is 0 here (dq_singular_block) */
-        cb[3][0][j] = dq_wrap(-theta1_0);
-        cb[3][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
-        cb[3][2][j] = dq_wrap(theta3_01);
-        cb[3][3][j] = dq_wrap(-theta4_011);
-        cb[3][4][j] = theta5_011;   /* in [-pi, pi] already */
-        cb[3][5][j] = dq_wrap(-theta6_011);
-        vb[3][j] = ok_011;
-        sb[3][j] = singular_01;
+        blk->cb[3][0][j] = dq_wrap(-theta1_0);
+        blk->cb[3][1][j] = dq_wrap(theta2_01 - 1.5707963267948966);
+        blk->cb[3][2][j] = dq_wrap(theta3_01);
+        blk->cb[3][3][j] = dq_wrap(-theta4_011);
+        blk->cb[3][4][j] = theta5_011;   /* in [-pi, pi] already */
+        blk->cb[3][5][j] = dq_wrap(-theta6_011);
+        blk->vb[3][j] = ok_011;
+        blk->sb[3][j] = singular_01;
         int ok_1 = ok;
         const double sg1_1 = -1.0;
         const double theta1_1 = k5 - dq_atan2(-k3, k6*sg1_1);
@@ -1077,28 +1100,28 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         const double h22_100 = h19_10 - 1.5707963267948966*sg3_100 + 1.5707963267948966;
         const double theta4_100 = h17_10 + h22_100;   /* singular_10 is 0 here (dq_singular_block) */
         const double theta6_100 = h17_10 - h22_100;   /* singular_10 is 0 here (dq_singular_block) */
-        cb[4][0][j] = dq_wrap(-theta1_1);
-        cb[4][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
-        cb[4][2][j] = dq_wrap(theta3_10);
-        cb[4][3][j] = dq_wrap(-theta4_100);
-        cb[4][4][j] = theta5_100;   /* in [-pi, pi] already */
-        cb[4][5][j] = dq_wrap(-theta6_100);
-        vb[4][j] = ok_100;
-        sb[4][j] = singular_10;
+        blk->cb[4][0][j] = dq_wrap(-theta1_1);
+        blk->cb[4][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
+        blk->cb[4][2][j] = dq_wrap(theta3_10);
+        blk->cb[4][3][j] = dq_wrap(-theta4_100);
+        blk->cb[4][4][j] = theta5_100;   /* in [-pi, pi] already */
+        blk->cb[4][5][j] = dq_wrap(-theta6_100);
+        blk->vb[4][j] = ok_100;
+        blk->sb[4][j] = singular_10;
         int ok_101 = ok_10;
         const double sg3_101 = -1.0;
         const double theta5_101 = 2.0*h20_10*sg3_101;   /* singular_10 is 0 here (dq_singular_block) */
         const double h22_101 = h19_10 - 1.5707963267948966*sg3_101 + 1.5707963267948966;
         const double theta4_101 = h17_10 + h22_101;   /* singular_10 is 0 here (dq_singular_block) */
         const double theta6_101 = h17_10 - h22_101;   /* singular_10 is 0 here (dq_singular_block) */
-        cb[5][0][j] = dq_wrap(-theta1_1);
-        cb[5][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
-        cb[5][2][j] = dq_wrap(theta3_10);
-        cb[5][3][j] = dq_wrap(-theta4_101);
-        cb[5][4][j] = theta5_101;   /* in [-pi, pi] already */
-        cb[5][5][j] = dq_wrap(-theta6_101);
-        vb[5][j] = ok_101;
-        sb[5][j] = singular_10;
+        blk->cb[5][0][j] = dq_wrap(-theta1_1);
+        blk->cb[5][1][j] = dq_wrap(theta2_10 - 1.5707963267948966);
+        blk->cb[5][2][j] = dq_wrap(theta3_10);
+        blk->cb[5][3][j] = dq_wrap(-theta4_101);
+        blk->cb[5][4][j] = theta5_101;   /* in [-pi, pi] already */
+        blk->cb[5][5][j] = dq_wrap(-theta6_101);
+        blk->vb[5][j] = ok_101;
+        blk->sb[5][j] = singular_10;
         int ok_11 = ok_1;
         const double sg2_11 = -1.0;
         const double theta3_11 = k13_1 + k14_1*sg2_11;
@@ -1125,36 +1148,36 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
         const double h22_110 = h19_11 - 1.5707963267948966*sg3_110 + 1.5707963267948966;
         const double theta4_110 = h17_11 + h22_110;   /* singular_11 is 0 here (dq_singular_block) */
         const double theta6_110 = h17_11 - h22_110;   /* singular_11 is 0 here (dq_singular_block) */
-        cb[6][0][j] = dq_wrap(-theta1_1);
-        cb[6][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
-        cb[6][2][j] = dq_wrap(theta3_11);
-        cb[6][3][j] = dq_wrap(-theta4_110);
-        cb[6][4][j] = theta5_110;   /* in [-pi, pi] already */
-        cb[6][5][j] = dq_wrap(-theta6_110);
-        vb[6][j] = ok_110;
-        sb[6][j] = singular_11;
+        blk->cb[6][0][j] = dq_wrap(-theta1_1);
+        blk->cb[6][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
+        blk->cb[6][2][j] = dq_wrap(theta3_11);
+        blk->cb[6][3][j] = dq_wrap(-theta4_110);
+        blk->cb[6][4][j] = theta5_110;   /* in [-pi, pi] already */
+        blk->cb[6][5][j] = dq_wrap(-theta6_110);
+        blk->vb[6][j] = ok_110;
+        blk->sb[6][j] = singular_11;
         int ok_111 = ok_11;
         const double sg3_111 = -1.0;
         const double theta5_111 = 2.0*h20_11*sg3_111;   /* singular_11 is 0 here (dq_singular_block) */
         const double h22_111 = h19_11 - 1.5707963267948966*sg3_111 + 1.5707963267948966;
         const double theta4_111 = h17_11 + h22_111;   /* singular_11 is 0 here (dq_singular_block) */
         const double theta6_111 = h17_11 - h22_111;   /* singular_11 is 0 here (dq_singular_block) */
-        cb[7][0][j] = dq_wrap(-theta1_1);
-        cb[7][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
-        cb[7][2][j] = dq_wrap(theta3_11);
-        cb[7][3][j] = dq_wrap(-theta4_111);
-        cb[7][4][j] = theta5_111;   /* in [-pi, pi] already */
-        cb[7][5][j] = dq_wrap(-theta6_111);
-        vb[7][j] = ok_111;
-        sb[7][j] = singular_11;
+        blk->cb[7][0][j] = dq_wrap(-theta1_1);
+        blk->cb[7][1][j] = dq_wrap(theta2_11 - 1.5707963267948966);
+        blk->cb[7][2][j] = dq_wrap(theta3_11);
+        blk->cb[7][3][j] = dq_wrap(-theta4_111);
+        blk->cb[7][4][j] = theta5_111;   /* in [-pi, pi] already */
+        blk->cb[7][5][j] = dq_wrap(-theta6_111);
+        blk->vb[7][j] = ok_111;
+        blk->sb[7][j] = singular_11;
     }
     /* the scalar pass only for a block with a singular pose (a vectorised reduction first) */
     int any_singular = 0;
     for (size_t j = 0; j < m; ++j) {
-        any_singular |= sb[0][j] | sb[1][j] | sb[2][j] | sb[3][j] | sb[4][j] | sb[5][j] | sb[6][j] | sb[7][j];
+        any_singular |= blk->sb[0][j] | blk->sb[1][j] | blk->sb[2][j] | blk->sb[3][j] | blk->sb[4][j] | blk->sb[5][j] | blk->sb[6][j] | blk->sb[7][j];
     }
     if (any_singular) {
-        dq_singular_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb);
+        dq_singular_block(m, (const double (*)[DQ_BLOCK])blk->pb, blk->cb, blk->vb, blk->sb);
     }
     /* every pair of candidates needs one of these 7 near flags among its flags to be a
        duplicate (the flag of a joint whose root the first differing branch step chose), and both
@@ -1163,25 +1186,25 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
        test below is skipped */
     int gate = 0;
     for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicate gates */
-        const int near0_4_0 = dq_adist(cb[4][0][j], cb[0][0][j]) < 1e-06;
-        gate |= near0_4_0 & ((vb[4][j] & vb[0][j]) | (vb[4][j] & vb[1][j]) | (vb[4][j] & vb[2][j]) | (vb[4][j] & vb[3][j]) | (vb[5][j] & vb[0][j]) | (vb[5][j] & vb[1][j]) | (vb[5][j] & vb[2][j]) | (vb[5][j] & vb[3][j]) | (vb[6][j] & vb[0][j]) | (vb[6][j] & vb[1][j]) | (vb[6][j] & vb[2][j]) | (vb[6][j] & vb[3][j]) | (vb[7][j] & vb[0][j]) | (vb[7][j] & vb[1][j]) | (vb[7][j] & vb[2][j]) | (vb[7][j] & vb[3][j]));
-        const int near1_2_0 = dq_adist(cb[2][1][j], cb[0][1][j]) < 1e-06;
-        gate |= near1_2_0 & ((vb[2][j] & vb[0][j]) | (vb[2][j] & vb[1][j]) | (vb[3][j] & vb[0][j]) | (vb[3][j] & vb[1][j]));
-        const int near1_6_4 = dq_adist(cb[6][1][j], cb[4][1][j]) < 1e-06;
-        gate |= near1_6_4 & ((vb[6][j] & vb[4][j]) | (vb[6][j] & vb[5][j]) | (vb[7][j] & vb[4][j]) | (vb[7][j] & vb[5][j]));
-        const int near3_1_0 = dq_adist(cb[1][3][j], cb[0][3][j]) < 1e-06;
-        gate |= near3_1_0 & ((vb[1][j] & vb[0][j]));
-        const int near3_3_2 = dq_adist(cb[3][3][j], cb[2][3][j]) < 1e-06;
-        gate |= near3_3_2 & ((vb[3][j] & vb[2][j]));
-        const int near3_5_4 = dq_adist(cb[5][3][j], cb[4][3][j]) < 1e-06;
-        gate |= near3_5_4 & ((vb[5][j] & vb[4][j]));
-        const int near3_7_6 = dq_adist(cb[7][3][j], cb[6][3][j]) < 1e-06;
-        gate |= near3_7_6 & ((vb[7][j] & vb[6][j]));
+        const int near0_4_0 = dq_adist(blk->cb[4][0][j], blk->cb[0][0][j]) < 1e-06;
+        gate |= near0_4_0 & ((blk->vb[4][j] & blk->vb[0][j]) | (blk->vb[4][j] & blk->vb[1][j]) | (blk->vb[4][j] & blk->vb[2][j]) | (blk->vb[4][j] & blk->vb[3][j]) | (blk->vb[5][j] & blk->vb[0][j]) | (blk->vb[5][j] & blk->vb[1][j]) | (blk->vb[5][j] & blk->vb[2][j]) | (blk->vb[5][j] & blk->vb[3][j]) | (blk->vb[6][j] & blk->vb[0][j]) | (blk->vb[6][j] & blk->vb[1][j]) | (blk->vb[6][j] & blk->vb[2][j]) | (blk->vb[6][j] & blk->vb[3][j]) | (blk->vb[7][j] & blk->vb[0][j]) | (blk->vb[7][j] & blk->vb[1][j]) | (blk->vb[7][j] & blk->vb[2][j]) | (blk->vb[7][j] & blk->vb[3][j]));
+        const int near1_2_0 = dq_adist(blk->cb[2][1][j], blk->cb[0][1][j]) < 1e-06;
+        gate |= near1_2_0 & ((blk->vb[2][j] & blk->vb[0][j]) | (blk->vb[2][j] & blk->vb[1][j]) | (blk->vb[3][j] & blk->vb[0][j]) | (blk->vb[3][j] & blk->vb[1][j]));
+        const int near1_6_4 = dq_adist(blk->cb[6][1][j], blk->cb[4][1][j]) < 1e-06;
+        gate |= near1_6_4 & ((blk->vb[6][j] & blk->vb[4][j]) | (blk->vb[6][j] & blk->vb[5][j]) | (blk->vb[7][j] & blk->vb[4][j]) | (blk->vb[7][j] & blk->vb[5][j]));
+        const int near3_1_0 = dq_adist(blk->cb[1][3][j], blk->cb[0][3][j]) < 1e-06;
+        gate |= near3_1_0 & ((blk->vb[1][j] & blk->vb[0][j]));
+        const int near3_3_2 = dq_adist(blk->cb[3][3][j], blk->cb[2][3][j]) < 1e-06;
+        gate |= near3_3_2 & ((blk->vb[3][j] & blk->vb[2][j]));
+        const int near3_5_4 = dq_adist(blk->cb[5][3][j], blk->cb[4][3][j]) < 1e-06;
+        gate |= near3_5_4 & ((blk->vb[5][j] & blk->vb[4][j]));
+        const int near3_7_6 = dq_adist(blk->cb[7][3][j], blk->cb[6][3][j]) < 1e-06;
+        gate |= near3_7_6 & ((blk->vb[7][j] & blk->vb[6][j]));
     }
     if (!gate) {
         for (int b = 0; b < 8; ++b) {
             for (size_t j = 0; j < m; ++j) {
-                kb[b][j] = vb[b][j];
+                blk->kb[b][j] = blk->vb[b][j];
             }
         }
         return;
@@ -1189,122 +1212,131 @@ DQ_INLINE void dq_ik_block(size_t m, const double pb[8][DQ_BLOCK], double cb[][6
     for (size_t j = 0; j < m; ++j) {   /* vectorised: ik duplicates */
         /* each distinct pair of values of a joint compared once (leaves that share a value need
            no test); candidate i is a duplicate of a when all of the pair's joints are near */
-        const int near3_1_0 = dq_adist(cb[1][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_1_0 = dq_adist(cb[1][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_1_0 = dq_adist(cb[1][5][j], cb[0][5][j]) < 1e-06;
-        const int near1_2_0 = dq_adist(cb[2][1][j], cb[0][1][j]) < 1e-06;
-        const int near2_2_0 = dq_adist(cb[2][2][j], cb[0][2][j]) < 1e-06;
-        const int near3_2_0 = dq_adist(cb[2][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_2_0 = dq_adist(cb[2][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_2_0 = dq_adist(cb[2][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_2_1 = dq_adist(cb[2][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_2_1 = dq_adist(cb[2][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_2_1 = dq_adist(cb[2][5][j], cb[1][5][j]) < 1e-06;
-        const int near3_3_0 = dq_adist(cb[3][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_3_0 = dq_adist(cb[3][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_3_0 = dq_adist(cb[3][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_3_1 = dq_adist(cb[3][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_3_1 = dq_adist(cb[3][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_3_1 = dq_adist(cb[3][5][j], cb[1][5][j]) < 1e-06;
-        const int near3_3_2 = dq_adist(cb[3][3][j], cb[2][3][j]) < 1e-06;
-        const int near4_3_2 = dq_adist(cb[3][4][j], cb[2][4][j]) < 1e-06;
-        const int near5_3_2 = dq_adist(cb[3][5][j], cb[2][5][j]) < 1e-06;
-        const int near0_4_0 = dq_adist(cb[4][0][j], cb[0][0][j]) < 1e-06;
-        const int near1_4_0 = dq_adist(cb[4][1][j], cb[0][1][j]) < 1e-06;
-        const int near2_4_0 = dq_adist(cb[4][2][j], cb[0][2][j]) < 1e-06;
-        const int near3_4_0 = dq_adist(cb[4][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_4_0 = dq_adist(cb[4][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_4_0 = dq_adist(cb[4][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_4_1 = dq_adist(cb[4][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_4_1 = dq_adist(cb[4][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_4_1 = dq_adist(cb[4][5][j], cb[1][5][j]) < 1e-06;
-        const int near1_4_2 = dq_adist(cb[4][1][j], cb[2][1][j]) < 1e-06;
-        const int near2_4_2 = dq_adist(cb[4][2][j], cb[2][2][j]) < 1e-06;
-        const int near3_4_2 = dq_adist(cb[4][3][j], cb[2][3][j]) < 1e-06;
-        const int near4_4_2 = dq_adist(cb[4][4][j], cb[2][4][j]) < 1e-06;
-        const int near5_4_2 = dq_adist(cb[4][5][j], cb[2][5][j]) < 1e-06;
-        const int near3_4_3 = dq_adist(cb[4][3][j], cb[3][3][j]) < 1e-06;
-        const int near4_4_3 = dq_adist(cb[4][4][j], cb[3][4][j]) < 1e-06;
-        const int near5_4_3 = dq_adist(cb[4][5][j], cb[3][5][j]) < 1e-06;
-        const int near3_5_0 = dq_adist(cb[5][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_5_0 = dq_adist(cb[5][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_5_0 = dq_adist(cb[5][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_5_1 = dq_adist(cb[5][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_5_1 = dq_adist(cb[5][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_5_1 = dq_adist(cb[5][5][j], cb[1][5][j]) < 1e-06;
-        const int near3_5_2 = dq_adist(cb[5][3][j], cb[2][3][j]) < 1e-06;
-        const int near4_5_2 = dq_adist(cb[5][4][j], cb[2][4][j]) < 1e-06;
-        const int near5_5_2 = dq_adist(cb[5][5][j], cb[2][5][j]) < 1e-06;
-        const int near3_5_3 = dq_adist(cb[5][3][j], cb[3][3][j]) < 1e-06;
-        const int near4_5_3 = dq_adist(cb[5][4][j], cb[3][4][j]) < 1e-06;
-        const int near5_5_3 = dq_adist(cb[5][5][j], cb[3][5][j]) < 1e-06;
-        const int near3_5_4 = dq_adist(cb[5][3][j], cb[4][3][j]) < 1e-06;
-        const int near4_5_4 = dq_adist(cb[5][4][j], cb[4][4][j]) < 1e-06;
-        const int near5_5_4 = dq_adist(cb[5][5][j], cb[4][5][j]) < 1e-06;
-        const int near1_6_0 = dq_adist(cb[6][1][j], cb[0][1][j]) < 1e-06;
-        const int near2_6_0 = dq_adist(cb[6][2][j], cb[0][2][j]) < 1e-06;
-        const int near3_6_0 = dq_adist(cb[6][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_6_0 = dq_adist(cb[6][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_6_0 = dq_adist(cb[6][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_6_1 = dq_adist(cb[6][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_6_1 = dq_adist(cb[6][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_6_1 = dq_adist(cb[6][5][j], cb[1][5][j]) < 1e-06;
-        const int near1_6_2 = dq_adist(cb[6][1][j], cb[2][1][j]) < 1e-06;
-        const int near2_6_2 = dq_adist(cb[6][2][j], cb[2][2][j]) < 1e-06;
-        const int near3_6_2 = dq_adist(cb[6][3][j], cb[2][3][j]) < 1e-06;
-        const int near4_6_2 = dq_adist(cb[6][4][j], cb[2][4][j]) < 1e-06;
-        const int near5_6_2 = dq_adist(cb[6][5][j], cb[2][5][j]) < 1e-06;
-        const int near3_6_3 = dq_adist(cb[6][3][j], cb[3][3][j]) < 1e-06;
-        const int near4_6_3 = dq_adist(cb[6][4][j], cb[3][4][j]) < 1e-06;
-        const int near5_6_3 = dq_adist(cb[6][5][j], cb[3][5][j]) < 1e-06;
-        const int near1_6_4 = dq_adist(cb[6][1][j], cb[4][1][j]) < 1e-06;
-        const int near2_6_4 = dq_adist(cb[6][2][j], cb[4][2][j]) < 1e-06;
-        const int near3_6_4 = dq_adist(cb[6][3][j], cb[4][3][j]) < 1e-06;
-        const int near4_6_4 = dq_adist(cb[6][4][j], cb[4][4][j]) < 1e-06;
-        const int near5_6_4 = dq_adist(cb[6][5][j], cb[4][5][j]) < 1e-06;
-        const int near3_6_5 = dq_adist(cb[6][3][j], cb[5][3][j]) < 1e-06;
-        const int near4_6_5 = dq_adist(cb[6][4][j], cb[5][4][j]) < 1e-06;
-        const int near5_6_5 = dq_adist(cb[6][5][j], cb[5][5][j]) < 1e-06;
-        const int near3_7_0 = dq_adist(cb[7][3][j], cb[0][3][j]) < 1e-06;
-        const int near4_7_0 = dq_adist(cb[7][4][j], cb[0][4][j]) < 1e-06;
-        const int near5_7_0 = dq_adist(cb[7][5][j], cb[0][5][j]) < 1e-06;
-        const int near3_7_1 = dq_adist(cb[7][3][j], cb[1][3][j]) < 1e-06;
-        const int near4_7_1 = dq_adist(cb[7][4][j], cb[1][4][j]) < 1e-06;
-        const int near5_7_1 = dq_adist(cb[7][5][j], cb[1][5][j]) < 1e-06;
-        const int near3_7_2 = dq_adist(cb[7][3][j], cb[2][3][j]) < 1e-06;
-        const int near4_7_2 = dq_adist(cb[7][4][j], cb[2][4][j]) < 1e-06;
-        const int near5_7_2 = dq_adist(cb[7][5][j], cb[2][5][j]) < 1e-06;
-        const int near3_7_3 = dq_adist(cb[7][3][j], cb[3][3][j]) < 1e-06;
-        const int near4_7_3 = dq_adist(cb[7][4][j], cb[3][4][j]) < 1e-06;
-        const int near5_7_3 = dq_adist(cb[7][5][j], cb[3][5][j]) < 1e-06;
-        const int near3_7_4 = dq_adist(cb[7][3][j], cb[4][3][j]) < 1e-06;
-        const int near4_7_4 = dq_adist(cb[7][4][j], cb[4][4][j]) < 1e-06;
-        const int near5_7_4 = dq_adist(cb[7][5][j], cb[4][5][j]) < 1e-06;
-        const int near3_7_5 = dq_adist(cb[7][3][j], cb[5][3][j]) < 1e-06;
-        const int near4_7_5 = dq_adist(cb[7][4][j], cb[5][4][j]) < 1e-06;
-        const int near5_7_5 = dq_adist(cb[7][5][j], cb[5][5][j]) < 1e-06;
-        const int near3_7_6 = dq_adist(cb[7][3][j], cb[6][3][j]) < 1e-06;
-        const int near4_7_6 = dq_adist(cb[7][4][j], cb[6][4][j]) < 1e-06;
-        const int near5_7_6 = dq_adist(cb[7][5][j], cb[6][5][j]) < 1e-06;
-        kb[0][j] = vb[0][j];
-        kb[1][j] = vb[1][j] & !((vb[0][j] & near3_1_0 & near4_1_0 & near5_1_0));
-        kb[2][j] = vb[2][j] & !((vb[0][j] & near1_2_0 & near2_2_0 & near3_2_0 & near4_2_0 & near5_2_0) | (vb[1][j] & near1_2_0 & near2_2_0 & near3_2_1 & near4_2_1 & near5_2_1));
-        kb[3][j] = vb[3][j] & !((vb[0][j] & near1_2_0 & near2_2_0 & near3_3_0 & near4_3_0 & near5_3_0) | (vb[1][j] & near1_2_0 & near2_2_0 & near3_3_1 & near4_3_1 & near5_3_1) | (vb[2][j] & near3_3_2 & near4_3_2 & near5_3_2));
-        kb[4][j] = vb[4][j] & !((vb[0][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_4_0 & near4_4_0 & near5_4_0) | (vb[1][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_4_1 & near4_4_1 & near5_4_1) | (vb[2][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_4_2 & near4_4_2 & near5_4_2) | (vb[3][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_4_3 & near4_4_3 & near5_4_3));
-        kb[5][j] = vb[5][j] & !((vb[0][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_5_0 & near4_5_0 & near5_5_0) | (vb[1][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_5_1 & near4_5_1 & near5_5_1) | (vb[2][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_5_2 & near4_5_2 & near5_5_2) | (vb[3][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_5_3 & near4_5_3 & near5_5_3) | (vb[4][j] & near3_5_4 & near4_5_4 & near5_5_4));
-        kb[6][j] = vb[6][j] & !((vb[0][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_6_0 & near4_6_0 & near5_6_0) | (vb[1][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_6_1 & near4_6_1 & near5_6_1) | (vb[2][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_6_2 & near4_6_2 & near5_6_2) | (vb[3][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_6_3 & near4_6_3 & near5_6_3) | (vb[4][j] & near1_6_4 & near2_6_4 & near3_6_4 & near4_6_4 & near5_6_4) | (vb[5][j] & near1_6_4 & near2_6_4 & near3_6_5 & near4_6_5 & near5_6_5));
-        kb[7][j] = vb[7][j] & !((vb[0][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_7_0 & near4_7_0 & near5_7_0) | (vb[1][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_7_1 & near4_7_1 & near5_7_1) | (vb[2][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_7_2 & near4_7_2 & near5_7_2) | (vb[3][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_7_3 & near4_7_3 & near5_7_3) | (vb[4][j] & near1_6_4 & near2_6_4 & near3_7_4 & near4_7_4 & near5_7_4) | (vb[5][j] & near1_6_4 & near2_6_4 & near3_7_5 & near4_7_5 & near5_7_5) | (vb[6][j] & near3_7_6 & near4_7_6 & near5_7_6));
+        const int near3_1_0 = dq_adist(blk->cb[1][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_1_0 = dq_adist(blk->cb[1][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_1_0 = dq_adist(blk->cb[1][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near1_2_0 = dq_adist(blk->cb[2][1][j], blk->cb[0][1][j]) < 1e-06;
+        const int near2_2_0 = dq_adist(blk->cb[2][2][j], blk->cb[0][2][j]) < 1e-06;
+        const int near3_2_0 = dq_adist(blk->cb[2][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_2_0 = dq_adist(blk->cb[2][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_2_0 = dq_adist(blk->cb[2][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_2_1 = dq_adist(blk->cb[2][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_2_1 = dq_adist(blk->cb[2][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_2_1 = dq_adist(blk->cb[2][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near3_3_0 = dq_adist(blk->cb[3][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_3_0 = dq_adist(blk->cb[3][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_3_0 = dq_adist(blk->cb[3][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_3_1 = dq_adist(blk->cb[3][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_3_1 = dq_adist(blk->cb[3][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_3_1 = dq_adist(blk->cb[3][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near3_3_2 = dq_adist(blk->cb[3][3][j], blk->cb[2][3][j]) < 1e-06;
+        const int near4_3_2 = dq_adist(blk->cb[3][4][j], blk->cb[2][4][j]) < 1e-06;
+        const int near5_3_2 = dq_adist(blk->cb[3][5][j], blk->cb[2][5][j]) < 1e-06;
+        const int near0_4_0 = dq_adist(blk->cb[4][0][j], blk->cb[0][0][j]) < 1e-06;
+        const int near1_4_0 = dq_adist(blk->cb[4][1][j], blk->cb[0][1][j]) < 1e-06;
+        const int near2_4_0 = dq_adist(blk->cb[4][2][j], blk->cb[0][2][j]) < 1e-06;
+        const int near3_4_0 = dq_adist(blk->cb[4][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_4_0 = dq_adist(blk->cb[4][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_4_0 = dq_adist(blk->cb[4][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_4_1 = dq_adist(blk->cb[4][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_4_1 = dq_adist(blk->cb[4][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_4_1 = dq_adist(blk->cb[4][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near1_4_2 = dq_adist(blk->cb[4][1][j], blk->cb[2][1][j]) < 1e-06;
+        const int near2_4_2 = dq_adist(blk->cb[4][2][j], blk->cb[2][2][j]) < 1e-06;
+        const int near3_4_2 = dq_adist(blk->cb[4][3][j], blk->cb[2][3][j]) < 1e-06;
+        const int near4_4_2 = dq_adist(blk->cb[4][4][j], blk->cb[2][4][j]) < 1e-06;
+        const int near5_4_2 = dq_adist(blk->cb[4][5][j], blk->cb[2][5][j]) < 1e-06;
+        const int near3_4_3 = dq_adist(blk->cb[4][3][j], blk->cb[3][3][j]) < 1e-06;
+        const int near4_4_3 = dq_adist(blk->cb[4][4][j], blk->cb[3][4][j]) < 1e-06;
+        const int near5_4_3 = dq_adist(blk->cb[4][5][j], blk->cb[3][5][j]) < 1e-06;
+        const int near3_5_0 = dq_adist(blk->cb[5][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_5_0 = dq_adist(blk->cb[5][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_5_0 = dq_adist(blk->cb[5][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_5_1 = dq_adist(blk->cb[5][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_5_1 = dq_adist(blk->cb[5][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_5_1 = dq_adist(blk->cb[5][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near3_5_2 = dq_adist(blk->cb[5][3][j], blk->cb[2][3][j]) < 1e-06;
+        const int near4_5_2 = dq_adist(blk->cb[5][4][j], blk->cb[2][4][j]) < 1e-06;
+        const int near5_5_2 = dq_adist(blk->cb[5][5][j], blk->cb[2][5][j]) < 1e-06;
+        const int near3_5_3 = dq_adist(blk->cb[5][3][j], blk->cb[3][3][j]) < 1e-06;
+        const int near4_5_3 = dq_adist(blk->cb[5][4][j], blk->cb[3][4][j]) < 1e-06;
+        const int near5_5_3 = dq_adist(blk->cb[5][5][j], blk->cb[3][5][j]) < 1e-06;
+        const int near3_5_4 = dq_adist(blk->cb[5][3][j], blk->cb[4][3][j]) < 1e-06;
+        const int near4_5_4 = dq_adist(blk->cb[5][4][j], blk->cb[4][4][j]) < 1e-06;
+        const int near5_5_4 = dq_adist(blk->cb[5][5][j], blk->cb[4][5][j]) < 1e-06;
+        const int near1_6_0 = dq_adist(blk->cb[6][1][j], blk->cb[0][1][j]) < 1e-06;
+        const int near2_6_0 = dq_adist(blk->cb[6][2][j], blk->cb[0][2][j]) < 1e-06;
+        const int near3_6_0 = dq_adist(blk->cb[6][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_6_0 = dq_adist(blk->cb[6][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_6_0 = dq_adist(blk->cb[6][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_6_1 = dq_adist(blk->cb[6][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_6_1 = dq_adist(blk->cb[6][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_6_1 = dq_adist(blk->cb[6][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near1_6_2 = dq_adist(blk->cb[6][1][j], blk->cb[2][1][j]) < 1e-06;
+        const int near2_6_2 = dq_adist(blk->cb[6][2][j], blk->cb[2][2][j]) < 1e-06;
+        const int near3_6_2 = dq_adist(blk->cb[6][3][j], blk->cb[2][3][j]) < 1e-06;
+        const int near4_6_2 = dq_adist(blk->cb[6][4][j], blk->cb[2][4][j]) < 1e-06;
+        const int near5_6_2 = dq_adist(blk->cb[6][5][j], blk->cb[2][5][j]) < 1e-06;
+        const int near3_6_3 = dq_adist(blk->cb[6][3][j], blk->cb[3][3][j]) < 1e-06;
+        const int near4_6_3 = dq_adist(blk->cb[6][4][j], blk->cb[3][4][j]) < 1e-06;
+        const int near5_6_3 = dq_adist(blk->cb[6][5][j], blk->cb[3][5][j]) < 1e-06;
+        const int near1_6_4 = dq_adist(blk->cb[6][1][j], blk->cb[4][1][j]) < 1e-06;
+        const int near2_6_4 = dq_adist(blk->cb[6][2][j], blk->cb[4][2][j]) < 1e-06;
+        const int near3_6_4 = dq_adist(blk->cb[6][3][j], blk->cb[4][3][j]) < 1e-06;
+        const int near4_6_4 = dq_adist(blk->cb[6][4][j], blk->cb[4][4][j]) < 1e-06;
+        const int near5_6_4 = dq_adist(blk->cb[6][5][j], blk->cb[4][5][j]) < 1e-06;
+        const int near3_6_5 = dq_adist(blk->cb[6][3][j], blk->cb[5][3][j]) < 1e-06;
+        const int near4_6_5 = dq_adist(blk->cb[6][4][j], blk->cb[5][4][j]) < 1e-06;
+        const int near5_6_5 = dq_adist(blk->cb[6][5][j], blk->cb[5][5][j]) < 1e-06;
+        const int near3_7_0 = dq_adist(blk->cb[7][3][j], blk->cb[0][3][j]) < 1e-06;
+        const int near4_7_0 = dq_adist(blk->cb[7][4][j], blk->cb[0][4][j]) < 1e-06;
+        const int near5_7_0 = dq_adist(blk->cb[7][5][j], blk->cb[0][5][j]) < 1e-06;
+        const int near3_7_1 = dq_adist(blk->cb[7][3][j], blk->cb[1][3][j]) < 1e-06;
+        const int near4_7_1 = dq_adist(blk->cb[7][4][j], blk->cb[1][4][j]) < 1e-06;
+        const int near5_7_1 = dq_adist(blk->cb[7][5][j], blk->cb[1][5][j]) < 1e-06;
+        const int near3_7_2 = dq_adist(blk->cb[7][3][j], blk->cb[2][3][j]) < 1e-06;
+        const int near4_7_2 = dq_adist(blk->cb[7][4][j], blk->cb[2][4][j]) < 1e-06;
+        const int near5_7_2 = dq_adist(blk->cb[7][5][j], blk->cb[2][5][j]) < 1e-06;
+        const int near3_7_3 = dq_adist(blk->cb[7][3][j], blk->cb[3][3][j]) < 1e-06;
+        const int near4_7_3 = dq_adist(blk->cb[7][4][j], blk->cb[3][4][j]) < 1e-06;
+        const int near5_7_3 = dq_adist(blk->cb[7][5][j], blk->cb[3][5][j]) < 1e-06;
+        const int near3_7_4 = dq_adist(blk->cb[7][3][j], blk->cb[4][3][j]) < 1e-06;
+        const int near4_7_4 = dq_adist(blk->cb[7][4][j], blk->cb[4][4][j]) < 1e-06;
+        const int near5_7_4 = dq_adist(blk->cb[7][5][j], blk->cb[4][5][j]) < 1e-06;
+        const int near3_7_5 = dq_adist(blk->cb[7][3][j], blk->cb[5][3][j]) < 1e-06;
+        const int near4_7_5 = dq_adist(blk->cb[7][4][j], blk->cb[5][4][j]) < 1e-06;
+        const int near5_7_5 = dq_adist(blk->cb[7][5][j], blk->cb[5][5][j]) < 1e-06;
+        const int near3_7_6 = dq_adist(blk->cb[7][3][j], blk->cb[6][3][j]) < 1e-06;
+        const int near4_7_6 = dq_adist(blk->cb[7][4][j], blk->cb[6][4][j]) < 1e-06;
+        const int near5_7_6 = dq_adist(blk->cb[7][5][j], blk->cb[6][5][j]) < 1e-06;
+        blk->kb[0][j] = blk->vb[0][j];
+        blk->kb[1][j] = blk->vb[1][j] & !((blk->vb[0][j] & near3_1_0 & near4_1_0 & near5_1_0));
+        blk->kb[2][j] = blk->vb[2][j] & !((blk->vb[0][j] & near1_2_0 & near2_2_0 & near3_2_0 & near4_2_0 & near5_2_0) | (blk->vb[1][j] & near1_2_0 & near2_2_0 & near3_2_1 & near4_2_1 & near5_2_1));
+        blk->kb[3][j] = blk->vb[3][j] & !((blk->vb[0][j] & near1_2_0 & near2_2_0 & near3_3_0 & near4_3_0 & near5_3_0) | (blk->vb[1][j] & near1_2_0 & near2_2_0 & near3_3_1 & near4_3_1 & near5_3_1) | (blk->vb[2][j] & near3_3_2 & near4_3_2 & near5_3_2));
+        blk->kb[4][j] = blk->vb[4][j] & !((blk->vb[0][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_4_0 & near4_4_0 & near5_4_0) | (blk->vb[1][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_4_1 & near4_4_1 & near5_4_1) | (blk->vb[2][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_4_2 & near4_4_2 & near5_4_2) | (blk->vb[3][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_4_3 & near4_4_3 & near5_4_3));
+        blk->kb[5][j] = blk->vb[5][j] & !((blk->vb[0][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_5_0 & near4_5_0 & near5_5_0) | (blk->vb[1][j] & near0_4_0 & near1_4_0 & near2_4_0 & near3_5_1 & near4_5_1 & near5_5_1) | (blk->vb[2][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_5_2 & near4_5_2 & near5_5_2) | (blk->vb[3][j] & near0_4_0 & near1_4_2 & near2_4_2 & near3_5_3 & near4_5_3 & near5_5_3) | (blk->vb[4][j] & near3_5_4 & near4_5_4 & near5_5_4));
+        blk->kb[6][j] = blk->vb[6][j] & !((blk->vb[0][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_6_0 & near4_6_0 & near5_6_0) | (blk->vb[1][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_6_1 & near4_6_1 & near5_6_1) | (blk->vb[2][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_6_2 & near4_6_2 & near5_6_2) | (blk->vb[3][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_6_3 & near4_6_3 & near5_6_3) | (blk->vb[4][j] & near1_6_4 & near2_6_4 & near3_6_4 & near4_6_4 & near5_6_4) | (blk->vb[5][j] & near1_6_4 & near2_6_4 & near3_6_5 & near4_6_5 & near5_6_5));
+        blk->kb[7][j] = blk->vb[7][j] & !((blk->vb[0][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_7_0 & near4_7_0 & near5_7_0) | (blk->vb[1][j] & near0_4_0 & near1_6_0 & near2_6_0 & near3_7_1 & near4_7_1 & near5_7_1) | (blk->vb[2][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_7_2 & near4_7_2 & near5_7_2) | (blk->vb[3][j] & near0_4_0 & near1_6_2 & near2_6_2 & near3_7_3 & near4_7_3 & near5_7_3) | (blk->vb[4][j] & near1_6_4 & near2_6_4 & near3_7_4 & near4_7_4 & near5_7_4) | (blk->vb[5][j] & near1_6_4 & near2_6_4 & near3_7_5 & near4_7_5 & near5_7_5) | (blk->vb[6][j] & near3_7_6 & near4_7_6 & near5_7_6));
     }
 }
 
-/* n poses (n x 8) in blocks of DQ_BLOCK: dq_ik_block, then dq_pack_block. Inlined into the batch
- * function, with the scheduling of DQ_SCHED, and into the single-pose one, without. */
-DQ_INLINE void dq_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts,
-                           int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
+/* The batch functions' one compiled copy of the block. */
+static DQ_NOINLINE DQ_SCHED void dq_ik_block(size_t m, struct dq_block *DQ_RESTRICT blk)
 {
-    double pb[8][DQ_BLOCK];
-    double cb[8][6][DQ_BLOCK];
-    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
+    dq_ik_block_body(m, blk);
+}
+
+/* n poses (n x 8) in blocks of DQ_BLOCK: the block (dq_ik_block; dq_ik_block_body inlined where
+ * `single`, a constant), then dq_pack_block. Inlined into the batch functions and into the
+ * single-pose one. */
+DQ_INLINE void dq_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols, int *DQ_RESTRICT counts,
+                           int *DQ_RESTRICT branch, int *DQ_RESTRICT singular, int single)
+{
+    struct dq_block block, *const blk = &block;
+    double (*DQ_RESTRICT const pb)[DQ_BLOCK] = blk->pb;
+    double (*DQ_RESTRICT const cb)[6][DQ_BLOCK] = blk->cb;
+    int (*DQ_RESTRICT const sb)[DQ_BLOCK] = blk->sb;
+    int (*DQ_RESTRICT const kb)[DQ_BLOCK] = blk->kb;
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
         for (size_t j = 0; j < m; ++j) {
@@ -1312,7 +1344,11 @@ DQ_INLINE void dq_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ
                 pb[k][j] = poses[(i0 + j) * 8 + k];
             }
         }
-        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        if (single) {
+            dq_ik_block_body(m, blk);
+        } else {
+            dq_ik_block(m, blk);
+        }
         dq_pack_block(m, cb, kb, sb, sols + i0 * 48, counts + i0,
                       branch ? branch + i0 * 8 : NULL, singular ? singular + i0 * 8 : NULL);
     }
@@ -1321,7 +1357,7 @@ DQ_INLINE void dq_ik_batch(size_t n, const double *DQ_RESTRICT poses, double *DQ
 DQ_SCHED void kr6_r900_ik_batch_ex(size_t n, const double *DQ_RESTRICT poses, double *DQ_RESTRICT sols,
                                  int *DQ_RESTRICT counts, int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
 {
-    dq_ik_batch(n, poses, sols, counts, branch, singular);
+    dq_ik_batch(n, poses, sols, counts, branch, singular, 0);
 }
 
 /* One pose: the batch of one (the same numbers as in a batch, bit for bit; the straight-line
@@ -1330,7 +1366,7 @@ DQ_SCHED void kr6_r900_ik_batch_ex(size_t n, const double *DQ_RESTRICT poses, do
 int kr6_r900_ik(const double *DQ_RESTRICT pose, double *DQ_RESTRICT sols)
 {
     int count;
-    dq_ik_batch(1, pose, sols, &count, NULL, NULL);
+    dq_ik_batch(1, pose, sols, &count, NULL, NULL, 1);
     return count;
 }
 
@@ -1360,9 +1396,12 @@ DQ_SCHED void kr6_r900_ik_nearest_batch(size_t n, const double *DQ_RESTRICT pose
                                         double *DQ_RESTRICT q, double *DQ_RESTRICT max_move, double *DQ_RESTRICT total_move,
                                         int *DQ_RESTRICT branch, int *DQ_RESTRICT singular)
 {
-    double pb[8][DQ_BLOCK], zb[6][DQ_BLOCK];
-    double cb[8][6][DQ_BLOCK];
-    int vb[8][DQ_BLOCK], sb[8][DQ_BLOCK], kb[8][DQ_BLOCK];
+    struct dq_block block, *const blk = &block;
+    double (*DQ_RESTRICT const pb)[DQ_BLOCK] = blk->pb;
+    double (*DQ_RESTRICT const cb)[6][DQ_BLOCK] = blk->cb;
+    int (*DQ_RESTRICT const sb)[DQ_BLOCK] = blk->sb;
+    int (*DQ_RESTRICT const kb)[DQ_BLOCK] = blk->kb;
+    double zb[6][DQ_BLOCK];
     double oq[6][DQ_BLOCK], omx[DQ_BLOCK], ott[DQ_BLOCK], obr[DQ_BLOCK];
     for (size_t i0 = 0; i0 < n; i0 += DQ_BLOCK) {
         const size_t m = n - i0 < DQ_BLOCK ? n - i0 : DQ_BLOCK;
@@ -1374,7 +1413,7 @@ DQ_SCHED void kr6_r900_ik_nearest_batch(size_t n, const double *DQ_RESTRICT pose
                 zb[k][j] = seeds[(i0 + j) * 6 + k];
             }
         }
-        dq_ik_block(m, (const double (*)[DQ_BLOCK])pb, cb, vb, sb, kb);
+        dq_ik_block(m, blk);
         for (size_t j = 0; j < m; ++j) {   /* vectorised: ik nearest */
             double bm = INFINITY, bt = INFINITY, mv = NAN, tv = NAN, bb = -1.0;
             double bq0 = NAN;

@@ -97,14 +97,51 @@ def batch_shape(*arrays_and_trailing) -> tuple:
 # --- small vector algebra (batched over leading axes) ---------------------------------------
 
 def dot(a, b):
+    """a . b over the last axis; a constant vector (3,) against a batch (n, 3) is one matrix
+    product."""
+    if a.ndim == 1 and b.ndim <= 2:
+        return b @ a
+    if b.ndim == 1 and a.ndim <= 2:
+        return a @ b
     return np.einsum("...i,...i->...", a, b)
 
 
+def cross(a, b):
+    """a x b over the last axis: numpy's component formulas on the components (strided views),
+    without np.cross's broadcast copies and moved axes; a constant axis (3,) enters as numbers."""
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    out = np.empty(shape + (3,))
+    tmp = np.empty(shape)
+    for j, (i, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(a[..., i], b[..., k], out=out[..., j])
+        np.multiply(a[..., k], b[..., i], out=tmp)
+        np.subtract(out[..., j], tmp, out=out[..., j])
+    return out
+
+
 def rot(k, theta, p):
-    """R(k, theta) p by the Rodrigues formula; k (..., 3) unit, theta (...), p (..., 3)."""
-    theta = np.asarray(theta, dtype=float)[..., None]
+    """R(k, theta) p by the Rodrigues formula; k (..., 3) unit, theta (...), p (..., 3).
+
+    c p + s (k x p) + (1 - c)(k . p) k, evaluated per component (arrays of the batch's length,
+    not rows of three; a constant axis (3,) enters as three numbers) into two scratch arrays:
+    the same operations as the vector formula, without its temporaries."""
+    k, p = np.asarray(k, dtype=float), np.asarray(p, dtype=float)
+    theta = np.asarray(theta, dtype=float)
     c, s = np.cos(theta), np.sin(theta)
-    return c * p + s * np.cross(k, p) + (1.0 - c) * dot(k, p)[..., None] * k
+    w = (1.0 - c) * dot(k, p)
+    shape = np.broadcast_shapes(c.shape, k.shape[:-1], p.shape[:-1])
+    out = np.empty(shape + (3,))
+    t1, t2 = np.empty(shape), np.empty(shape)
+    for j, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):
+        np.multiply(k[..., a], p[..., b], out=t1)
+        np.multiply(k[..., b], p[..., a], out=t2)
+        np.subtract(t1, t2, out=t1)                         # (k x p)_j
+        np.multiply(s, t1, out=t1)
+        np.multiply(c, p[..., j], out=t2)
+        np.add(t2, t1, out=t2)
+        np.multiply(w, k[..., j], out=t1)
+        np.add(t2, t1, out=out[..., j])
+    return out
 
 
 def a_matrix(k, p):
@@ -112,6 +149,32 @@ def a_matrix(k, p):
     kxp = np.cross(np.broadcast_to(k, np.broadcast_shapes(k.shape, p.shape)), p)
     axial = dot(k, p)[..., None] * k
     return np.stack([kxp, p - axial], axis=-1), axial
+
+
+def a_coef(k, p, h):
+    """A(k, p)^T h as its two components (h . (k x p), h . (p - (k . p) k)), and the axial
+    part (k . p) k: the line a . x of ``circle_line`` without building A."""
+    return a_coef_with(k, p, h, cross(k, p))
+
+
+def a_coef_with(k, p, h, kxp):
+    """``a_coef`` with k x p given. A constant axis k (3,) (the compositions' steps) takes two
+    dot products; a batch of axes goes through A^T h as before (the same sums, bit for bit)."""
+    axial = np.asarray(dot(k, p))[..., None] * k
+    if k.ndim == 1:
+        return dot(kxp, h), dot(p - axial, h), axial
+    coef = np.einsum("...ij,...i->...j", np.stack([kxp, p - axial], axis=-1), h)
+    return coef[..., 0], coef[..., 1], axial
+
+
+def wrap_pi(a):
+    """``wrap_angle`` of angles in [-pi, pi] (atan2's range), bit for bit, without np.mod:
+    a + pi lies in [0, 2 pi] there, where np.mod is the identity but at 2 pi (exact: Sterbenz)."""
+    w = np.asarray(a, dtype=float) + np.pi
+    np.subtract(w, 2.0 * np.pi, out=w, where=w >= 2.0 * np.pi)
+    w -= np.pi
+    np.add(w, 2.0 * np.pi, out=w, where=w <= -np.pi)
+    return w
 
 
 def angle(x):
@@ -132,21 +195,28 @@ def circle_line(a, beta):
       in slot 0, slot 1 a copy (``two`` False);
     - |a| below SP_FREE_ANGLE: theta does not enter the equation (``free``), slot 0 is 0.
     """
-    norm2 = dot(a, a)
+    return circle_line2(a[..., 0], a[..., 1], beta)
+
+
+def circle_line2(a0, a1, beta):
+    """``circle_line`` with a given as its components a0, a1 (broadcasting with beta)."""
+    norm2 = a0 * a0 + a1 * a1
     free = norm2 <= SP_FREE_ANGLE ** 2
     safe = np.where(free, 1.0, norm2)
     disc = norm2 - beta * beta
     two = (disc >= 0.0) & ~free
     root = np.sqrt(np.where(two, disc, 0.0))
-    ja = np.stack([a[..., 1], -a[..., 0]], axis=-1)
-    base = a * beta[..., None]
-    x_plus = (base + root[..., None] * ja) / safe[..., None]
-    x_minus = (base - root[..., None] * ja) / safe[..., None]
-    ls = a * np.where(beta < 0, -1.0, 1.0)[..., None]
-    x_plus = np.where(two[..., None], x_plus, ls)
-    x_minus = np.where(two[..., None], x_minus, ls)
-    theta = np.stack([angle(x_plus), angle(x_minus)], axis=-1)
-    theta = np.where(free[..., None], 0.0, theta)
+    b0, b1 = a0 * beta, a1 * beta
+    r0, r1 = root * a1, root * a0
+    theta = np.empty(np.broadcast_shapes(np.shape(norm2), np.shape(beta)) + (2,))
+    np.arctan2((b0 + r0) / safe, (b1 - r1) / safe, out=theta[..., 0])
+    np.arctan2((b0 - r0) / safe, (b1 + r1) / safe, out=theta[..., 1])
+    if not np.all(two):                     # least-squares slots: x = a sign(beta) / |a|
+        sign = np.where(beta < 0, -1.0, 1.0)
+        ls = np.arctan2(a0 * sign, a1 * sign)[..., None]
+        np.copyto(theta, np.broadcast_to(ls, theta.shape), where=~two[..., None])
+    if np.any(free):
+        np.copyto(theta, 0.0, where=free[..., None])
     return theta, two, free
 
 

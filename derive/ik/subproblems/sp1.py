@@ -4,23 +4,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape, finish,
-                                           rot, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef_with, axis, batch_shape, cross,
+                                           dot, finish, rot, vector, wrap_pi)
 from derive.ik.tolerances import SP_FREE_ANGLE
 
 
 def angle_sp1(k, p1, p2):
-    """The core of ``sp1`` without input checks, for arrays already broadcast (..., 3).
+    """The core of ``sp1`` without input checks, for arrays that broadcast (..., 3) (a constant
+    axis k may be one (3,) vector).
 
     Returns (theta (...), degenerate (...)); theta = atan2((k x p1) . p2, (p1 - (k . p1) k) . p2),
     0 where degenerate (p1 or p2 within SP_FREE_ANGLE of the axis).
     """
-    a, _axial = a_matrix(k, p1)
-    coef = np.einsum("...ij,...i->...j", a, p2)
-    degenerate = (np.linalg.norm(np.cross(k, p1), axis=-1) <= SP_FREE_ANGLE) \
-        | (np.linalg.norm(np.cross(k, p2), axis=-1) <= SP_FREE_ANGLE)
-    theta = np.where(degenerate, 0.0, np.arctan2(coef[..., 0], coef[..., 1]))
+    kxp1, kxp2 = cross(k, p1), cross(k, p2)
+    c0, c1, _axial = a_coef_with(k, p1, p2, kxp1)
+    degenerate = (dot(kxp1, kxp1) <= SP_FREE_ANGLE ** 2) | (dot(kxp2, kxp2) <= SP_FREE_ANGLE ** 2)
+    theta = np.arctan2(c0, c1)
+    if np.any(degenerate):
+        theta = np.where(degenerate, 0.0, theta)
     return theta, degenerate
+
+
+def _sp1(k, p1, p2):
+    """``sp1``'s angle (...) wrapped to (-pi, pi], without input checks or residual: the step of
+    the compositions (:mod:`derive.ik.closed_form`, :mod:`derive.ik.spherical`)."""
+    return wrap_pi(angle_sp1(k, p1, p2)[0])
 
 
 def sp1(k, p1, p2) -> SubproblemSolutions:

@@ -4,10 +4,37 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape,
-                                           circle_line, dot, finish, rot, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, vector,
+                                           wrap_pi)
 from derive.ik.subproblems.sp1 import angle_sp1
 from derive.ik.tolerances import SP_FREE_ANGLE
+
+
+def _slots(v):
+    """v (..., 3) with a slot axis before the last; a constant vector (3,) stays as it is."""
+    return v if v.ndim == 1 else v[..., None, :]
+
+
+def solve_sp2(k1, k2, p1, p2):
+    """The core of ``sp2`` without input checks (arrays that broadcast; constant vectors may be
+    (3,)): (t1 (..., 2), t2 (..., 2), two, free1 (...), free2 (..., 2), c (..., 2, 3) the common
+    points R(k1, t1) p1)."""
+    n1, n2 = np.linalg.norm(p1, axis=-1), np.linalg.norm(p2, axis=-1)
+    u1 = p1 / np.where(n1 > SP_FREE_ANGLE, n1, 1.0)[..., None]
+    u2 = p2 / np.where(n2 > SP_FREE_ANGLE, n2, 1.0)[..., None]
+    a0, a1, axial = a_coef(k1, u1, k2)
+    t1, two, free1 = circle_line2(a0, a1, dot(k2, u2) - dot(k2, axial))
+    c = rot(_slots(k1), t1, _slots(p1))                                  # (..., 2, 3)
+    t2, free2 = angle_sp1(_slots(k2), _slots(p2), c)
+    return t1, t2, two, free1, free2, c
+
+
+def _sp2(k1, k2, p1, p2):
+    """``sp2``'s angles (..., 2 slots, 2) wrapped to (-pi, pi] (slot 1 repeats slot 0 where there
+    is one solution), without input checks or residuals: the step of the compositions."""
+    t1, t2 = solve_sp2(k1, k2, p1, p2)[:2]
+    return wrap_pi(np.stack([t1, t2], axis=-1))
 
 
 def sp2(k1, k2, p1, p2) -> SubproblemSolutions:
@@ -36,13 +63,7 @@ def sp2(k1, k2, p1, p2) -> SubproblemSolutions:
     p1, p2 = vector(p1, "sp2 p1"), vector(p2, "sp2 p2")
     shape = batch_shape((k1, 1), (k2, 1), (p1, 1), (p2, 1))
     k1, k2, p1, p2 = (np.broadcast_to(v, shape + (3,)) for v in (k1, k2, p1, p2))
-    n1, n2 = np.linalg.norm(p1, axis=-1), np.linalg.norm(p2, axis=-1)
-    u1 = p1 / np.where(n1 > SP_FREE_ANGLE, n1, 1.0)[..., None]
-    u2 = p2 / np.where(n2 > SP_FREE_ANGLE, n2, 1.0)[..., None]
-    a, axial = a_matrix(k1, u1)
-    t1, two, free1 = circle_line(np.einsum("...ij,...i->...j", a, k2), dot(k2, u2) - dot(k2, axial))
-    c = rot(k1[..., None, :], t1, p1[..., None, :])                     # (..., 2, 3)
-    t2, free2 = angle_sp1(k2[..., None, :], p2[..., None, :], c)
+    t1, t2, two, free1, free2, c = solve_sp2(k1, k2, p1, p2)
     residual = np.linalg.norm(c - rot(k2[..., None, :], t2, p2[..., None, :]), axis=-1)
     valid = np.stack([np.ones(shape, dtype=bool), two], axis=-1)
     degenerate = free1 | np.any(free2, axis=-1)

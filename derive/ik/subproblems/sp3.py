@@ -5,8 +5,23 @@ from __future__ import annotations
 import numpy as np
 
 from derive.errors import InputError
-from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape,
-                                           circle_line, dot, finish, rot, scalar, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, scalar, vector,
+                                           wrap_pi)
+
+
+def solve_sp3(k, p1, p2, d):
+    """The core of ``sp3`` without input checks (arrays that broadcast; constant vectors may be
+    (3,)): (theta (..., 2), two (...), free (...)) as ``circle_line`` returns them."""
+    a0, a1, axial = a_coef(k, p1, p2)
+    beta = (dot(p1, p1) + dot(p2, p2) - d * d) / 2 - dot(p2, axial)
+    return circle_line2(a0, a1, beta)
+
+
+def _sp3(k, p1, p2, d):
+    """``sp3``'s two slots (..., 2) wrapped to (-pi, pi] (slot 1 repeats slot 0 where there is
+    one root), without input checks or residuals: the step of the compositions."""
+    return wrap_pi(solve_sp3(k, p1, p2, d)[0])
 
 
 def sp3(k, p1, p2, d) -> SubproblemSolutions:
@@ -36,9 +51,7 @@ def sp3(k, p1, p2, d) -> SubproblemSolutions:
     shape = batch_shape((k, 1), (p1, 1), (p2, 1), (d, 0))
     k, p1, p2 = (np.broadcast_to(v, shape + (3,)) for v in (k, p1, p2))
     d = np.broadcast_to(d, shape)
-    a, axial = a_matrix(k, p1)
-    beta = (dot(p1, p1) + dot(p2, p2) - d * d) / 2 - dot(p2, axial)
-    theta, two, free = circle_line(np.einsum("...ij,...i->...j", a, p2), beta)
+    theta, two, free = solve_sp3(k, p1, p2, d)
     valid = np.stack([np.ones(shape, dtype=bool), two], axis=-1)
     dist = np.linalg.norm(rot(k[..., None, :], theta, p1[..., None, :]) - p2[..., None, :], axis=-1)
     return finish(theta[..., None], valid, np.abs(dist - d[..., None]), free)

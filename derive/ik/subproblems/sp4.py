@@ -4,8 +4,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from derive.ik.subproblems._common import (SubproblemSolutions, a_matrix, axis, batch_shape,
-                                           circle_line, dot, finish, rot, scalar, vector)
+from derive.ik.subproblems._common import (SubproblemSolutions, a_coef, axis, batch_shape,
+                                           circle_line2, dot, finish, rot, scalar, vector,
+                                           wrap_pi)
+
+
+def solve_sp4(h, k, p, d):
+    """The core of ``sp4`` without input checks (arrays that broadcast; constant vectors may be
+    (3,)): (theta (..., 2), two (...), free (...)) as ``circle_line`` returns them."""
+    a0, a1, axial = a_coef(k, p, h)
+    return circle_line2(a0, a1, d - dot(h, axial))
+
+
+def _sp4(h, k, p, d):
+    """``sp4``'s two slots (..., 2) wrapped to (-pi, pi] (slot 1 repeats slot 0 where there is
+    one root) and ``degenerate`` (...), without input checks or residuals: the step of the
+    compositions."""
+    theta, _two, free = solve_sp4(h, k, p, d)
+    return wrap_pi(theta), free
 
 
 def sp4(h, k, p, d) -> SubproblemSolutions:
@@ -35,8 +51,7 @@ def sp4(h, k, p, d) -> SubproblemSolutions:
     shape = batch_shape((h, 1), (k, 1), (p, 1), (d, 0))
     h, k, p = (np.broadcast_to(v, shape + (3,)) for v in (h, k, p))
     d = np.broadcast_to(d, shape)
-    a, axial = a_matrix(k, p)
-    theta, two, free = circle_line(np.einsum("...ij,...i->...j", a, h), d - dot(h, axial))
+    theta, two, free = solve_sp4(h, k, p, d)
     valid = np.stack([np.ones(shape, dtype=bool), two], axis=-1)
     residual = np.abs(dot(h[..., None, :], rot(k[..., None, :], theta, p[..., None, :])) - d[..., None])
     return finish(theta[..., None], valid, residual, free)

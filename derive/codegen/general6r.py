@@ -1,0 +1,156 @@
+"""Emitted kernels of the general 6R arm (issue 31, item 2): the elimination of
+:mod:`derive.ik.general6r` (Raghavan-Roth's 14 equations, Manocha-Canny's 24 x 24 companion
+eigenproblem) as dependency-free C99 with the robot's constants baked in.
+
+What the emitted code does per pose (templates/general6r.c.j2; the numbers refer to the steps
+of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it follows):
+
+1. **Coefficients** (``g6_coefs(pose, params, Q, ycol)``, a function of its own so that a caller
+   with extra runtime parameters can replace it): Q (14 x 8), the coefficients of the pair of
+   joints eliminated linearly, and ycol (14), the pose's part of the constant column of the
+   triple's side Y (14 x 27, the rest of Y is a baked constant). For the standard elimination
+   (joints 1, 2 eliminated, the triple 3, 4, 5) these are the derived polynomials of degree <= 3
+   in (l, p), the direction and a point of joint 6's axis, evaluated as a baked table times the
+   pose monomials; for the loop cut at joint e (the CRX, the Jaco2) the pair's coefficients are
+   fitted per pose from 3 sample angles per joint (the fit's 9 x 9 inverse baked in).
+2. **Left null space of Q** by a Householder QR of the 14 x 8 matrix (the last 6 columns of the
+   complete Q); its first 8 columns and R give q1, q2 (or the pair) by least squares later.
+3. **The 12 x 12 quadratic pencil** M(x) = M0 + x M1 + x^2 M2 (x the half-angle tangent of the
+   eigen-variable moved by an offset d3, the Moebius substitution: the first of three offsets
+   whose leading matrix has a 1-norm condition below G6_GOOD_COND, else the best), and the
+   24 x 24 companion matrix [[0, I], [-M2^-1 M0, -M2^-1 M1]].
+4. **Eigenvalues** by balancing, reduction to upper Hessenberg form by stabilised elementary
+   similarity transformations and Francis's double-shift QR iteration (Wilkinson and Reinsch,
+   *Handbook for Automatic Computation II*, 1971: balance, elmhes, hqr; Golub and Van Loan,
+   *Matrix Computations*, 4th ed., algorithms 7.4.2 and 7.5.1). A pose whose QR iteration does not
+   converge in 30 sweeps per eigenvalue is flagged degenerate.
+5. **Eigenvectors**: for each (nearly) real eigenvalue x the null vector of M(x) (the monomials
+   x4^i x5^j) by one step of inverse iteration from a fixed start (an LU solve with partial
+   pivoting of M(x) + 1e-11 I), or, where its residual is large, the last column of the Q of a
+   Householder QR with column pivoting of M(x)^T. Eigenvalues shared by several solutions (a
+   cluster within CLUSTER_TOL, as the CRX's pairs with the same q3) take the null space of that
+   QR (its dimension from the small pivots) and separate the members by the shift structure of
+   the monomials (Stetter's method: V[shift] c = x V[base] c), a small eigenproblem solved by the
+   same Hessenberg QR.
+6. **Back-substitution**: the triple's joints from x and the vector's ratios, the pair from the
+   least squares of Q X2 = Y X1, the last joint from the rest of the chain.
+7. **Newton polish** on the product-form FK (damped Gauss-Newton with the geometric Jacobian, at
+   most G6_NEWTON_MAX steps), the **check** on the kernels' own dual-quaternion FK (position and
+   rotation angle within G6_ACCEPT), the **singular** flag (Jacobian's smallest over largest
+   singular value below G6_SINGULAR, by a cyclic Jacobi eigenvalue sweep of J^T J), the
+   **merge** of duplicates (MERGE_TOL in every joint) and the **order** (ascending q1), at most
+   16 solutions. Every value is tested with isfinite; no NaN leaves a kernel but the padding.
+8. **Nearby poses** (:func:`derive.ik.general6r._perturbed`): a pose flagged degenerate by the
+   steps above is solved again at G6_PERTURB_TRIALS nearby poses (the reference's fixed twists
+   ``_TWISTS`` times G6_PERTURB, baked in as a quaternion and a translation each); Newton (every
+   step) carries their candidates back onto the pose, they are checked and merged with the
+   pose's own; the flag stays set where every nearby pose is degenerate too or a solution found
+   is singular.
+
+The rank-deficient Q of a general arm (rank < 8, ``Plan.mix``) is not emitted: DeriveError.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from derive.errors import DeriveError
+from derive.ik import general6r as g6
+from derive.algebra import quaternion as quat
+from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_PERTURB,
+                                  G6_PERTURB_TRIALS, G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+
+#: The solutions a general 6R kernel returns at most (the degree of the eliminant).
+MAX_SOLUTIONS = g6.MAX_SOLUTIONS
+
+
+def _lit(x) -> str:
+    x = float(x)
+    if not np.isfinite(x):
+        raise DeriveError(f"general 6R kernels: a constant is not finite ({x})")
+    return repr(x) if x != 0 else "0.0"
+
+
+def _arr(a) -> str:
+    """A C initialiser of a numeric array (nested braces)."""
+    a = np.asarray(a, dtype=float)
+    if a.ndim == 1:
+        return "{" + ", ".join(_lit(v) for v in a) + "}"
+    return "{" + ", ".join(_arr(r) for r in a) + "}"
+
+
+def general_context(robot) -> dict:
+    """The template context of a general 6R robot's IK (``ik.general``): the plan's constants
+    as C initialisers (:func:`derive.ik.general6r.plan`: the derivation, cached, with progress).
+    DeriveError when the arm has no plan or one the emitted kernels do not cover."""
+    pl = g6.plan(robot)
+    if pl.rank_q != 8:
+        raise DeriveError(f"{pl.robot}: Q has generic rank {pl.rank_q} < 8; the emitted general 6R "
+                          "kernels cover rank 8 (use derive.ik.general6r.solve)")
+    cut = pl.cut
+    if cut:
+        e = int(cut["e"])
+        ev = int(cut["ev"])
+        triple, pair = g6._cut_joints(e)
+        chain = pl.c
+        y = np.array(cut["y"])                               # (14, 27)
+        last = e
+        kinv = np.linalg.inv(np.kron(g6._BS, g6._BS))        # (9 samples) -> (9 coefficients)
+        links = g6._links(chain)
+        mode = {"kind": "cut", "e": e, "pair_links": [], "kinv": _arr(kinv),
+                "samples": [_lit(v) for v in g6._SAMPLES]}
+        # the pair's two links: K_j = C_{j+1} (constant) or the pose link K6 = C7 T^-1 C1
+        for j in pair:
+            mode["pair_links"].append({"joint": j, "pose": j == 6,
+                                       "k": _arr(np.ravel(links[j])) if j != 6 else None})
+        monomials, qk, r0 = [], None, None
+    else:
+        ev = 0
+        triple, pair, last = (3, 4, 5), (1, 2), 6
+        chain = g6._reverse(pl.c) if pl.reverse else pl.c
+        el = pl.elim
+        y = el.pl.reshape(14, 27)
+        monomials = [list(m) for m in el.monomials]
+        qk = el.q.reshape(112, -1)                            # (112, K)
+        r0 = el.r0                                           # (14, K)
+        mode = {"kind": "std", "qk": _arr(qk), "r0": _arr(r0), "k": len(monomials),
+                "monomials": monomials, "c7inv": _arr(np.ravel(g6._inv(chain[6])))}
+    order = [ev] + [i for i in range(3) if i != ev]
+    # perm[new 9 i + 3 j + k] = old index: the eigen joint first, then the vector's two
+    perm = []
+    for a in range(3):
+        for b in range(3):
+            for c in range(3):
+                old = [0, 0, 0]
+                old[order[0]], old[order[1]], old[order[2]] = a, b, c
+                perm.append(9 * old[0] + 3 * old[1] + old[2])
+    halves = [g6._half(d) for d in pl.d3]
+    # the nearby poses of a degenerate pose (derive.ik.general6r._perturbed): the pose's rotation
+    # times the quaternion of the twist's rotation (body frame), its translation plus the twist's
+    # translation times the arm's size (m)
+    tw = np.array([g6._TWISTS[k % len(g6._TWISTS)] * G6_PERTURB for k in range(G6_PERTURB_TRIALS)]).reshape(-1, 6)
+    ang = np.linalg.norm(tw[:, :3], axis=1)
+    pq = quat._from_axis_angle(tw[:, :3] / np.maximum(ang, 1e-300)[:, None], ang)
+    pt = tw[:, 3:] * pl.scale
+    start = g6._START
+    return {
+        "mode": mode, "reverse": bool(pl.reverse) and not cut, "scale": _lit(pl.scale),
+        "chain": _arr(np.reshape(chain, (7, 16))), "fchain": _arr(np.reshape(pl.c, (7, 16))), "y": _arr(y), "perm": perm, "order": order,
+        "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair], "last": last - 1,
+        "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
+        "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(h) for h in halves],
+        "n_d3": len(pl.d3), "start": _arr(start), "nudge": _lit(g6._NUDGE),
+        "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
+        "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
+        "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
+        "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
+        "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
+        "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
+                % (cut["e"], tuple(pair), tuple(triple), triple[ev]) if cut else
+                "Raghavan-Roth elimination of the %s chain (q1, q2 eliminated linearly, eigen-variable %s)"
+                % ("reversed" if pl.reverse else "forward", "q4 of the reversed chain" if pl.reverse else "q3")),
+    }
+
+
+def g6_comment(text: str) -> str:
+    return " ".join(str(text).split()).replace("*/", "* /")

@@ -1,0 +1,238 @@
+"""The emitted general 6R kernels (derive.codegen.general6r, templates/general6r.c.j2): every
+solution of the arms outside the closed-form classes, checked against the numpy reference
+(derive.ik.general6r.solve: the same solution sets), the reference FK (each solution within
+1e-10), the generating configuration and, for the Fanuc CRX-10iA, ssik's prebuilt solver."""
+
+import importlib.util
+import math
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import derive
+from derive import InputError, reference
+from derive.algebra.angles import wrap_angle
+from derive.ik import general6r
+from derive.kinematics.fk import pose_error
+
+needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+
+ROBOTS = ["crx10ia", "general-6r", "xarm6", "jaco2-6dof"]
+
+
+@pytest.fixture(scope="module")
+def quick_c():
+    """The C backend at -O1 for these tests (quicker to compile; the results do not depend on it)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("DQ_DERIVE_CFLAGS", "-std=c99 -O1")
+        yield
+
+
+def _poses(robot, n, seed):
+    robot = derive.load_robot(robot)
+    lo = np.maximum(robot.limits[:, 0], -math.pi)
+    hi = np.minimum(robot.limits[:, 1], math.pi)
+    q = np.random.default_rng(seed).uniform(lo, hi, (n, 6))
+    return q, reference.fk(robot, q)
+
+
+def _contains(sols, q, tol=1e-6):
+    return len(sols) > 0 and float(np.min(np.max(np.abs(wrap_angle(sols - q)), axis=1))) < tol
+
+
+def _same_sets(a, na, b, nb, tol=1e-6):
+    """Per pose, whether the two solution sets are equal (each member of one within tol of one of
+    the other, in every joint)."""
+    out = []
+    for i in range(len(na)):
+        x, y = a[i, :na[i]], b[i, :nb[i]]
+        out.append(na[i] == nb[i] and all(_contains(y, s, tol) for s in x) and all(_contains(x, s, tol) for s in y))
+    return np.array(out)
+
+
+@needs_gcc
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_c_kernels_give_the_reference_solution_sets(robot, quick_c):
+    k = derive.kernels(robot, "c")
+    assert k.has_ik and k.max_solutions == 16
+    q, P = _poses(robot, 120, 31)
+    sols, counts = k.ik(P)
+    assert sols.shape == (120, 16, 6)
+    ref = general6r.solve(robot, P)
+    same = _same_sets(sols, counts, ref.q, ref.counts)
+    assert same.all(), np.nonzero(~same)[0][:10]
+    for i in range(len(q)):
+        s = sols[i, :counts[i]]
+        assert np.all(np.isfinite(s)) and np.all(np.isnan(sols[i, counts[i]:]))
+        assert _contains(s, q[i]), i
+        dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
+        assert dp.max() < 1e-10 and dr.max() < 1e-10
+    # the single-pose call is the batch of one
+    s1, c1 = k.ik(P[3])
+    assert c1 == counts[3] and np.array_equal(s1[:c1], sols[3, :c1])
+
+
+@needs_gcc
+@pytest.mark.skipif(importlib.util.find_spec("ssik") is None, reason="needs ssik (test extra)")
+def test_c_kernels_contain_every_ssik_solution_of_the_crx(quick_c):
+    """ssik.prebuilt's CRX-10iA (its FK is ours: tests/test_vendor_arms.py), 100 poses: every
+    solution its native solver returns (wrapped to (-pi, pi]) is among ours."""
+    m = importlib.import_module("ssik.prebuilt.fanuc.crx10ia_ik")
+    k = derive.kernels("crx10ia", "c")
+    q, P = _poses("crx10ia", 100, 7)
+    sols, counts = k.ik(P)
+    total = 0
+    for i in range(len(q)):
+        theirs = m.solve(reference.fk_matrix("crx10ia", q[i]), native=True)
+        total += len(theirs)              # (ssik lists each winding within the limits)
+        for s in theirs:
+            assert _contains(sols[i, :counts[i]], np.asarray(s.q, float)), (i, s.q)
+    assert total >= 400
+    assert counts.max() >= 12                       # more than a Pieper arm's 8
+
+
+@needs_gcc
+def test_degenerate_and_singular_poses_give_no_nan(quick_c):
+    """Axis-aligned configurations (joint values multiples of pi/2: wrist and elbow singular,
+    shared roots, the symmetric CRX pose with a 4-fold q3) and the home pose: counts in 0..16,
+    finite solutions that reproduce the pose, NaN only in the padding; the generating
+    configuration is found wherever it is regular (not on a singular set, where the solutions
+    form a continuum) and the numpy reference finds it."""
+    k = derive.kernels("crx10ia", "c")
+    grid = np.array(np.meshgrid(*[[0.0, math.pi / 2, -math.pi / 2]] * 4, indexing="ij")).reshape(4, -1).T
+    q = np.concatenate([np.zeros((len(grid), 1)), grid[:, :2], grid[:, 2:3], grid[:, 3:4],
+                        np.full((len(grid), 1), -math.pi / 2)], axis=1)
+    q = np.concatenate([q, [[0.0, math.pi / 2, math.pi / 2, -math.pi / 2, math.pi / 2, -math.pi / 2]]])
+    P = reference.fk("crx10ia", q)
+    sols, counts = k.ik(P)
+    _, _, _, sing = k.ik(P, details=True)
+    assert counts.min() >= 0 and counts.max() <= 16
+    ref = general6r.solve("crx10ia", P)
+    pl = general6r.plan("crx10ia")
+    frames, end = general6r._chain_frames(pl.c, q)
+    axes = frames[:, :, :3, 2]
+    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
+                       compute_uv=False)
+    regular = sv[:, -1] > 1e-6 * sv[:, 0]
+    assert regular.sum() >= 20
+    for i in range(len(q)):
+        s = sols[i, :counts[i]]
+        assert np.all(np.isfinite(s)) and np.all(np.isnan(sols[i, counts[i]:]))
+        assert np.all((sing[i, :counts[i]] == 0) | (sing[i, :counts[i]] == 1))
+        if counts[i]:
+            dp, dr = pose_error(reference.fk("crx10ia", s), np.broadcast_to(P[i], (len(s), 8)))
+            assert dp.max() < 1e-10 and dr.max() < 1e-10
+        if regular[i] and _contains(ref.q[i, :ref.counts[i]], q[i]):
+            assert _contains(s, q[i]), i      # where the reference finds it, so do the kernels
+    # the symmetric pose: four solutions share q3 (Stetter's shift structure separates them)
+    last = sols[-1, :counts[-1]]
+    assert _contains(last, q[-1])
+    assert np.sum(np.abs(wrap_angle(last[:, 2] - q[-1, 2])) < 1e-6) >= 4
+
+
+@needs_gcc
+def test_bad_input_raises_input_error_and_unreachable_is_empty(quick_c):
+    k = derive.kernels("general-6r", "c")
+    with pytest.raises(InputError):
+        k.ik(np.full(8, np.nan))
+    with pytest.raises(InputError):
+        k.ik(np.ones(7))
+    with pytest.raises(InputError):
+        k.ik(2 * np.eye(4))
+    far = derive.pose.from_position_quaternion([50.0, 0.0, 0.0], [0, 0, 0, 1], order="xyzw")
+    sols, count = k.ik(far)
+    assert count == 0 and np.all(np.isnan(sols))
+
+
+@needs_gcc
+def test_nearest_and_details_on_a_general_arm(quick_c):
+    k = derive.kernels("general-6r", "c")
+    q, P = _poses("general-6r", 20, 3)
+    sols, counts, branch, sing = k.ik(P, details=True)
+    for i in range(len(q)):
+        assert list(branch[i, :counts[i]]) == list(range(counts[i]))
+        assert np.all(branch[i, counts[i]:] == -1)
+    near = k.nearest(P, q + 1e-4)
+    assert near.found.all()
+    assert np.abs(near.q - q).max() < 1e-3
+
+
+@pytest.mark.parametrize("robot", ["crx10ia", "xarm6"])
+def test_numpy_and_python_kernels_give_the_reference_solution_sets(robot):
+    """The numpy kernels (batched, numpy.linalg) on 60 poses and the pure-Python ones (the C's
+    algorithm transliterated, its own Hessenberg-QR eigen-solver) on 6: the reference's solution
+    sets, the generating configuration among them."""
+    kn = derive.kernels(robot, "numpy")
+    kp = derive.kernels(robot, "python")
+    assert kn.has_ik and kp.has_ik and kn.max_solutions == kp.max_solutions == 16
+    q, P = _poses(robot, 60, 11)
+    ref = general6r.solve(robot, P)
+    sols, counts = kn.ik(P)
+    assert sols.shape == (60, 16, 6)
+    assert _same_sets(sols, counts, ref.q, ref.counts).all()
+    assert all(_contains(sols[i, :counts[i]], q[i]) for i in range(len(q)))
+    sp, cp = kp.ik(P[:6])
+    assert _same_sets(sp, cp, ref.q[:6], ref.counts[:6]).all()
+    assert all(_contains(sp[i, :cp[i]], q[i]) for i in range(6))
+    with pytest.raises(InputError):
+        kp.ik(np.full(8, np.inf))
+
+
+@needs_gcc
+def test_general_c_source_compiles_as_c99_and_cxx17(tmp_path):
+    """The emitted source of a standard-elimination arm (reversed chain, xarm6) and of a cut arm
+    (crx10ia), warnings as errors, -Wpedantic, as C99 and C++17."""
+    from derive.codegen import emit
+    for robot in ("crx10ia", "xarm6"):
+        files = emit.render_kernels(robot)
+        for name, text in files.values():
+            (tmp_path / name).write_text(text)
+        src = tmp_path / files["c_source"][0]
+        for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
+                    ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
+            if shutil.which(cmd[0]) is None:
+                continue
+            res = subprocess.run([*cmd, "-Wall", "-Wextra", "-Werror", str(src)], capture_output=True, text=True)
+            assert res.returncode == 0, (robot, cmd, res.stderr[-3000:])
+
+
+@needs_gcc
+def test_c_kernels_are_clean_under_address_and_undefined_sanitizers(tmp_path):
+    """The CRX's C source with a driver, built with -fsanitize=address,undefined, on axis-aligned
+    configurations (singular, shared roots) and random ones: no invalid access, no undefined
+    behaviour, the counts within 0..16 and no NaN before the padding."""
+    from derive.codegen import emit
+    files = emit.render_kernels("crx10ia")
+    for name, text in files.values():
+        (tmp_path / name).write_text(text)
+    grid = np.array(np.meshgrid(*[[0.0, math.pi / 2, -math.pi / 2, math.pi]] * 3, indexing="ij")).reshape(3, -1).T
+    q = np.concatenate([np.zeros((len(grid), 2)), grid, np.full((len(grid), 1), math.pi / 2)], axis=1)
+    q = np.concatenate([q, np.random.default_rng(4).uniform(-math.pi, math.pi, (16, 6))])
+    P = reference.fk("crx10ia", q)
+    rows = ",\n".join("{" + ", ".join(repr(float(v)) for v in p) + "}" for p in P)
+    (tmp_path / "main.c").write_text(f"""#include <math.h>
+#include <stdio.h>
+#include "crx10ia_kinematics.h"
+static const double poses[{len(P)}][8] = {{{rows}}};
+int main(void) {{
+    static double sols[{len(P)} * CRX10IA_IK_MAX * 6];
+    static int counts[{len(P)}], branch[{len(P)} * CRX10IA_IK_MAX], singular[{len(P)} * CRX10IA_IK_MAX];
+    crx10ia_ik_batch_ex({len(P)}, &poses[0][0], sols, counts, branch, singular);
+    int bad = 0;
+    for (int i = 0; i < {len(P)}; ++i) {{
+        bad += counts[i] < 0 || counts[i] > CRX10IA_IK_MAX;
+        for (int k = 0; k < counts[i] * 6; ++k) bad += !isfinite(sols[i * CRX10IA_IK_MAX * 6 + k]);
+    }}
+    printf("%d\\n", bad);
+    return 0;
+}}
+""")
+    res = subprocess.run(["gcc", "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+                          "-fno-sanitize-recover=all", "-o", str(tmp_path / "t"), str(tmp_path / "main.c"),
+                          str(tmp_path / "crx10ia_kinematics.c"), "-lm"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-3000:]
+    run = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.split() == ["0"]
