@@ -310,7 +310,9 @@ def _six(pl: Plan, d, target):
     ten = np.moveaxis((null @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
     sig = (ten.reshape(n, 6, 3, 9) @ g6._t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
     mats = g6._twelve(sig)
-    d3, mk, lam, real, degen = g6._pencil_roots(SimpleNamespace(d3=pl.d3), mats, degen)
+    # no deflation: the merged link changes with the held value, so no basis is kept per robot
+    flat = SimpleNamespace(d3=pl.d3, deflate=None, deflate_keep=0, spurious=())
+    d3, mk, lam, real, degen = g6._pencil_roots(flat, mats, degen)
     ip, ie = np.nonzero(real)
     if len(ip) == 0:
         return ip, np.zeros((0, 6)), degen
