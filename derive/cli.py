@@ -46,6 +46,7 @@ from derive.cache import find_artifact, shipped_index
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
 from derive.ik import nearclass
+from derive.ik.free_joint import joint_range as free_joint_range, route as free_joint_route
 from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.nearclass import classify
 from derive.ik.redundant import NAMES as FREE_NAMES
@@ -426,6 +427,9 @@ def cmd_ik(args) -> int:
     deg = args.deg
     head = {"robot": robot.name, "target": {"given": target, **_pose_dict(pose, deg)},
             "joints": _joint_meta(robot, deg)}
+    if (robot.dof == 7 and args.free_joint is not None
+            and not (args.free_joint == 3 and (reference._near(robot) or redundant_kind(robot) == "srs"))):
+        return _ik_free_joint(robot, args, pose, q, head)
     if reference._near(robot):
         return _ik_near(robot, args, pose, q, head)
     if redundant_kind(robot) is not None:
@@ -615,6 +619,66 @@ def _ik_redundant(robot, args, pose, q, head) -> int:
     print(f"{len(rows)} solution(s) ({what}):")
     lead = [("#", "", 3), (name, f"({unit})", 10)]
     table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s, f"branch {int(b)}" + (", singular" if g else ""))
+             for i, (v, s, b, g) in enumerate(rows)]
+    for line in _table(robot, table, deg, lead):
+        print(line)
+    return EXIT_OK
+
+
+def _ik_free_joint(robot, args, pose, q, head) -> int:
+    """ik of a seven-joint arm with joint J given (--free-joint J, any J but the SRS class's 3,
+    which _ik_redundant answers): at --free V, over --sweep N values of joint J, or nearest to
+    --seed Q with joint J chosen for the path (derive.ik.free_joint through derive.reference)."""
+    deg = args.deg
+    unit = _angle_unit(deg)
+    conv = np.degrees if deg else (lambda x: x)
+    k = args.free_joint
+    name = f"q{k}"
+    given = [o for o, v in (("--free", args.free), ("--sweep", args.sweep), ("--seed", args.seed))
+             if v is not None]
+    if len(given) != 1:
+        raise InputError(f"ik: --free-joint {k}: give exactly one of --free V (the value of joint {k}; {unit}), "
+                         f"--sweep N (N values over its range) or --seed Q (the solution nearest to Q)"
+                         + (f" (got {' and '.join(given)})" if given else ""))
+    if not 1 <= k <= 7:
+        raise InputError(f"ik: --free-joint: a joint of {robot.name}, 1 to 7; got {k}")
+    lo, hi = free_joint_range(robot, k)
+    head = {**head, "free_parameter": {"name": name, "unit": unit, "range": [_jnum(conv(lo)), _jnum(conv(hi))]}}
+    if args.seed is not None:
+        seed = _joints_in(robot, args.seed, "--seed", deg)
+        res = reference.nearest(robot, pose, seed, free_name=name)
+        if not res.found:
+            return _no_solution(robot, args, head, "no solution inside the joint limits")
+        rows = [(float(res.q[k - 1]), res.q, res.branch, res.singular)]
+        what = f"nearest to the seed, within the limits, {name} chosen by a 1D search"
+        reason = ""
+    elif args.sweep is not None:
+        if args.sweep < 1:
+            raise InputError(f"--sweep: the number of values of {name}, an integer >= 1; got {args.sweep}")
+        sw = reference.ik_sweep(robot, pose, args.sweep, q_ref=q, free_name=name)
+        rows = [(v, s, b, g) for v, sols, c, br, sg in zip(sw.free, sw.q, sw.counts, sw.branch, sw.singular)
+                for s, b, g in zip(sols[:c], br[:c], sg[:c])]
+        what = f"{len(sw.free)} values of {name} over its range, the solutions inside the joint limits"
+        reason = "" if rows else f"no solution inside the joint limits at any of the {args.sweep} values of {name}"
+    else:
+        _warn_angles("--free", args.free, deg)
+        value = math.radians(args.free) if deg else float(args.free)
+        sols = reference.ik(robot, pose, q_ref=q, within_limits=args.within_limits, free=value, free_name=name)
+        rows = [(value, s, b, g) for s, b, g in zip(sols, sols.branch, sols.singular)]
+        what = (f"{name} = {_clean(args.free, 6):g} {unit} given, the other six by the "
+                f"{free_joint_route(robot, k)} route" + (", inside the joint limits" if args.within_limits else ""))
+        reason = sols.reason
+    if not rows:
+        return _no_solution(robot, args, head, reason or "no solution")
+    if args.json:
+        _print_json({**head, "count": len(rows), "selection": what, "reason": "",
+                     "solutions": [{"q": _jlist(_joints_out(robot, s, deg)), "free": _jnum(conv(v)),
+                                    "branch": int(b), "singular": bool(g)} for v, s, b, g in rows]})
+        return EXIT_OK
+    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
+    print(f"{len(rows)} solution(s) ({what}):")
+    lead = [("#", "", 3), (name, f"({unit})", 10)]
+    table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s, ("singular" if g else ""))
              for i, (v, s, b, g) in enumerate(rows)]
     for line in _table(robot, table, deg, lead):
         print(line)
@@ -1068,8 +1132,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="seven-joint arms: the free parameter, q7 (panda, fr3) or the arm angle psi "
                         "(iiwa7, iiwa14), rad (--deg: degrees); every solution at that value")
     s.add_argument("--free-joint", type=int, default=None, metavar="J", dest="free_joint",
-                   help="SRS arms (iiwa7, iiwa14): --free V gives joint J's value instead of the arm "
-                        "angle; J = 3 (the joint EAIK and IK-Geo lock)")
+                   help="seven-joint arms: --free V gives joint J's value (J = 1..7; the other six solved "
+                        "as a 6R: by a class where one applies, else the general 6R); with --sweep N, N "
+                        "values of joint J; with --seed Q, joint J chosen for the path")
     s.add_argument("--sweep", type=int, default=None, metavar="N",
                    help="seven-joint arms: N values of the free parameter over its feasible range, the "
                         "solutions inside the joint limits at each")

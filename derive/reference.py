@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from derive.errors import InputError, as_finite_array
-from derive.ik import closed_form, nearclass, redundant, select, srs
+from derive.ik import closed_form, free_joint, nearclass, redundant, select, srs
 from derive.ik.closed_form import IKSolutions
 from derive.ik.redundant import RedundantIKSolutions, Sweep, free_parameter
 from derive.kinematics.fk import (
@@ -67,6 +67,15 @@ def _srs_q3(robot, pose, free, q_ref, within_limits, sort_by) -> IKSolutions:
     return IKSolutions(sols.reshape(-1, 7), sing, reason)
 
 
+def _any_joint(robot, free_name):
+    """K when ``free_name`` is "qK" for a seven-joint arm and the any-joint solver answers it
+    (:mod:`derive.ik.free_joint`; a near-class arm's "q3" stays with its polish), else None."""
+    k = free_joint.parse_joint(free_name)
+    if k is None or robot.dof != 7 or (free_name == "q3" and _near(robot)):
+        return None
+    return k
+
+
 def _no_free(robot) -> InputError:
     return InputError(f"free: {robot.name} has {robot.dof} joint variables and no free parameter; "
                       "free= is for the seven-joint arms of the Franka Panda class (q7) and the "
@@ -88,7 +97,9 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
     taken from it; ``within_limits``: only solutions inside the joint limits, every 2 pi
     winding; ``sort_by``: sorted by distance to this configuration. ``free_name="q3"``: for the
     SRS class, ``free`` is the value of joint 3 instead of the arm angle
-    (:func:`derive.ik.srs.ik_joint`).
+    (:func:`derive.ik.srs.ik_joint`). ``free_name="qK"`` (K = 1..7) for any seven-joint arm:
+    ``free`` is the value of joint K, the other six solved as a 6R by its class or by the
+    general 6R, up to 16 solutions (:func:`derive.ik.free_joint.ik`).
 
     Near-class arms (no exact class, a nominal robot of one within the tolerances of
     :func:`derive.ik.nearclass.nominal`): the nominal's closed form and a Newton polish on the
@@ -96,6 +107,11 @@ def ik(robot, pose, q_ref=None, within_limits: bool = False, sort_by=None, *, fr
     ``.iterations`` per solution and ``.polish``. Seven-joint near-class arms are solved with a
     joint given: joint 3 (``free_name="q3"``) for the SRS class, joint 7 for the Panda class."""
     robot = load_robot(robot)
+    k = _any_joint(robot, free_name)
+    if k is not None:
+        if free is None:
+            raise InputError(f"free: free_name={free_name!r} needs free=, the value of joint {k} (rad)")
+        return free_joint.ik(robot, pose, k, free, q_ref=q_ref, within_limits=within_limits, sort_by=sort_by)
     if _near(robot):
         return nearclass.ik(robot, pose, q_ref, within_limits, sort_by, free=free, free_name=free_name)
     if free_name == "q3" and redundant.redundant_kind(robot) == "srs":
@@ -122,6 +138,11 @@ def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False, free
     Near-class arms: :func:`derive.ik.nearclass.ik_batch` (nominal closed form + Newton polish;
     its result also has residual and iterations per solution)."""
     robot = load_robot(robot)
+    k = _any_joint(robot, free_name)
+    if k is not None:
+        if free is None:
+            raise InputError(f"free: free_name={free_name!r} needs free=, the value of joint {k} (rad)")
+        return free_joint.ik_batch(robot, poses, k, free, q_ref=q_ref, details=details)
     if _near(robot):
         if details:
             raise InputError("details: a near-class arm has no branch ids; "
@@ -146,14 +167,18 @@ def ik_batch(robot, poses, q_ref=None, *, free=None, details: bool = False, free
     return closed_form.ik_batch(robot, poses, q_ref=q_ref)
 
 
-def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True) -> Sweep:
+def ik_sweep(robot, poses, n: int, q_ref=None, within_limits: bool = True, *, free_name=None) -> Sweep:
     """A seven-joint arm's solutions at ``n`` values of its free parameter over the feasible
     range (q7: joint 7's limits; psi: the pose's feasible intervals,
-    :func:`derive.ik.srs.psi_intervals`): :func:`derive.ik.redundant.ik_sweep`."""
+    :func:`derive.ik.srs.psi_intervals`): :func:`derive.ik.redundant.ik_sweep`.
+    ``free_name="qK"``: over joint K's range (:func:`derive.ik.free_joint.ik_sweep`)."""
+    k = _any_joint(load_robot(robot), free_name)
+    if k is not None:
+        return free_joint.ik_sweep(robot, poses, k, n, q_ref=q_ref, within_limits=within_limits)
     return redundant.ik_sweep(robot, poses, n, q_ref=q_ref, within_limits=within_limits)
 
 
-def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
+def nearest(robot, poses, q_seed, tol=None, *, free_name=None) -> select.Nearest:
     """Per pose the closed-form solution nearest to the seed(s) ``q_seed`` ((dof,) or (n, dof)),
     inside the joint limits with every winding, by the largest single-joint move then the
     summed move, as a :class:`derive.ik.select.Nearest` record; ``found`` False where there is
@@ -162,8 +187,13 @@ def nearest(robot, poses, q_seed, tol=None) -> select.Nearest:
     Seven-joint arms: the free parameter and the branch are chosen by the 1D search of
     :func:`derive.ik.redundant.nearest` (from the seed's own q7 or arm angle), which keeps a path
     continuous. 6R arms: every solution (:func:`derive.ik.closed_form.ik_batch` with the seed as
-    reference configuration) and :func:`derive.ik.select.nearest` (branch ids -1)."""
+    reference configuration) and :func:`derive.ik.select.nearest` (branch ids -1).
+    ``free_name="qK"`` (seven joints): joint K is chosen for the path by the same 1D search
+    (:func:`derive.ik.free_joint.nearest`)."""
     robot = load_robot(robot)
+    k = _any_joint(robot, free_name)
+    if k is not None:
+        return free_joint.nearest(robot, poses, k, q_seed, tol=tol)
     if redundant.redundant_kind(robot) is not None:
         return redundant.nearest(robot, poses, q_seed, tol=tol)
     if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))

@@ -143,8 +143,11 @@ def test_cli_ik_with_joint_3_given(capsys):
     pose = reference.fk("iiwa14", q)
     dp, dr = reference.pose_error(reference.fk("iiwa14", sols), np.repeat(pose[None], 8, 0))
     assert max(dp.max(), dr.max()) < 1e-10
-    assert main(["ik", "panda", "--q", *map(str, q), "--free", "0.4", "--free-joint", "3"]) == 2
-    assert "SRS arms" in capsys.readouterr().err
+    # any other arm and joint: derive.ik.free_joint (tests/test_free_joint.py)
+    assert main(["ik", "panda", "--q", *map(str, q), "--free", "-0.4", "--free-joint", "3", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    sols = np.array([s["q"] for s in out["solutions"]])
+    assert out["free_parameter"]["name"] == "q3" and _wrapped(sols - np.array(q)).max(-1).min() < 1e-8
     assert main(["ik", "iiwa14", "--q", *map(str, q), "--sweep", "3", "--free-joint", "3"]) == 2
     assert "give --free V" in capsys.readouterr().err
 

@@ -829,6 +829,21 @@ def near_class_nominal(robot, free: str | None = None):
     return nearclass.nominal(robot)
 
 
+def _any_joint(robot, free) -> bool:
+    """Whether ``free`` is "qK" for a 7R arm and not one of its class's own choices
+    (:data:`derive.ik.redundant.FREE_CHOICES`, kept by the generated kernels) nor a near-class
+    arm's q3 (the polish kernels)."""
+    if free is None or robot.dof != 7:
+        return False
+    from derive.ik.free_joint import parse_joint
+    if parse_joint(free) is None:
+        return False
+    if free in redundant.FREE_CHOICES.get(redundant.redundant_kind(robot), ()):
+        return False
+    # a near-class SRS arm's q3 stays with its nominal's polish kernels
+    return not (free == "q3" and near_class_nominal(robot, free) is not None)
+
+
 def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None) -> Kernels:
     """The generated kernels of ``robot`` (a library name, a description file under any name,
     or a :class:`~derive.model.robot.Robot`) for ``backend`` ("python", "numpy", "c"), loaded
@@ -838,7 +853,9 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     choice (:data:`derive.ik.redundant.FREE_CHOICES`): the SRS class (iiwa) takes the arm angle
     psi by default and joint 3's value with ``free="q3"`` (derived into the user cache on first
     use, about 15 s; ``ik_sweep`` and ``nearest`` search over psi: use the default kernels for
-    them; CasADi: ``functions(robot)["ik_q3"]``).
+    them; CasADi: ``functions(robot)["ik_q3"]``). Any other ``free="qK"`` (K = 1..7) of a
+    7-joint arm: :class:`derive.codegen.free_joint.FreeJointKernels`, the IK with joint K given
+    by :mod:`derive.ik.free_joint` (numpy; "python" and "numpy" backends, no C kernel yet).
 
     ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal` (its exact nominal robot
     and the relation FK(q) ~= B FK_nominal(s q + o) T): the IK runs the nominal's closed form and
@@ -848,6 +865,18 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     if backend not in BACKENDS:
         raise InputError(f"unknown backend {backend!r}; choose one of {BACKENDS}")
     r = load_robot(robot)
+    if nominal is None and _any_joint(r, free):
+        # any joint K of a 7R arm outside its class's own choices: derive.ik.free_joint (numpy)
+        k = int(free[1:])
+        if backend == "c":
+            choices = redundant.FREE_CHOICES.get(redundant.redundant_kind(r), ())
+            raise InputError(f"free: {r.name} has no C kernels with {free!r} as the free parameter; its "
+                             f"choices: {', '.join(choices) or 'none'}; any joint K is solved by "
+                             f"derive.kernels({r.name!r}, 'numpy', free='q{k}') (derive.ik.free_joint; "
+                             "no C kernel for it yet)")
+        from derive.codegen.free_joint import free_joint_kernels
+        return memo("kernels-free-joint", (r.id, r.limits_id, backend, k),
+                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend)))
     if nominal is None:
         nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)

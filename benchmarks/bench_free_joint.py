@@ -1,0 +1,87 @@
+"""Seven-joint arms with joint K given (derive.ik.free_joint): per arm and K, on configurations
+drawn within the joint limits with the generating value of joint K given: the route taken,
+the solution counts, how often the generating configuration is found, the largest FK error
+(4x4 matrix FK, m / entry), the degenerate flags, and the time per pose (numpy, batched).
+With ``--ssik M``: on the first M poses of xarm7 and gen3, ssik's joint-lock solver
+(ssik.solvers.jointlock.seven_r, same held value) and whether its solutions are all ours.
+
+    .venv/bin/python benchmarks/bench_free_joint.py [--poses N] [--arms a,b] [--ssik M] [--seed S]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import math
+import time
+
+import numpy as np
+
+import derive
+from derive import reference
+from derive.errors import InputError
+from derive.ik import free_joint
+
+SSIK = {"xarm7": "ssik.prebuilt.ufactory.xarm7_ik", "gen3": "ssik.prebuilt.kinova.gen3_ik"}
+
+
+def _wrapped(d):
+    return np.abs((np.asarray(d) + math.pi) % (2 * math.pi) - math.pi)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--poses", type=int, default=2000)
+    ap.add_argument("--arms", default="xarm7,gen3,iiwa14,panda,fr3")
+    ap.add_argument("--ssik", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    print("| arm | K | route | found | largest FK error | counts (k: share) | degenerate | ms / pose | ssik |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for name in args.arms.split(","):
+        robot = derive.load_robot(name)
+        lim = np.where(np.isfinite(robot.limits), robot.limits, np.array([-math.pi, math.pi]))
+        rng = np.random.default_rng(args.seed)
+        q = rng.uniform(np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi), (args.poses, 7))
+        poses = reference.fk(robot, q)
+        target = reference.fk_matrix(robot, q)
+        for k in range(1, 8):
+            try:
+                how = free_joint.route(robot, k)
+            except InputError:
+                print(f"| {name} | {k} | refused | | | | | | |")
+                continue
+            free_joint.solve(robot, poses[:2], k, q[:2, k - 1])          # plan, caches
+            t = time.perf_counter()
+            r = free_joint.solve(robot, poses, k, q[:, k - 1])
+            dt = (time.perf_counter() - t) / args.poses * 1e3
+            valid = np.arange(r.q.shape[1])[None] < r.counts[:, None]
+            rows = np.nonzero(valid)[0]
+            err = float(np.abs(reference.fk_matrix(robot, r.q[valid]) - target[rows]).max()) if len(rows) else 0.0
+            gen = np.nanmin(np.where(valid, _wrapped(r.q - q[:, None]).max(-1), np.inf), axis=1)
+            found = int(np.sum(gen < 1e-6))
+            cnt = np.bincount(r.counts)
+            dist = ", ".join(f"{c}: {100 * v / args.poses:.1f} %" for c, v in enumerate(cnt) if v)
+            extra = ""
+            if args.ssik and name in SSIK:
+                from ssik.solvers.jointlock import seven_r
+                arm = importlib.import_module(SSIK[name])
+                theirs = missing = 0
+                t0 = time.perf_counter()
+                for i in range(min(args.ssik, args.poses)):
+                    sols, _ = seven_r.solve(arm._KB, target[i], lock_samples=[q[i, k - 1]], lock_idx=k - 1,
+                                            allow_refinement=True)
+                    for s in sols:
+                        x = np.asarray(s.q, dtype=float)
+                        if np.abs(arm.fk(x) - target[i]).max() > 1e-8:
+                            continue
+                        theirs += 1
+                        missing += int(_wrapped(r.q[i, :r.counts[i]] - x).max(-1).min() >= 1e-6)
+                ms = (time.perf_counter() - t0) / min(args.ssik, args.poses) * 1e3
+                extra = f"{theirs} solutions, {missing} not ours, {ms:.0f} ms / pose"
+            print(f"| {name} | {k} | {how} | {found}/{args.poses} | {err:.1e} | {dist} | "
+                  f"{int(r.degenerate.sum())} | {dt:.2f} | {extra} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
