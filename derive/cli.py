@@ -608,21 +608,7 @@ def _ik_redundant(robot, args, pose, q, head) -> int:
         what = (f"closed form at {name} = {_clean(args.free, 6):g} {unit}"
                 + (", inside the joint limits, every 2 pi winding" if args.within_limits else ""))
         reason = sols.reason
-    if not rows:
-        return _no_solution(robot, args, head, reason or "no solution")
-    if args.json:
-        _print_json({**head, "count": len(rows), "selection": what, "reason": "",
-                     "solutions": [{"q": _jlist(_joints_out(robot, s, deg)), "free": _jnum(conv(v)),
-                                    "branch": int(b), "singular": bool(g)} for v, s, b, g in rows]})
-        return EXIT_OK
-    print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
-    print(f"{len(rows)} solution(s) ({what}):")
-    lead = [("#", "", 3), (name, f"({unit})", 10)]
-    table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s, f"branch {int(b)}" + (", singular" if g else ""))
-             for i, (v, s, b, g) in enumerate(rows)]
-    for line in _table(robot, table, deg, lead):
-        print(line)
-    return EXIT_OK
+    return _free_rows(robot, args, head, pose, q, rows, what, reason, name, branches=True)
 
 
 def _ik_free_joint(robot, args, pose, q, head) -> int:
@@ -668,6 +654,16 @@ def _ik_free_joint(robot, args, pose, q, head) -> int:
         what = (f"{name} = {_clean(args.free, 6):g} {unit} given, the other six by the "
                 f"{free_joint_route(robot, k)} route" + (", inside the joint limits" if args.within_limits else ""))
         reason = sols.reason
+    return _free_rows(robot, args, head, pose, q, rows, what, reason, name, branches=False)
+
+
+def _free_rows(robot, args, head, pose, q, rows, what: str, reason, name: str, branches: bool) -> int:
+    """Print the solutions of a seven-joint arm's ik at given values of its free parameter or
+    joint ``name``: ``rows`` of (value, q, branch, singular); JSON with --json. ``branches``:
+    the table names each solution's branch (the general route of a given joint has none)."""
+    deg = args.deg
+    unit = _angle_unit(deg)
+    conv = np.degrees if deg else (lambda x: x)
     if not rows:
         return _no_solution(robot, args, head, reason or "no solution")
     if args.json:
@@ -678,7 +674,8 @@ def _ik_free_joint(robot, args, pose, q, head) -> int:
     print(f"{robot.name}: target {_target_text(robot, pose, q, deg)}")
     print(f"{len(rows)} solution(s) ({what}):")
     lead = [("#", "", 3), (name, f"({unit})", 10)]
-    table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s, ("singular" if g else ""))
+    table = [([str(i + 1), f"{_clean(conv(v), 5):.5f}"], s,
+              (f"branch {int(b)}" + (", singular" if g else "")) if branches else ("singular" if g else ""))
              for i, (v, s, b, g) in enumerate(rows)]
     for line in _table(robot, table, deg, lead):
         print(line)

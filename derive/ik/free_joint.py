@@ -45,7 +45,7 @@ import numpy as np
 
 from derive.algebra.angles import wrap_angle
 from derive.cache import memo
-from derive.errors import DeriveError, InputError, as_finite_array
+from derive.errors import DeriveError, InputError
 from derive.ik import finish, general6r as g6, panda, redundant, select, srs
 from derive.ik.closed_form import IKSolutions
 from derive.ik.tolerances import G6_ACCEPT, G6_NEWTON_MAX, G6_RANK_TOL, G6_SINGULAR, TIE
@@ -318,16 +318,7 @@ def _six(pl: Plan, d, target):
         return ip, np.zeros((0, 6)), degen
     x3 = lam[ip, ie].real
     v = g6._monomial_vectors(mk, ip, x3)
-    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
-    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
-    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
-    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
-    vals = {order[0]: d3[ip] + 2 * np.arctan(x3),
-            order[1]: pl.offsets[0] + 2 * np.arctan2(num4, den4),
-            order[2]: pl.offsets[1] + 2 * np.arctan2(num5, den5)}
-    qt = [vals[i] for i in range(3)]
-    tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
-    ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
+    qt, ym = g6.triple_angles(v, d3[ip] + 2 * np.arctan(x3), pl.offsets, order)
     rhs = np.einsum("mek,mk->me", yy[ip], ym)
     yv = np.einsum("mek,me->mk", qq[ip][:, :, :8], rhs)
     r8 = rr[ip, :8]
@@ -680,16 +671,8 @@ def nearest(robot, poses, joint: int, q_seed, tol=None, solver=None) -> select.N
     scalars. ``solver`` as in :func:`ik_sweep`."""
     robot = load_robot(robot)
     route(robot, joint)
-    if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
-                                and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
-        raise InputError(f"tol: expected a finite number >= 0 (rad), got {tol!r}")
-    P, single = as_pose_batch(poses)
-    seeds_in = as_finite_array(q_seed, "q_seed", last_dim=7)
-    if seeds_in.ndim > 2 or (seeds_in.ndim == 2 and seeds_in.shape[0] not in (1, len(P))):
-        raise InputError(f"q_seed: expected shape (7,) or ({len(P)}, 7), got {seeds_in.shape}")
-    single = single and seeds_in.ndim == 1
+    P, seeds, single = redundant.nearest_inputs(poses, q_seed, tol)
     n = len(P)
-    seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
     prob = _Problem(robot, joint, P, seeds, solver)
     lo, hi = (float(x) for x in robot.limits[joint - 1])
     flo, fhi = (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (-math.pi, math.pi)

@@ -1129,6 +1129,24 @@ def _cut_front(pl: Plan, target):
     return x, qq, rr, degen, yy, order, _twelve(sig)
 
 
+
+def triple_angles(v, q_eig, offsets, order):
+    """The cut's triple of joints from one eigenpair per candidate: ``q_eig`` the eigen-variable's
+    angle, the other two from the monomial vector ``v`` (m, 4, 3) as ratios of consecutive
+    half-angle tangent powers (least squares over the rows), each shifted by its random offset;
+    ``order`` places them in the triple. Returns the three angle arrays in the triple's order and
+    the 27 monomials (s, c, 1) x (s, c, 1) x (s, c, 1) of them (m, 27)."""
+    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
+    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
+    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
+    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
+    vals = {order[0]: q_eig,
+            order[1]: offsets[0] + 2 * np.arctan2(num4, den4),
+            order[2]: offsets[1] + 2 * np.arctan2(num5, den5)}
+    qt = [vals[i] for i in range(3)]
+    tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
+    return qt, np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
+
 def _solve_chunk_cut(robot, pl: Plan, poses):
     n = poses.shape[0]
     target = _to_matrix(poses)
@@ -1142,16 +1160,7 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     x3 = lam[ip, ie].real
     v = _monomial_vectors(mk, ip, x3)
     ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
-    num4 = np.sum(v[:, 1:, :] * v[:, :-1, :], axis=(1, 2))
-    den4 = np.sum(v[:, :-1, :] ** 2, axis=(1, 2))
-    num5 = np.sum(v[:, :, 1:] * v[:, :, :-1], axis=(1, 2))
-    den5 = np.sum(v[:, :, :-1] ** 2, axis=(1, 2))
-    vals = {order[0]: d3[ip] + 2 * np.arctan(x3),
-            order[1]: pl.offsets[0] + 2 * np.arctan2(num4, den4),
-            order[2]: pl.offsets[1] + 2 * np.arctan2(num5, den5)}
-    qt = [vals[i] for i in range(3)]                         # the triple's joints in order
-    tr = [np.stack([np.sin(t), np.cos(t), np.ones_like(t)], 1) for t in qt]
-    ym = np.einsum("ma,mb,mc->mabc", *tr).reshape(-1, 27)
+    qt, ym = triple_angles(v, d3[ip] + 2 * np.arctan(x3), pl.offsets, order)
     rhs = np.einsum("mek,mk->me", yy[ip], ym)
     yv = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
     r8 = rr[ip, :8]

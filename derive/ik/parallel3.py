@@ -255,6 +255,18 @@ def _first_if_missing(sol) -> np.ndarray:
     return np.where(sol.valid, th, th[..., :1])
 
 
+
+def _q6_theta(h, hb, rt, q5, x, free6):
+    """Steps 3 and 4 of both layouts, given q5 and ``rt`` = R_1^T R_06: q6 by subproblem 1
+    (R(-h6, q6) R_5^T h_2 = rt^T h_2; ``free6`` where R_5^T h_2 is along h_6, the wrist
+    singularity), then theta = q2 + q3 + q4 by subproblem 1 on ``x`` (a vector normal to the
+    parallel axes). Returns q6, theta and the wrist-singular flags."""
+    u = rot(hb[4], -q5, hb[1])                                           # R_5^T h_2
+    sing6 = np.linalg.norm(np.cross(h[5], u), axis=-1) < WRIST_SINGULAR
+    q6 = np.where(sing6, free6, sp1(-hb[5], u, np.einsum("nji,j->ni", rt, h[1])).theta[:, 0, 0])
+    y = np.einsum("nij,nj->ni", rt, rot(hb[5], -q6, rot(hb[4], -q5, x)))
+    return q6, sp1(hb[1], x, y).theta[:, 0, 0], sing6
+
 def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -298,13 +310,8 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
         ok5 = ok5 | geo.ortho_wrist
         for i5 in range(2):
             q5 = q5s[:, i5]
-            u = rot(hb[4], -q5, hb[1])                                   # R_5^T h_2
-            # 3. q6 (subproblem 1), free at the wrist singularity
-            sing6 = np.linalg.norm(np.cross(h[5], u), axis=-1) < WRIST_SINGULAR
-            q6 = np.where(sing6, free6, sp1(-hb[5], u, np.einsum("nji,j->ni", rt, h[1])).theta[:, 0, 0])
-            # 4. theta = q2 + q3 + q4 (subproblem 1 on x)
-            y = np.einsum("nij,nj->ni", rt, rot(hb[5], -q6, rot(hb[4], -q5, x)))
-            theta = sp1(hb[1], x, y).theta[:, 0, 0]
+            # 3. q6 and 4. theta = q2 + q3 + q4 (subproblems 1)
+            q6, theta, sing6 = _q6_theta(h, hb, rt, q5, x, free6)
             # 5. q3 (subproblem 3)
             v = (np.einsum("nji,nj->ni", _rotm(hb[0], q1), p16) - p[1]
                  - rot(hb[1], theta, np.broadcast_to(p[4], (n, 3))))
@@ -383,13 +390,8 @@ def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None
         q5 = np.where(ok6, s6.theta[:, i6, 1], 0.0)
         r1 = _rotm(hb[0], q1)
         rt = np.einsum("nji,njk->nik", r1, r06)                          # R_1^T R_06
-        u = rot(hb[4], -q5, hb[1])                                       # R_5^T h_2
-        # 3. q6 (subproblem 1), free where R_5^T h_2 is along h_6
-        sing6 = np.linalg.norm(np.cross(h[5], u), axis=-1) < WRIST_SINGULAR
-        q6 = np.where(sing6, free6, sp1(-hb[5], u, np.einsum("nji,j->ni", rt, h[1])).theta[:, 0, 0])
-        # 4. theta = q2 + q3 + q4 (subproblem 1 on x)
-        y = np.einsum("nij,nj->ni", rt, rot(hb[5], -q6, rot(hb[4], -q5, x)))
-        theta = sp1(hb[1], x, y).theta[:, 0, 0]
+        # 3. q6 and 4. theta = q2 + q3 + q4 (subproblems 1)
+        q6, theta, sing6 = _q6_theta(h, hb, rt, q5, x, free6)
         # 5. q3 (subproblem 3): v = R_2 (p_2 + R_3 p_3)
         v = (np.einsum("nji,nj->ni", r1, p16) - p[1]
              - rot(hb[1], theta, np.broadcast_to(p[4], (n, 3)) + rot(hb[4], q5, np.broadcast_to(p[5], (n, 3)))))

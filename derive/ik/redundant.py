@@ -487,6 +487,21 @@ def _refine(prob, kind, rows, a, b, br, f_best, k_best, t_best, flo, fhi, key):
 NEAREST_CHUNK = 512
 
 
+
+def nearest_inputs(poses, q_seed, tol):
+    """The checked inputs of a seven-joint nearest search (this module's and
+    :func:`derive.ik.free_joint.nearest`): poses (n, 8), seeds (n, 7) and whether one pose and
+    one seed were given; InputError naming a bad ``tol`` or ``q_seed``."""
+    if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
+                                and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol: expected a finite number >= 0 (rad), got {tol!r}")
+    P, single = as_pose_batch(poses)
+    seeds_in = as_finite_array(q_seed, "q_seed", last_dim=7)
+    if seeds_in.ndim > 2 or (seeds_in.ndim == 2 and seeds_in.shape[0] not in (1, len(P))):
+        raise InputError(f"q_seed: expected shape (7,) or ({len(P)}, 7), got {seeds_in.shape}")
+    seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (len(P), 7)).astype(float)
+    return P, seeds, single and seeds_in.ndim == 1
+
 def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
     branch chosen by the 1D search of the module docstring: on the branch of the least largest
@@ -503,16 +518,8 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     solved again by :func:`solve` with the seed as reference."""
     robot = load_robot(robot)
     kind = _kind(robot)
-    if tol is not None and not (isinstance(tol, (int, float, np.floating, np.integer))
-                                and not isinstance(tol, bool) and math.isfinite(tol) and tol >= 0):
-        raise InputError(f"tol: expected a finite number >= 0 (rad), got {tol!r}")
-    P, single = as_pose_batch(poses)
-    seeds_in = as_finite_array(q_seed, "q_seed", last_dim=7)
-    if seeds_in.ndim > 2 or (seeds_in.ndim == 2 and seeds_in.shape[0] not in (1, len(P))):
-        raise InputError(f"q_seed: expected shape (7,) or ({len(P)}, 7), got {seeds_in.shape}")
-    single = single and seeds_in.ndim == 1
+    P, seeds, single = nearest_inputs(poses, q_seed, tol)
     n = len(P)
-    seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (n, 7)).astype(float)
     if n > NEAREST_CHUNK:
         # each pose's search is its own: in chunks, so the scan's temporaries (about 270 KB per
         # pose) stay bounded
