@@ -271,8 +271,12 @@ def _robot_row(name: str) -> dict:
     """Class and availability of one library robot (no search for related robots: fast)."""
     r = load_robot(name)
     c = geometric_classify(r)
+    p3 = None if c.closed_form or spherical_class(r) is not None else parallel3_class(r)
+    # the three-parallel layout with axes 5 and 6 apart: the numpy closed form (subproblem 6), and
+    # kernels of the general 6R elimination (no IK program, so no CasADi ik)
+    sp6 = p3 is not None and p3.layout != "intersecting"
     closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else
-                                         "three parallel" if parallel3_class(r) is not None else "")
+                                         ("three parallel (sp6)" if sp6 else "three parallel") if p3 else "")
     kind = redundant_kind(r) if not closed else None
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
     # a near-class arm (only where the description has near misses or names a nominal: fast)
@@ -285,7 +289,7 @@ def _robot_row(name: str) -> dict:
     # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
     # run the nominal's closed form and polish (derive.codegen.polish), a seven-joint one's with
     # joint 3 given; any other 6R arm's kernels the general 6R elimination (up to 16 solutions)
-    general = not closed and not kind and not near and _general_6r(r)
+    general = sp6 or (not closed and not kind and not near and _general_6r(r))
     has_ik = bool(closed or kind or (near and r.dof == 6) or general)
     given = " (q3 given)" if near and r.dof == 7 else ""
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),

@@ -484,7 +484,9 @@ def _solve_related(robot, poses, q_ref):
         raise DeriveError(f"{robot.name}: no closed-form IK: closed forms are implemented for the "
                           "UR family, the spherical-wrist (OPW) class, the three-parallel class "
                           f"and the general 6R, and this chain is in none ({str(first).split(': ', 1)[-1]}; "
-                          f"{spherical_reason(robot).split(': ', 1)[-1]}; {general}); use derive.refine")
+                          f"{spherical_reason(robot).split(': ', 1)[-1]}; {general}); "
+                          + ("give one joint (derive.ik.free_joint; dq-derive ik --free-joint J --free V) or "
+                             if robot.dof == 7 else "") + "use derive.refine")
     lib = load_robot(rel.other)
     q, counts, singular, reasons = solve(lib, ur_geometry(lib), rel.into_other(poses),
                                          None if q_ref is None else q_ref[:, 5] * rel.signs[5])

@@ -113,7 +113,7 @@ def parallel3_program(robot, geo: P3Geometry) -> IKProgram:
     if geo.layout != "intersecting":
         raise DeriveError(f"{robot.name}: no IK program for the three-parallel layout with axes 5 and 6 "
                           "not meeting (subproblem 6) yet: derive.reference.ik solves it "
-                          "(derive.ik.parallel3.solve_batch_sp6); the kernels have FK only")
+                          "(derive.ik.parallel3.solve_batch_sp6), and the kernels run the general 6R elimination")
     h = [_vec(v) for v in geo.h]
     p = [_vec(v) for v in geo.p]
     r6t = [_vec(row) for row in geo.r6t]

@@ -480,17 +480,19 @@ def _notes(robot, chain, cls, nominal_cls, closed_form, why_not, pieper, structu
         notes.append(f"Pieper's criterion holds ({triples}), so a closed-form IK exists, but "
                      "dq-derive implements no special class for this structure: the numpy "
                      "reference (derive.reference.ik) solves a 6R arm by the general 6R elimination "
-                     "(derive.ik.general6r, every solution; no generated kernels for it yet), "
+                     "(derive.ik.general6r, every solution, and its generated kernels: up to 16 solutions), "
                      "derive.refine numerically")
     elif six_r:
         notes.append("no three consecutive axes are parallel or meet in one point (Pieper's "
                      "criterion fails): no special class, up to 16 solutions; the numpy reference "
                      "(derive.reference.ik) solves a 6R arm by the general 6R elimination "
-                     "(derive.ik.general6r, every solution; no generated kernels for it yet), "
+                     "(derive.ik.general6r, every solution, and its generated kernels: up to 16 solutions), "
                      "derive.refine numerically from several starts")
     elif chain.n == 7 and all(t == "revolute" for t in chain.types):
         notes.append("7R, redundant: no closed form in dq-derive for this chain unless it is of "
-                     "the Franka Panda class (q7 given, derive.ik.panda), which derive.classify checks")
+                     "the Franka Panda class (q7 given, derive.ik.panda), which derive.classify checks; "
+                     "with any one joint given the other six are solved by their class or the general "
+                     "6R elimination (derive.ik.free_joint; dq-derive ik --free-joint J --free V)")
     else:
         notes.append("no closed form in dq-derive for this chain")
     if nominal_cls == cls:
