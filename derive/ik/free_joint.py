@@ -717,17 +717,7 @@ def nearest(robot, poses, joint: int, q_seed, tol=None, solver=None) -> select.N
         ok = np.isfinite(mx)
         q[at[ok]], mx_out[at[ok]], tot_out[at[ok]] = w[ok], mx[ok], tot[ok]
         br_out[at[ok]], sg_out[at[ok]] = br[ok], sg[ok]
-    found = np.isfinite(mx_out)
-    if tol is not None:
-        found &= mx_out <= tol + TIE
-    res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
-                         max_move=np.where(found, mx_out, np.nan),
-                         total_move=np.where(found, tot_out, np.nan),
-                         branch=np.where(found, br_out, -1), singular=found & sg_out)
-    if single:
-        return select.Nearest(*(getattr(res, k)[0] for k in ("q", "found", "max_move", "total_move",
-                                                           "branch", "singular")))
-    return res
+    return redundant.nearest_record(q, mx_out, tot_out, br_out, sg_out, tol, single, slack=TIE)
 
 
 __all__ = ["chain7", "locked_chain", "parse_joint", "route", "plan", "solve", "ik_batch", "ik",

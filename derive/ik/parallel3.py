@@ -267,6 +267,24 @@ def _q6_theta(h, hb, rt, q5, x, free6):
     y = np.einsum("nij,nj->ni", rt, rot(hb[5], -q6, rot(hb[4], -q5, x)))
     return q6, sp1(hb[1], x, y).theta[:, 0, 0], sing6
 
+
+def _q3_q2_q4(hb, p, v, theta):
+    """Steps 5 and 6 of both layouts: q3 by subproblem 3 (||R(h_2, q3) p_3 + p_2|| = ||v||, two
+    roots, the first repeated where one is missing), then per root q2 by subproblem 1
+    (R(h_2, q2)(p_2 + R(h_2, q3) p_3) = v) and q4 = theta - q2 - q3. Returns whether q3 exists
+    (n,) and the two (q2, q3, q4)."""
+    n = len(v)
+    s3 = sp3(hb[1], np.broadcast_to(p[3], (n, 3)), np.broadcast_to(-p[2], (n, 3)),
+             np.linalg.norm(v, axis=-1))
+    q3s = _first_if_missing(s3)
+    arms = []
+    for i3 in range(2):
+        q3 = q3s[:, i3]
+        w = p[2] + rot(hb[1], q3, np.broadcast_to(p[3], (n, 3)))
+        q2 = sp1(hb[1], w, v).theta[:, 0, 0]
+        arms.append((q2, q3, theta - q2 - q3))
+    return _ok(s3), arms
+
 def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -315,16 +333,9 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
             # 5. q3 (subproblem 3)
             v = (np.einsum("nji,nj->ni", _rotm(hb[0], q1), p16) - p[1]
                  - rot(hb[1], theta, np.broadcast_to(p[4], (n, 3))))
-            s3 = sp3(hb[1], np.broadcast_to(p[3], (n, 3)), np.broadcast_to(-p[2], (n, 3)),
-                     np.linalg.norm(v, axis=-1))
-            ok3 = _ok(s3)
-            q3s = _first_if_missing(s3)
-            for i3 in range(2):
-                q3 = q3s[:, i3]
-                # 6. q2 (subproblem 1), q4 by subtraction
-                w = p[2] + rot(hb[1], q3, np.broadcast_to(p[3], (n, 3)))
-                q2 = sp1(hb[1], w, v).theta[:, 0, 0]
-                q4 = theta - q2 - q3
+            # 6. q2 (subproblem 1), q4 by subtraction, per root of q3
+            ok3, arms = _q3_q2_q4(hb, p, v, theta)
+            for i3, (q2, q3, q4) in enumerate(arms):
                 k = 4 * i1 + 2 * i5 + i3
                 theta_k = np.stack([q1, q2, q3, q4, q5, q6], axis=-1)
                 out[:, k, list(geo.order)] = wrap_angle(theta_k)
@@ -395,16 +406,9 @@ def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None
         # 5. q3 (subproblem 3): v = R_2 (p_2 + R_3 p_3)
         v = (np.einsum("nji,nj->ni", r1, p16) - p[1]
              - rot(hb[1], theta, np.broadcast_to(p[4], (n, 3)) + rot(hb[4], q5, np.broadcast_to(p[5], (n, 3)))))
-        s3 = sp3(hb[1], np.broadcast_to(p[3], (n, 3)), np.broadcast_to(-p[2], (n, 3)),
-                 np.linalg.norm(v, axis=-1))
-        ok3 = _ok(s3)
-        q3s = _first_if_missing(s3)
-        for i3 in range(2):
-            q3 = q3s[:, i3]
-            # 6. q2 (subproblem 1), q4 by subtraction
-            w = p[2] + rot(hb[1], q3, np.broadcast_to(p[3], (n, 3)))
-            q2 = sp1(hb[1], w, v).theta[:, 0, 0]
-            q4 = theta - q2 - q3
+        # 6. q2 (subproblem 1), q4 by subtraction, per root of q3
+        ok3, arms = _q3_q2_q4(hb, p, v, theta)
+        for i3, (q2, q3, q4) in enumerate(arms):
             k = 2 * i6 + i3
             theta_k = np.stack([q1, q2, q3, q4, q5, q6], axis=-1)
             out[:, k, list(geo.order)] = np.where(ok6[:, None], wrap_angle(theta_k), np.nan)

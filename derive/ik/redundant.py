@@ -502,6 +502,23 @@ def nearest_inputs(poses, q_seed, tol):
     seeds = np.broadcast_to(seeds_in.reshape(-1, 7), (len(P), 7)).astype(float)
     return P, seeds, single and seeds_in.ndim == 1
 
+
+def nearest_record(q, mx, tot, br, sg, tol, single: bool, slack: float = 0.0):
+    """The :class:`derive.ik.select.Nearest` record of a seven-joint nearest search (this
+    module's and :func:`derive.ik.free_joint.nearest`): ``found`` where a largest move ``mx`` is
+    finite and within ``tol`` + ``slack`` (no bound for tol None), NaN and branch -1 elsewhere;
+    scalars for one pose and one seed."""
+    found = np.isfinite(mx)
+    if tol is not None:
+        found &= mx <= tol + slack
+    res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
+                         max_move=np.where(found, mx, np.nan), total_move=np.where(found, tot, np.nan),
+                         branch=np.where(found, br, -1), singular=found & sg)
+    if single:
+        return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
+                                                           "branch", "singular")))
+    return res
+
 def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
     """Per pose the solution nearest to the seed along a path, with the free parameter and the
     branch chosen by the 1D search of the module docstring: on the branch of the least largest
@@ -599,14 +616,4 @@ def nearest(robot, poses, q_seed, tol=None, solver=None) -> select.Nearest:
             q[redo] = best[kk, choose]
             mx_out[redo], tot_out[redo] = mx[kk, choose], tot[kk, choose]
             br_out[redo], sg_out[redo] = r.branch[kk, choose], r.singular[kk, choose]
-    found = np.isfinite(mx_out)
-    if tol is not None:
-        found &= mx_out <= tol
-    res = select.Nearest(q=np.where(found[:, None], q, np.nan), found=found,
-                         max_move=np.where(found, mx_out, np.nan),
-                         total_move=np.where(found, tot_out, np.nan),
-                         branch=np.where(found, br_out, -1), singular=found & sg_out)
-    if single:
-        return select.Nearest(*(getattr(res, f)[0] for f in ("q", "found", "max_move", "total_move",
-                                                           "branch", "singular")))
-    return res
+    return nearest_record(q, mx_out, tot_out, br_out, sg_out, tol, single)
