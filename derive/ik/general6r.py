@@ -59,7 +59,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
-from derive.cache import find_artifact, memo, step, store_artifacts, task
+from derive.cache import find_artifact, memo, peek, step, store_artifacts, task
 from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
@@ -344,6 +344,8 @@ def _plan(robot, progress):
     found = find_artifact(robot.id, "general6r")
     if found is not None:
         data = json.loads(found.read_text())
+        if data.get("format") == FORMAT and data.get("degenerate"):
+            raise DeriveError(data["degenerate"])
         if data.get("format") == FORMAT:
             return _plan_from(robot, c, scale, data)
     with task(f"general 6R {robot.name}", progress=progress):
@@ -373,26 +375,70 @@ def _plan(robot, progress):
                     break
                 why.append(f"cut at joint {e}: {info}")
         if data is None:
-            raise DeriveError(f"{robot.name}: the general 6R elimination degenerates in both directions "
-                              f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
+            # kept too (status(), robots and classify read it without deriving)
+            message = (f"{robot.name}: the general 6R elimination degenerates in both directions "
+                       f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
+            store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(
+                {"format": FORMAT, "degenerate": message, "notes": why}))}, {"robot": robot.name})
+            raise DeriveError(message)
         store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(data))},
                         {"robot": robot.name})
     return _plan_from(robot, c, scale, data)
 
 
+def kernels_cover(rank_q: int) -> bool:
+    """Whether the emitted general 6R kernels (:mod:`derive.codegen.general6r`) cover a plan whose
+    Q has generic rank ``rank_q``: they bake in the rank-8 elimination (and the loop cut's)."""
+    return int(rank_q) == 8
+
+
+def _decision(robot):
+    """The derivation's decision for a robot without deriving: this process's plan (or its
+    DeriveError), else the stored artifact's JSON; None when neither exists yet."""
+    out = peek("general6r-plan", robot.id)
+    if isinstance(out, Plan):
+        return {"rank_q": out.rank_q, "cut": out.cut, "reverse": out.reverse, "notes": list(out.notes)}
+    if isinstance(out, DeriveError):
+        return {"degenerate": str(out)}
+    found = find_artifact(robot.id, "general6r")
+    data = json.loads(found.read_text()) if found is not None else None
+    return data if data is not None and data.get("format") == FORMAT else None
+
+
+def status(robot) -> str:
+    """What the general 6R derivation decided for a robot of no special class, read from the
+    cache without deriving (:func:`plan` derives and stores it; a degenerate arm's DeriveError is
+    stored too): "kernels" (the numpy reference and the generated kernels solve it), "reference"
+    (only the numpy reference: Q of rank < 8, :func:`kernels_cover`), "degenerate" (the
+    elimination degenerates in every direction and cut: neither does) or "unchecked" (not
+    derived yet)."""
+    data = _decision(load_robot(robot))
+    if data is None:
+        return "unchecked"
+    if data.get("degenerate"):
+        return "degenerate"
+    return "kernels" if kernels_cover(data["rank_q"]) else "reference"
+
+
 def describe(robot) -> str:
     """Why and how the general 6R elimination solves a robot of no special class, for classify:
     the formulation its cached derivation chose (forward or reversed chain, or the loop cut and
-    why), without deriving (a robot not derived yet says so)."""
+    why), or why it degenerates, without deriving (a robot not derived yet says so)."""
     robot = load_robot(robot)
+    data = _decision(robot)
+    if data is not None and data.get("degenerate"):
+        return ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
+                "applies, and the general 6R elimination (derive.ik.general6r) does not solve it: "
+                + data["degenerate"].split(": ", 1)[-1] + "; no IK kernels (FK only), use derive.refine")
     head = ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
             "applies, so derive.reference.ik solves it by the general 6R elimination "
             "(derive.ik.general6r: Raghavan-Roth's 14 equations derived with sympy for this arm, "
             "solved per pose as Manocha-Canny's eigenproblem in numpy; every solution, up to 16)")
-    found = find_artifact(robot.id, "general6r")
-    data = json.loads(found.read_text()) if found is not None else None
-    if data is None or data.get("format") != FORMAT:
-        return head + "; derived on first use (a few seconds, then cached)"
+    if data is None:
+        return head + ("; derived on first use (a few seconds, then cached): whether its elimination "
+                       "is regular (then it has IK kernels too) is not checked yet")
+    if not kernels_cover(data["rank_q"]):
+        head += f"; Q has generic rank {data['rank_q']} < 8, so it has no generated IK kernels (FK only)"
     if data.get("cut"):
         how = (f"its standard elimination degenerates ({'; '.join(data['notes'][:-1])}), so the loop is "
                f"{data['notes'][-1]}")
