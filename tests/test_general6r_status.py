@@ -101,6 +101,8 @@ def test_library_general_arms_label_is_the_kernels_decision(name):
     robot = derive.load_robot(name)
     pl = general6r.plan(robot, progress=False)                     # derived (or cached) here
     assert general6r.status(robot) == "kernels"
+    clear_memory(["general6r-plan"])                               # as a fresh process: the artifact
+    assert general6r.status(robot) == "kernels"
     row = cli._robot_row(name)
     assert row["ik"] == "general 6R elimination"
     assert row["kernels"].startswith("FK+IK, ") and "unchecked" not in row["kernels"]
