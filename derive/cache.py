@@ -28,6 +28,7 @@ one, with a warning (:func:`writable_root`); a finished derivation is stored the
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
 import os
@@ -472,9 +473,18 @@ def task(label: str, progress: bool = True):
 # budget, and the handler runs check(), which raises DeriveError in the interrupted frame. sympy
 # is pure Python, so the signal is handled between two bytecodes of the call. Only the main
 # thread receives signals; in another thread (or without SIGALRM) the checks in the loops remain.
+# The signal can land in code where the interpreter drops an exception (a gc callback such as
+# hypothesis's, a __del__, a weakref finalizer: "Exception ignored"); there the handler only
+# marks the tasks stopped and looks again every _ALARM_RETRY s, so the error is raised in the
+# derivation's own code as soon as it runs again.
 _ALARM_GRACE = 0.05
 #: A budget this long (s, about 30 years; inf included) arms no timer: setitimer cannot hold it
 _ALARM_MAX = 1e9
+
+
+#: While the interrupted code is one whose exceptions the interpreter drops (:func:`_dropping`),
+#: the handler looks again this often (s) until the derivation's own code runs
+_ALARM_RETRY = 0.001
 
 
 def _on_alarm(signum, frame):
@@ -483,11 +493,33 @@ def _on_alarm(signum, frame):
     except BudgetError:
         for t in _TASKS:
             t["stopped"] = True
+        if _dropping(frame):
+            # raised here, the error would be printed and dropped ("Exception ignored in ...")
+            # and the derivation would go on: raise it once that code has returned
+            signal.setitimer(signal.ITIMER_REAL, _ALARM_RETRY)
+            return
         # fire again if a caller swallows the error and goes on deriving
         signal.setitimer(signal.ITIMER_REAL, 10 * _ALARM_GRACE)
         raise
     # not yet over budget by the perf_counter clock (timer granularity): look again shortly
     signal.setitimer(signal.ITIMER_REAL, _ALARM_GRACE)
+
+
+def _dropping(frame) -> bool:
+    """Whether the interrupted code (``frame`` and its callers) runs where the interpreter
+    reports an exception and drops it: a gc callback (``gc.callbacks``, as hypothesis's), a
+    ``__del__``, a ``weakref.finalize`` callback."""
+    codes = set()
+    for cb in gc.callbacks:
+        code = getattr(getattr(cb, "__func__", cb), "__code__", None)
+        if code is not None:
+            codes.add(code)
+    while frame is not None:
+        if frame.f_code in codes or frame.f_code.co_name == "__del__" \
+                or frame.f_globals.get("__name__") == "weakref":
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _arm_alarm(entry):

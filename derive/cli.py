@@ -45,7 +45,7 @@ from derive.bench import BENCHES
 from derive.cache import find_artifact, shipped_index
 from derive.codegen.loader import kernels
 from derive.errors import DeriveError, InputError
-from derive.ik import nearclass
+from derive.ik import general6r, nearclass
 from derive.ik.free_joint import joint_range as free_joint_range, route as free_joint_route
 from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.nearclass import classify
@@ -281,17 +281,24 @@ def _robot_row(name: str) -> dict:
     cls = c.cls if c.cls == c.nominal_cls else f"{c.cls} (nominal {c.nominal_cls})"
     # a near-class arm (only where the description has near misses or names a nominal: fast)
     near = (not closed and not kind and (r.nominal or c.near_misses) and reference._near(r))
+    # the general 6R route: what its derivation decided, from the cache without deriving (the
+    # kernels' own test, derive.ik.general6r.status; "unchecked" until it is first derived)
+    route = sp6 or (not closed and not kind and not near and _general_6r(r))
+    g6 = general6r.status(r) if route else None
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
                     f"nominal {nearclass.nominal_class(r)} + Newton polish" if near else
                     f"no: refine, seeded by {r.nominal}" if r.nominal else
-                    "general 6R elimination" if _general_6r(r) else
+                    ("no: refine (the general 6R elimination degenerates)" if g6 == "degenerate" else
+                     "general 6R elimination") if _general_6r(r) else
                     "any joint given (numpy)" if _seven_revolute(r) else "no: refine")
     # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
     # run the nominal's closed form and polish (derive.codegen.polish), a seven-joint one's with
     # joint 3 given; any other 6R arm's kernels the general 6R elimination (up to 16 solutions)
-    general = sp6 or (not closed and not kind and not near and _general_6r(r))
-    has_ik = bool(closed or kind or (near and r.dof == 6) or general)
+    # when its elimination is regular with Q of rank 8 (derive.codegen.general6r)
+    general = route and g6 in ("kernels", "unchecked")
+    has_ik = bool((closed and not sp6) or kind or (near and r.dof == 6) or general)
     given = " (q3 given)" if near and r.dof == 7 else ""
+    given += " (elimination unchecked)" if general and g6 == "unchecked" else ""
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
             "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else
@@ -300,7 +307,7 @@ def _robot_row(name: str) -> dict:
             "ik": ik,
             "kernels": ("FK+IK" if has_ik or given else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else given)
                        + ", " + _where(r.id, "c_source"),
-            "casadi": ("fk, residual, ik" if has_ik and not general else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
+            "casadi": ("fk, residual, ik" if has_ik and not route else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
 
 
@@ -347,7 +354,8 @@ def cmd_robots(args) -> int:
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
           "--seed Q; SRS also with joint 3 given: --free V --free-joint 3), nominal X + Newton polish = "
           "a near-class arm solved by its nominal robot's closed form and Newton steps on its own FK; "
-          "kernels and CasADi "
+          "(elimination unchecked) = a general 6R arm not derived yet: its kernels have IK when its "
+          "elimination is regular, checked on first use (dq-derive kernels or ik); kernels and CasADi "
           "functions: shipped in the package, cached (derived earlier), or derived on first use and cached")
     return EXIT_OK
 

@@ -157,6 +157,63 @@ def test_the_budget_timer_gives_back_a_running_alarm():
     assert res.stdout.split() == ["True", "True"], res.stderr
 
 
+def test_the_budget_timer_does_not_raise_where_the_error_would_be_dropped():
+    """The timer can fire in any code: in a gc callback (as hypothesis's, in the test run), a
+    __del__ or a weakref finalizer the interpreter reports the error and drops it ("Exception
+    ignored"), and the derivation goes on. There the handler looks again shortly, and the
+    BudgetError comes from the derivation's own code, still at about the budget. Here a gc
+    callback and a __del__ take nine tenths of the time, so the timer lands in them."""
+    code = textwrap.dedent("""
+        import gc, time, weakref
+        from derive.cache import task
+        from derive.errors import BudgetError
+
+        def spin(seconds):
+            t = time.perf_counter()
+            while time.perf_counter() - t < seconds:
+                pass
+
+        def work(seconds):                  # the derivation's own code
+            t = time.perf_counter()
+            while time.perf_counter() - t < seconds:
+                pass
+
+        def slow_callback(phase, info):
+            spin(0.006)
+
+        class Slow:
+            def __del__(self):
+                spin(0.006)
+
+        class Obj:
+            pass
+
+        gc.callbacks.append(slow_callback)
+        t0 = time.perf_counter()
+        where = "none"
+        try:
+            with task("t", progress=False):
+                while time.perf_counter() - t0 < 10:
+                    gc.collect()                            # the callback, twice
+                    Slow()                                  # its __del__
+                    weakref.finalize(Obj(), spin, 0.006)    # a finalizer
+                    work(0.003)
+        except BudgetError as exc:
+            names, tb = [], exc.__traceback__
+            while tb is not None:
+                names.append(tb.tb_frame.f_code.co_name)
+                tb = tb.tb_next
+            where = names[names.index("_on_alarm") - 1]     # the code the timer interrupted
+        print("RAISED", where, "%.2f" % (time.perf_counter() - t0))
+    """)
+    res = subprocess.run([PY, "-c", code], capture_output=True, text=True, timeout=60,
+                         env={**os.environ, "DQ_DERIVE_BUDGET": "0.5"})
+    word, where, seconds = res.stdout.split()
+    assert "Exception ignored" not in res.stderr, res.stderr
+    assert word == "RAISED" and where in ("work", "<module>"), res.stdout + res.stderr
+    assert float(seconds) < 1.5, res.stdout         # the budget and a few graces
+
+
 # --------------------------------------------------------------------------- #
 # 3. memory: refused past the stated limits, counted before built
 # --------------------------------------------------------------------------- #

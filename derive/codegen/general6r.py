@@ -84,7 +84,7 @@ def general_context(robot) -> dict:
     as C initialisers (:func:`derive.ik.general6r.plan`: the derivation, cached, with progress).
     DeriveError when the arm has no plan or one the emitted kernels do not cover."""
     pl = g6.plan(robot)
-    if pl.rank_q != 8:
+    if not g6.kernels_cover(pl.rank_q):
         raise DeriveError(f"{pl.robot}: Q has generic rank {pl.rank_q} < 8; the emitted general 6R "
                           "kernels cover rank 8 (use derive.ik.general6r.solve)")
     cut = pl.cut

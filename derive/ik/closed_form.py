@@ -436,6 +436,10 @@ def classify(robot) -> Classification:
     if rel is None:
         if robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints):
             why = general6r.describe(robot)
+            if general6r.status(robot) == "degenerate":
+                # the derivation found no regular elimination: no claim that it solves the arm
+                notes = [n for n in c.notes if "derive.ik.general6r, every solution" not in n]
+                return dataclasses.replace(c, notes=notes + [why])
             return dataclasses.replace(c, general6r=why, notes=c.notes + [why])
         return c
     notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n]

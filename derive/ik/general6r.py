@@ -37,7 +37,8 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
 * A pose whose elimination degenerates (the leading matrix ill-conditioned for every offset, or
   Q rank-deficient there) is solved at nearby poses and Newton carries their solutions back
-  (:func:`_perturbed`); a pose with a (near-)singular solution is flagged ``degenerate``.
+  (:func:`_perturbed`); a pose with a (near-)singular solution, or whose pencil is singular for
+  every q3 (a continuum there need not show at the nearby poses), is flagged ``degenerate``.
 
 A robot whose elimination degenerates (Q of too low rank, or det M identically zero: special
 geometry) is tried in reverse order (the IK of T^-1 for the reversed chain, where q4 is the
@@ -59,7 +60,7 @@ import numpy as np
 from derive.algebra import dualquat as dq
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
-from derive.cache import find_artifact, memo, step, store_artifacts, task
+from derive.cache import find_artifact, memo, peek, step, store_artifacts, task
 from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
@@ -344,6 +345,8 @@ def _plan(robot, progress):
     found = find_artifact(robot.id, "general6r")
     if found is not None:
         data = json.loads(found.read_text())
+        if data.get("format") == FORMAT and data.get("degenerate"):
+            raise DeriveError(data["degenerate"])
         if data.get("format") == FORMAT:
             return _plan_from(robot, c, scale, data)
     with task(f"general 6R {robot.name}", progress=progress):
@@ -373,26 +376,70 @@ def _plan(robot, progress):
                     break
                 why.append(f"cut at joint {e}: {info}")
         if data is None:
-            raise DeriveError(f"{robot.name}: the general 6R elimination degenerates in both directions "
-                              f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
+            # kept too (status(), robots and classify read it without deriving)
+            message = (f"{robot.name}: the general 6R elimination degenerates in both directions "
+                       f"({'; '.join(why)}): special geometry that no class of dq-derive covers yet")
+            store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(
+                {"format": FORMAT, "degenerate": message, "notes": why}))}, {"robot": robot.name})
+            raise DeriveError(message)
         store_artifacts(robot.id, {"general6r": ("general6r.json", json.dumps(data))},
                         {"robot": robot.name})
     return _plan_from(robot, c, scale, data)
 
 
+def kernels_cover(rank_q: int) -> bool:
+    """Whether the emitted general 6R kernels (:mod:`derive.codegen.general6r`) cover a plan whose
+    Q has generic rank ``rank_q``: they bake in the rank-8 elimination (and the loop cut's)."""
+    return int(rank_q) == 8
+
+
+def _decision(robot):
+    """The derivation's decision for a robot without deriving: this process's plan (or its
+    DeriveError), else the stored artifact's JSON; None when neither exists yet."""
+    out = peek("general6r-plan", robot.id)
+    if isinstance(out, Plan):
+        return {"rank_q": out.rank_q, "cut": out.cut, "reverse": out.reverse, "notes": list(out.notes)}
+    if isinstance(out, DeriveError):
+        return {"degenerate": str(out)}
+    found = find_artifact(robot.id, "general6r")
+    data = json.loads(found.read_text()) if found is not None else None
+    return data if data is not None and data.get("format") == FORMAT else None
+
+
+def status(robot) -> str:
+    """What the general 6R derivation decided for a robot of no special class, read from the
+    cache without deriving (:func:`plan` derives and stores it; a degenerate arm's DeriveError is
+    stored too): "kernels" (the numpy reference and the generated kernels solve it), "reference"
+    (only the numpy reference: Q of rank < 8, :func:`kernels_cover`), "degenerate" (the
+    elimination degenerates in every direction and cut: neither does) or "unchecked" (not
+    derived yet)."""
+    data = _decision(load_robot(robot))
+    if data is None:
+        return "unchecked"
+    if data.get("degenerate"):
+        return "degenerate"
+    return "kernels" if kernels_cover(data["rank_q"]) else "reference"
+
+
 def describe(robot) -> str:
     """Why and how the general 6R elimination solves a robot of no special class, for classify:
     the formulation its cached derivation chose (forward or reversed chain, or the loop cut and
-    why), without deriving (a robot not derived yet says so)."""
+    why), or why it degenerates, without deriving (a robot not derived yet says so)."""
     robot = load_robot(robot)
+    data = _decision(robot)
+    if data is not None and data.get("degenerate"):
+        return ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
+                "applies, and the general 6R elimination (derive.ik.general6r) does not solve it: "
+                + data["degenerate"].split(": ", 1)[-1] + "; no IK kernels (FK only), use derive.refine")
     head = ("general 6R: none of the special classes (UR, OPW, spherical wrist, three parallel) "
             "applies, so derive.reference.ik solves it by the general 6R elimination "
             "(derive.ik.general6r: Raghavan-Roth's 14 equations derived with sympy for this arm, "
             "solved per pose as Manocha-Canny's eigenproblem in numpy; every solution, up to 16)")
-    found = find_artifact(robot.id, "general6r")
-    data = json.loads(found.read_text()) if found is not None else None
-    if data is None or data.get("format") != FORMAT:
-        return head + "; derived on first use (a few seconds, then cached)"
+    if data is None:
+        return head + ("; derived on first use (a few seconds, then cached): whether its elimination "
+                       "is regular (then it has IK kernels too) is not checked yet")
+    if not kernels_cover(data["rank_q"]):
+        head += f"; Q has generic rank {data['rank_q']} < 8, so it has no generated IK kernels (FK only)"
     if data.get("cut"):
         how = (f"its standard elimination degenerates ({'; '.join(data['notes'][:-1])}), so the loop is "
                f"{data['notes'][-1]}")
@@ -658,8 +705,8 @@ def _perturbed(robot, pl: Plan, poses, q0, counts0):
     G6_PERTURB rad and G6_PERTURB times the arm's size), whose solutions Newton carries back onto
     the pose (a regular solution moves continuously with the pose). Returns (q, counts,
     singular, degenerate) as :func:`_collect`; degenerate stays set where every nearby pose was
-    degenerate too or a solution found is singular (a continuum of solutions, or a multiple root:
-    some may be missing)."""
+    degenerate too, a solution found is singular (a continuum of solutions, or a multiple root:
+    some may be missing) or the pose's own pencil is singular for every q3."""
     n = len(poses)
     target = _to_matrix(poses)
     ips = [np.repeat(np.arange(n), counts0)]
@@ -683,7 +730,13 @@ def _perturbed(robot, pl: Plan, poses, q0, counts0):
     scaled[:, :3, 3] /= pl.scale
     qc, err, jac = _newton(pl.c, qc, scaled[ip], with_error=True)
     q, counts, sing, degen = _collect(robot, pl, poses, ip, wrap_angle(qc), n, every, err, jac)
-    return q, counts, sing, degen | np.any(sing, axis=1)
+    # a pose whose pencil is singular for every q3 (its leading matrix past G6_LEADING_COND at
+    # every offset tried: det M(x) = 0 identically) can have a continuum of solutions that the
+    # nearby poses do not show (none of their solutions is near it: the CRX at q3 = -pi/2 with
+    # axes 1 and 5 on one line, q1 - q5 free): the solutions found there are returned, flagged
+    mats = _cut_front(pl, scaled)[-1] if pl.cut else _standard_front(pl, scaled)[5]
+    whole = _pencil_roots(pl, mats, np.zeros(n, dtype=bool))[-1]
+    return q, counts, sing, degen | np.any(sing, axis=1) | whole
 
 
 def _to_matrix(poses):
@@ -915,6 +968,47 @@ def _monomial_vectors(mk, ip, x3):
     return v
 
 
+def _wide_cluster_candidates(mk, ip, x3, v, order):
+    """Extra candidates for a multiple eigenvalue whose null space of M(x) is wider than its
+    cluster (more null vectors than eigenvalues found there: at a singular configuration of the
+    CRX, q = (pi, pi/2, pi, pi/2, pi, pi/2), a double eigenvalue with a 4-dimensional null
+    space, where the monomial vectors of :func:`_monomial_vectors` from 2 of its 4 dimensions
+    are wrong and the double root was lost). Stetter's eigenvector method as there, on the whole
+    null space: one candidate per null vector, each with the cluster's x3 (Newton and the FK
+    check decide). ``order``: lexsort of (x3, ip). Returns (ip, x3, v) with them appended (the
+    first len(ip) rows unchanged)."""
+    ips, xs = ip[order], x3[order]
+    near = (ips[1:] == ips[:-1]) & (np.abs(xs[1:] - xs[:-1]) <= CLUSTER_TOL * (1 + np.abs(xs[1:])))
+    if not np.any(near):
+        return ip, x3, v
+    starts = np.nonzero(near & ~np.r_[False, near[:-1]])[0]
+    sizes = np.nonzero(near & ~np.r_[near[1:], False])[0] - starts + 2     # members per cluster
+    heads = order[starts]
+    powers = np.stack([np.ones(len(heads)), x3[heads], x3[heads] ** 2], 1)[:, None, :]
+    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip[heads]]).reshape(len(heads), 12, 12)
+    _, sv, vt = np.linalg.svd(mx)
+    dims = np.sum(sv < 1e-7 * sv[:, :1], axis=1)
+    extra_i, extra_v = [], []
+    for h, size, d, vth in zip(heads, sizes, dims, vt):
+        if d <= size:
+            continue
+        basis = vth[-d:].T                                   # (12, d)
+        with np.errstate(all="ignore"):
+            a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
+                 + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
+            _, cvec = np.linalg.eig(a)
+            vecs = (basis @ cvec).T
+            big = vecs[np.arange(d), np.argmax(np.abs(vecs), axis=1)]
+            vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
+        keep = np.all(np.isfinite(vecs), axis=1)
+        extra_i += [h] * int(keep.sum())
+        extra_v.append(vecs[keep].reshape(-1, 4, 3))
+    if not extra_i:
+        return ip, x3, v
+    idx = np.array(extra_i)
+    return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, *extra_v])
+
+
 def _near_pair_candidates(mk, ip, x3, v):
     """Extra candidates for near pairs of eigenvalues (:data:`NEAR_PAIR_TOL`): for the pair's
     two members, the two monomial vectors in the span of M(x)'s two smallest right singular
@@ -925,6 +1019,7 @@ def _near_pair_candidates(mk, ip, x3, v):
     if len(ip) < 2:
         return ip, x3, v
     order = np.lexsort((x3, ip))
+    ip, x3, v = _wide_cluster_candidates(mk, ip, x3, v, order)
     ips, xs = ip[order], x3[order]
     gap = np.abs(xs[1:] - xs[:-1])
     pair = (ips[1:] == ips[:-1]) & (gap > CLUSTER_TOL * (1 + np.abs(xs[1:]))) & \
