@@ -164,6 +164,97 @@ def _chain_frames(c, q):
     return frames, (a.reshape(4 * m, 4) @ c[6]).reshape(m, 4, 4)
 
 
+#: Columns per block of :func:`_x_times`: OpenBLAS runs a product of more than about 2.6e5
+#: multiply-adds on several threads, and for these thin products (4 x 4 times 4 x N) waking the
+#: threads costs more than the product (measured: 0.3 ms on one thread, 23 ms on two while the
+#: machine is busy); blocks below that size stay on the calling thread.
+_MM_COLS = 12288
+
+
+def _x_times(x, c):
+    """The columns (4, m, 3) of the top three rows of A (m rigid 4x4 transforms: x[j] is
+    column j, rows 1-3) times a constant c (4, 4): column j of A c is sum_i c[i, j] A[:, i],
+    so the (4, 3 m) block is c^T times x's, in column blocks of :data:`_MM_COLS`."""
+    m = x.shape[1]
+    x2 = x.reshape(4, 3 * m)
+    ct = np.ascontiguousarray(c.T)
+    out = np.empty((4, 3 * m))
+    for s in range(0, 3 * m, _MM_COLS):
+        np.matmul(ct, x2[:, s:s + _MM_COLS], out=out[:, s:s + _MM_COLS])
+    return out.reshape(4, m, 3)
+
+
+def _x_rot(x, cq, sq):
+    """In place: A Rz(q) in the column layout of :func:`_x_times` (cq, sq: (m, 1)); Rz mixes
+    columns 0 and 1 only."""
+    x0 = x[0].copy()
+    x[0] *= cq
+    x[0] += sq * x[1]
+    x[1] *= cq
+    x[1] -= sq * x0
+
+
+def _x_start(c0, m):
+    x = np.empty((4, m, 3))
+    x[:] = c0[:3, :].T[:, None, :]
+    return x
+
+
+def _chain_x(c, cq, sq, zs, ps, x=None, start=0, stop=6):
+    """The product-form chain C1 Rz(q1) C2 ... in the column layout (:func:`_x_times`), for
+    joints ``start`` .. ``stop`` - 1 (0-based) from x (A before joint ``start``'s constant; None:
+    from C_{start+1} alone), writing joint i's z axis and origin (its frame before the rotation:
+    the rotation keeps both) into zs[:, i], ps[:, i] (m, 6, 3). With stop = 6 the result is the
+    end pose (times C7), else A before joint ``stop``'s rotation (its constant applied)."""
+    m = cq.shape[0]
+    for i in range(start, stop):
+        x = _x_start(c[i], m) if x is None else _x_times(x, c[i])
+        zs[:, i] = x[2]
+        ps[:, i] = x[3]
+        _x_rot(x, cq[:, i, None], sq[:, i, None])
+    if stop == 6:
+        return _x_times(x, c[6])
+    x = _x_times(x, c[stop])
+    zs[:, stop] = x[2]
+    ps[:, stop] = x[3]
+    return x
+
+
+def _err_jt(target, zs, ps, x):
+    """(error (m, 6): position (scaled) and rotation vector, as :func:`_errors`; J^T (m, 6, 6),
+    row i joint i's (z_i x (p - p_i), z_i)) of the end x (column layout) against target
+    (m, 4, 4). The rotation error of R_T R^T: with R_T's columns t_k and R's columns x_k,
+    R_T R^T = sum_k t_k x_k^T, its vee part is 1/2 sum_k x_k x t_k, its trace sum_k t_k . x_k."""
+    pe = x[3]
+    dp = target[:, :3, 3] - pe
+    w = np.zeros_like(pe)
+    tr = np.zeros(len(pe))
+    for k in range(3):
+        t = target[:, :3, k]
+        w += np.cross(x[k], t)
+        tr += np.einsum("mi,mi->m", t, x[k])
+    w *= 0.5
+    sn = np.sqrt(np.einsum("mi,mi->m", w, w))
+    ang = np.arctan2(sn, 0.5 * (tr - 1))
+    fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
+    err = np.concatenate([dp, w * fac[:, None]], 1)
+    jt = np.empty((len(pe), 6, 6))
+    r = pe[:, None, :] - ps
+    jt[:, :, 0] = zs[:, :, 1] * r[:, :, 2] - zs[:, :, 2] * r[:, :, 1]
+    jt[:, :, 1] = zs[:, :, 2] * r[:, :, 0] - zs[:, :, 0] * r[:, :, 2]
+    jt[:, :, 2] = zs[:, :, 0] * r[:, :, 1] - zs[:, :, 1] * r[:, :, 0]
+    jt[:, :, 3:] = zs
+    return err, jt
+
+
+def _frames_x(c, q):
+    """(zs, ps (m, 6, 3), the end in column layout) of the product-form chain at q (m, 6)."""
+    m = len(q)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, np.cos(q), np.sin(q), zs, ps)
+    return zs, ps, x
+
+
 # --------------------------------------------------------------------------- #
 # Derivation (sympy)
 # --------------------------------------------------------------------------- #
@@ -842,10 +933,19 @@ def _solve_chunk(robot, pl: Plan, poses):
     q1 = np.arctan2(x2[:, 2], x2[:, 5])
     q2 = np.arctan2(x2[:, 6], x2[:, 7])
     qc = np.stack([q1, q2, q3, q4, q5, np.zeros_like(q1)], 1)
-    frames, _ = _chain_frames(c, qc)
-    r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
-    qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    # q6 from A6 = C1 Rz1 .. C6 (the frame before joint 6): Rz(q6) = A6^-1 T C7^-1, whose first
+    # column is R_A6^T (R_T c), c the first column of C7^-1's rotation; the chain of q1..q5 is
+    # the one Newton's first step needs (the frames before each joint's rotation), kept
+    m = len(ip)
+    cq, sq = np.cos(qc), np.sin(qc)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, cq, sq, zs, ps, stop=5)
+    tp = target[ip]
+    u = tp[:, :3, :3] @ _inv(c[6])[:3, 0]
+    q6 = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
+    qc[:, 5] = q6
+    _x_rot(x, np.cos(q6)[:, None], np.sin(q6)[:, None])
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])))
     if pl.reverse:
         qc = -qc[:, ::-1]
         jac = None                     # the reversed chain's Jacobian: the forward one is made again
@@ -1172,13 +1272,22 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
         qc[:, j - 1] = t
     qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
     qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
-    # joint e from the rest: with q_e = 0 the chain is A_e B (A_e = C1 Rz1 .. C_e, B the rest),
-    # so Rz(q_e) = A_e^-1 T B^-1 = A_e^-1 T (A_e B)^-1 A_e
-    frames, end0 = _chain_frames(c, qc)
-    a_e = frames[:, e - 1]
-    rel = _inv_rigid(a_e) @ target[ip] @ _inv_rigid(end0) @ a_e
-    qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
-    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    # joint e from the rest: the chain is A_e Rz(q_e) B (A_e = C1 Rz1 .. C_e, B = C_{e+1} .. C7),
+    # so Rz(q_e) = A_e^-1 T B^-1, whose first column is R_Ae^T R_T b, b the first row of R_B;
+    # the chain A_e is continued past joint e for Newton's first step
+    m = len(ip)
+    cq, sq = np.cos(qc), np.sin(qc)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, cq, sq, zs, ps, stop=e - 1)
+    xb = _chain_x(c, cq, sq, np.empty((m, 6, 3)), np.empty((m, 6, 3)), start=e)
+    tp = target[ip]
+    u = np.einsum("mij,mj->mi", tp[:, :3, :3], np.stack([xb[0][:, 0], xb[1][:, 0], xb[2][:, 0]], 1))
+    qe = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
+    qc[:, e - 1] = qe
+    cq[:, e - 1], sq[:, e - 1] = np.cos(qe), np.sin(qe)
+    _x_rot(x, cq[:, e - 1, None], sq[:, e - 1, None])
+    x = _chain_x(c, cq, sq, zs, ps, x=x, start=e)
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x))
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
@@ -1200,35 +1309,57 @@ def _errors(c, q, target):
     return err, jac
 
 
-def _newton(c, q, target, steps=None, with_error=False):
+#: Newton stops after a step below this (rad, every joint) taken where the error was below it
+#: too (scaled lengths and rad) and the linear model's residual |e - J dq| is below 1e-13: the
+#: error the step leaves is that residual plus the order of the step's square (the second
+#: derivatives of the scaled FK are of order one), so below the 1e-13 the loop asks for, and the
+#: exact FK check decides; no evaluation only to confirm it.
+NEWTON_DONE = 1e-7
+
+
+def _newton(c, q, target, steps=None, with_error=False, first=None):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
-    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done. With
-    ``with_error``, also the last error measured per candidate (max of scaled position and
-    rotation) and the Jacobian there (at the returned q: the loop measures before it steps)."""
+    error (scaled lengths and rad) is below 1e-13, or after a step below :data:`NEWTON_DONE`
+    from an error below it, or when G6_NEWTON_MAX steps are done. ``first``: the chain at q
+    ((zs, ps, end) of :func:`_frames_x`) when the caller has it. With ``with_error``, also the
+    last error measured per candidate (max of scaled position and rotation; after a last step
+    below NEWTON_DONE, the bound on the error it leaves) and the Jacobian
+    there (m, 6, 6) (at the returned q, or before that last step)."""
     q = q.copy()
     last = np.full(len(q), np.inf)
-    last_jac = np.zeros((len(q), 6, 6))
+    last_jt = np.zeros((len(q), 6, 6))
     idx = np.arange(len(q))
     for k in range(G6_NEWTON_MAX + 1):
-        err, jac = _errors(c, q[idx], target[idx])
+        if k == 0 and first is not None:
+            err, jt = _err_jt(target, *first)
+        else:
+            err, jt = _err_jt(target[idx], *_frames_x(c, q[idx]))
         size = np.max(np.abs(err), axis=1)
         last[idx] = size
         if with_error:
-            last_jac[idx] = jac
+            last_jt[idx] = jt
         todo = size > 1e-13
-        idx, err, jac = idx[todo], err[todo], jac[todo]
+        if not np.all(todo):
+            idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
             break
-        jt = np.swapaxes(jac, 1, 2)
-        a = jt @ jac
+        a = jt @ np.swapaxes(jt, 1, 2)
         lam = 1e-14 * (np.trace(a, axis1=1, axis2=2) + 1e-30)
-        a = a + lam[:, None, None] * np.eye(6)
+        a += lam[:, None, None] * np.eye(6)
         dq_ = _solve_safe(a, np.einsum("mij,mj->mi", jt, err))
-        big = np.max(np.abs(dq_), axis=1, keepdims=True)
-        dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
+        big = np.max(np.abs(dq_), axis=1)
+        dq_ = np.where(big[:, None] > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300))[:, None], dq_)
         new = q[idx] + dq_
         q[idx] = np.where(np.isfinite(new), new, q[idx])
-    return (q, last, last_jac) if with_error else q
+        # done: a small step that the linear model says leaves an error below 1e-13 (not so
+        # at a singular Jacobian, where the damped step misses part of the error)
+        left = np.max(np.abs(err - np.einsum("mji,mj->mi", jt, dq_)), axis=1) + big ** 2
+        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < 1e-13)
+        last[idx[done]] = left[done]
+        idx = idx[~done]
+        if len(idx) == 0:
+            break
+    return (q, last, np.swapaxes(last_jt, 1, 2)) if with_error else q
 
 
 def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
@@ -1252,17 +1383,21 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
     if len(ip) == 0:
         return q, counts, sing, degen
     # singular flag: the Jacobian's relative smallest singular value
-    if jac is None:
-        frames, end = _chain_frames(pl.c, qc)
-        axes = frames[:, :, :3, 2]
-        jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
-        jac = jac.transpose(0, 2, 1)
-    else:
-        jac = jac[ok]
     # sigma_min / sigma_max >= |det J| / |J|_F^6 (sigma_min >= |det J| / sigma_max^5 and
     # sigma_max <= |J|_F): where that bound already clears G6_SINGULAR the Jacobian is regular;
-    # the others get the singular values (eigenvalues of J^T J)
+    # the others get the singular values (eigenvalues of J^T J). Newton's Jacobian can be the
+    # one before its last step (below NEWTON_DONE): where its bound is within a factor 10 of
+    # G6_NEAR_SINGULAR, the Jacobian at qc itself is made
     with np.errstate(all="ignore"):
+        if jac is None:
+            redo = np.ones(len(qc), dtype=bool)
+            jac = np.empty((len(qc), 6, 6))
+        else:
+            jac = jac[ok]
+            redo = ~(np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3 >= 10 * G6_NEAR_SINGULAR)
+        if np.any(redo):
+            jac[redo] = np.swapaxes(_err_jt(np.broadcast_to(np.eye(4), (int(np.sum(redo)), 4, 4)),
+                                            *_frames_x(pl.c, qc[redo]))[1], 1, 2)
         bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
     is_sing = ~(bound >= G6_NEAR_SINGULAR)
     near_sing = is_sing.copy()
