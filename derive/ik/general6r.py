@@ -227,13 +227,13 @@ def _err_jt(target, zs, ps, x):
     R_T R^T = sum_k t_k x_k^T, its vee part is 1/2 sum_k x_k x t_k, its trace sum_k t_k . x_k."""
     pe = x[3]
     dp = target[:, :3, 3] - pe
-    w = np.zeros_like(pe)
-    tr = np.zeros(len(pe))
-    for k in range(3):
-        t = target[:, :3, k]
-        w += np.cross(x[k], t)
-        tr += np.einsum("mi,mi->m", t, x[k])
-    w *= 0.5
+    t = target[:, :3, :3]
+    # sum_k x_k x t_k and sum_k t_k . x_k, x_k and t_k the columns (x's columns are rows of xr)
+    xr = x[:3].transpose(1, 0, 2)                               # (m, k, i): row k is x_k
+    tr = np.einsum("mik,mki->m", t, xr)
+    w = 0.5 * np.stack([np.einsum("mk,mk->m", xr[:, :, 1], t[:, 2]) - np.einsum("mk,mk->m", xr[:, :, 2], t[:, 1]),
+                        np.einsum("mk,mk->m", xr[:, :, 2], t[:, 0]) - np.einsum("mk,mk->m", xr[:, :, 0], t[:, 2]),
+                        np.einsum("mk,mk->m", xr[:, :, 0], t[:, 1]) - np.einsum("mk,mk->m", xr[:, :, 1], t[:, 0])], 1)
     sn = np.sqrt(np.einsum("mi,mi->m", w, w))
     ang = np.arctan2(sn, 0.5 * (tr - 1))
     fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
@@ -974,10 +974,13 @@ def _monomial_vectors(mk, ip, x3):
     monomial vectors in the null space V are found by the shift structure of the monomials
     (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
     (Stetter's eigenvector method)."""
+    # M(x3) has the structure of _twelve (its 6 x 9 block twice): only that block is gathered
     powers = np.stack([np.ones_like(x3), x3, x3 * x3], 1)[:, None, :]            # (k, 1, 3)
-    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip]).reshape(len(ip), 12, 12)
-    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
-    mx = mx / np.where(scale_m > 0, scale_m, 1.0)
+    six = np.ascontiguousarray(mk[:, :, :6, :9]).reshape(len(mk), 3, 54)
+    sx = (powers @ six[ip]).reshape(len(ip), 6, 9)
+    scale_m = np.abs(sx).max(axis=(1, 2), keepdims=True)
+    sx /= np.where(scale_m > 0, scale_m, 1.0)
+    mx = _twelve(sx)
     v = _null_vectors(mx + _NUDGE * np.eye(12))
     if len(ip) < 2:
         return v
@@ -1362,6 +1365,73 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
     return (q, last, np.swapaxes(last_jt, 1, 2)) if with_error else q
 
 
+def _right_matrix(b):
+    """R (8, 8) with a b = a @ R for dual quaternions a (rows) and the constant b (8,)."""
+    eye = np.eye(8)
+    return np.array([dq._mul(e, b) for e in eye])
+
+
+def _fk_form(robot):
+    """derive's dual-quaternion FK (:func:`derive.kinematics.fk.fk`: each joint's ``pre``
+    factors, its rotation cos(t/2) + sin(t/2) n, its ``post`` factors, then the end's) with the
+    constant factors between two rotations multiplied once: (K_0 (8,) the constant before joint
+    1, per joint the (8, 16) matrix [R(K) | R((0, n_i)) R(K)] (R(b): right multiplication by b,
+    K the constant after the joint), the joints' variables, multipliers and offsets), or None
+    for a chain that is not a plain serial one."""
+    joints = robot.joints
+    end = robot.ends[robot.default_end]
+    if len(joints) != 6 or any(j.type != "revolute" or j.parent != i - 1 for i, j in enumerate(joints)) \
+            or end.parent != 5:
+        return None
+    ident = np.array([1.0, 0, 0, 0, 0, 0, 0, 0])
+
+    def product(ops):
+        out = ident
+        for op in ops:
+            out = dq._mul(out, dq._rotation(op.axis, op.angle) if op.kind == "R" else dq._translation_dq(op.vector))
+        return out
+
+    consts = [product(joints[0].pre)] + [dq._mul(product(joints[i - 1].post), product(joints[i].pre))
+                                         for i in range(1, 6)] + [dq._mul(product(joints[5].post), product(end.ops))]
+    mats = []
+    for i, j in enumerate(joints):
+        kr = _right_matrix(consts[i + 1])
+        nr = _right_matrix(np.concatenate([[0.0], np.asarray(j.axis, float), np.zeros(4)]))
+        mats.append(np.concatenate([kr, nr @ kr], 1))
+    return (consts[0], np.array(mats), np.array([j.variable for j in joints]),
+            np.array([j.multiplier for j in joints]), np.array([j.mimic_offset + j.offset for j in joints]))
+
+
+def _fk_exact(robot, q):
+    """Unit dual quaternions (m, 8) of the end frame at q (m, 6), up to sign: derive's
+    dual-quaternion product (:func:`_fk_form`; equal to :func:`derive.kinematics.fk.fk` to
+    rounding) as one (m, 8) x (8, 16) product per joint: A Rot_i K = cos(t/2) A K +
+    sin(t/2) A N_i K (Rot_i = cos(t/2) + sin(t/2) (0, n_i), K the constants that follow)."""
+    form = memo("general6r-fk", robot.id, lambda: _fk_form(robot))
+    if form is None:
+        return fk(robot, q)
+    k0, mats, var, mult, off = form
+    half = 0.5 * (mult * q[:, var] + off)
+    ch, sh = np.cos(half), np.sin(half)
+    a = np.broadcast_to(k0, (len(q), 8))
+    for i in range(6):
+        both = _mm(a, mats[i])
+        a = ch[:, i, None] * both[:, :8] + sh[:, i, None] * both[:, 8:]
+    return a
+
+
+def _mm(a, b):
+    """a (N, k) @ b (k, l) in row blocks small enough that OpenBLAS keeps each on the calling
+    thread (see :data:`_MM_COLS`)."""
+    rows = max(256, 200000 // (b.shape[0] * b.shape[1]))
+    if a.shape[0] <= rows:
+        return a @ b
+    out = np.empty((a.shape[0], b.shape[1]))
+    for s in range(0, a.shape[0], rows):
+        np.matmul(a[s:s + rows], b, out=out[s:s + rows])
+    return out
+
+
 def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
     """Check every candidate on derive's exact FK, merge duplicates, pad. ``err``: the
     product-form error Newton left (scaled lengths and rad); a candidate whose error is surely
@@ -1377,7 +1447,7 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
         jac = None if jac is None else jac[near]
     if len(ip) == 0:
         return q, counts, sing, degen
-    dpos, drot = _pose_error(fk(robot, qc), poses[ip])
+    dpos, drot = _pose_error(_fk_exact(robot, qc), poses[ip])
     ok = (dpos < G6_ACCEPT) & (drot < G6_ACCEPT) & np.all(np.isfinite(qc), axis=1)
     ip, qc = ip[ok], qc[ok]
     if len(ip) == 0:
@@ -1411,14 +1481,23 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
     # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
     # pairs (j, j + d) of one pose, d = 1, 2, ...)
+    # pairs (j, j + d) of one pose, d = 1, 2, ...; sorted by q1, only pairs whose q1 are within
+    # MERGE_TOL can be close: d grows while some are, and the pairs across +-pi (the largest q1 of
+    # a pose against its smallest) are compared on their own
     dup = np.zeros(len(ip), dtype=bool)
+    q1 = qc[:, 0]
     for d in range(1, len(ip)):
-        same = ip[d:] == ip[:-d]
-        if not np.any(same):
+        j = np.nonzero((ip[d:] == ip[:-d]) & (q1[d:] - q1[:-d] < MERGE_TOL))[0]
+        if len(j) == 0:
             break
-        j = np.nonzero(same)[0]
         close = np.all(np.abs(wrap_angle(qc[j + d] - qc[j])) < MERGE_TOL, axis=1)
         dup[j[close] + d] = True
+    hi = np.nonzero(q1 > np.pi - MERGE_TOL)[0]
+    lo = np.nonzero(q1 < -np.pi + MERGE_TOL)[0]
+    for a in lo:
+        for b in hi[ip[hi] == ip[a]]:
+            if np.all(np.abs(wrap_angle(qc[b] - qc[a])) < MERGE_TOL):
+                dup[b] = True
     ip, qc, is_sing = ip[~dup], qc[~dup], is_sing[~dup]
     starts = np.searchsorted(ip, ip)
     rank = np.arange(len(ip)) - starts
