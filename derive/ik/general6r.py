@@ -836,8 +836,8 @@ def _standard_front(pl: Plan, target):
     t7 = target @ _inv(c[6])
     lp = np.concatenate([t7[:, :3, 2], t7[:, :3, 3]], axis=1)
     pm = _pose_monomials(lp, el.monomials)
-    qm = (pm @ el.q.reshape(112, -1).T).reshape(n, 14, 8)
-    r0 = pm @ el.r0.T                                        # (n, 14)
+    qm = _mm(pm, el.q.reshape(112, -1).T).reshape(n, 14, 8)
+    r0 = _mm(pm, el.r0.T)                                       # (n, 14)
     # the left null space of Q (rank 8 for a general arm) and the least squares of Q X2 = b
     # (for q1, q2 below) by one complete QR
     qq, rr = np.linalg.qr(qm, mode="complete")               # (n, 14, 14), (n, 14, 8)
@@ -886,7 +886,7 @@ def _eigvals(pl: Plan, lower, best):
         b = pl.deflate[k]
         w1, w2 = b[:12, :keep], b[12:, :keep]
         low = lower[idx]
-        cb = (low.reshape(12 * m, 24) @ b).reshape(m, 12, 24)                 # lower B
+        cb = _mm(low.reshape(12 * m, 24), b).reshape(m, 12, 24)               # lower B
         t = w1.T @ b[12:] + w2.T @ cb                                         # W^T C B (m, keep, 24)
         leak = np.abs(t[:, :, keep:]).max(axis=(1, 2))                        # W^T C V
         good = leak <= DEFLATE_LEAK * np.maximum(1.0, np.abs(low).max(axis=(1, 2)))
