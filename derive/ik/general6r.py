@@ -827,7 +827,7 @@ def _pencil_roots(pl, mats, degen):
 def _standard_front(pl: Plan, target):
     """The pencil of each pose (target: (n, 4, 4) scaled matrices of the forward chain): (c,
     target in the solved direction, the complete QR of Q, degenerate flags, the pencil's
-    coefficients of (s3, c3, 1) (n, 3, 12, 12), P with the pose terms (n, 14, 3, 9))."""
+    coefficients of (s3, c3, 1) (n, 3, 12, 12), the pose terms r0 of P's constant (n, 14))."""
     n = target.shape[0]
     c = _reverse(pl.c) if pl.reverse else pl.c
     if pl.reverse:
@@ -850,9 +850,7 @@ def _standard_front(pl: Plan, target):
     pt[:, :, 2, :] -= r0[:, :, None] * t45[8][None, None, :]
     sig = (null @ pt.reshape(n, 14, 27)).reshape(n, 6, 3, 9).transpose(0, 2, 1, 3)   # s3, c3, 1
     mats = _twelve(sig)                                      # (n, 3, 12, 12)
-    pa = np.broadcast_to(el.pl, (n, 14, 3, 9)).copy()
-    pa[:, :, 2, 8] -= r0
-    return c, target, qq, rr, degen, mats, pa
+    return c, target, qq, rr, degen, mats, r0
 
 
 #: The deflation is used for a pose when the block it drops, W^T C V, is below this relative
@@ -898,11 +896,27 @@ def _eigvals(pl: Plan, lower, best):
     return lam
 
 
+def _lsq_operator(qq, rr):
+    """Per pose the operator (n, 8, 14) of the least squares of Q X2 = b by its complete QR
+    (X2 = R^-1 Q1^T b, Q1 the first 8 columns; a diagonal entry of R below G6_RANK_TOL of its
+    largest set to 1: the rank-deficient Q of a degenerate pose), made once per pose rather
+    than solved once per candidate."""
+    r8 = rr[:, :8]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
+    q1t = np.swapaxes(qq[:, :, :8], 1, 2)
+    try:
+        with np.errstate(all="ignore"):
+            return np.linalg.solve(r8, q1t)
+    except np.linalg.LinAlgError:
+        return np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(r8, q1t)])
+
+
 def _solve_chunk(robot, pl: Plan, poses):
     n = poses.shape[0]
     target = _to_matrix(poses)
     target[:, :3, 3] /= pl.scale
-    c, target, qq, rr, degen, mats, pa = _standard_front(pl, target)
+    c, target, qq, rr, degen, mats, r0 = _standard_front(pl, target)
     # the offset of q3: the first whose leading matrix is well conditioned, else the best of
     # those tried (the Moebius substitution against a singular leading matrix)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
@@ -921,15 +935,12 @@ def _solve_chunk(robot, pl: Plan, poses):
     q5 = pl.offsets[1] + 2 * np.arctan2(num5, den5)
     q3 = d3[ip] + 2 * np.arctan(x3)
     # q1, q2: least squares of Q X2 = P(q3) X1 (the SVD above)
-    p3 = (pa[ip, :, 0] * np.sin(q3)[:, None, None] + pa[ip, :, 1] * np.cos(q3)[:, None, None] + pa[ip, :, 2])
-    x1 = np.einsum("ma,mb->mab", np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
-                   np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 9)
-    rhs = np.einsum("mej,mj->me", p3, x1)
-    y = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
-    r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
-    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
-    x2 = _solve_safe(r8, y)
+    # P(q3) X1 = pl . ((s3, c3, 1) x X1) less r0 (the monomial 1 x 1 x 1 carries it)
+    m27 = np.einsum("ma,mb,mc->mabc", np.stack([np.sin(q3), np.cos(q3), np.ones_like(q3)], 1),
+                    np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
+                    np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 27)
+    rhs = _mm(m27, pl.elim.pl.reshape(14, 27).T) - r0[ip]
+    x2 = np.einsum("mke,me->mk", _lsq_operator(qq, rr)[ip], rhs)
     q1 = np.arctan2(x2[:, 2], x2[:, 5])
     q2 = np.arctan2(x2[:, 6], x2[:, 7])
     qc = np.stack([q1, q2, q3, q4, q5, np.zeros_like(q1)], 1)
@@ -1264,12 +1275,9 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     v = _monomial_vectors(mk, ip, x3)
     ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     qt, ym = triple_angles(v, d3[ip] + 2 * np.arctan(x3), pl.offsets, order)
-    rhs = np.einsum("mek,mk->me", yy[ip], ym)
-    yv = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
-    r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
-    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
-    x2 = _solve_safe(r8, yv)
+    # Y ym with Y = y less the pair's constant column in column 26 (the monomial 1 x 1 x 1)
+    rhs = _mm(ym, np.asarray(pl.cut["y"]).T) - x[ip, :, 8]
+    x2 = np.einsum("mke,me->mk", _lsq_operator(qq, rr)[ip], rhs)
     qc = np.zeros((len(ip), 6))
     for j, t in zip(triple, qt):
         qc[:, j - 1] = t
@@ -1462,13 +1470,16 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
         if jac is None:
             redo = np.ones(len(qc), dtype=bool)
             jac = np.empty((len(qc), 6, 6))
+            bound = np.zeros(len(qc))
         else:
             jac = jac[ok]
-            redo = ~(np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3 >= 10 * G6_NEAR_SINGULAR)
+            bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+            redo = ~(bound >= 10 * G6_NEAR_SINGULAR)
         if np.any(redo):
-            jac[redo] = np.swapaxes(_err_jt(np.broadcast_to(np.eye(4), (int(np.sum(redo)), 4, 4)),
-                                            *_frames_x(pl.c, qc[redo]))[1], 1, 2)
-        bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+            jr = np.swapaxes(_err_jt(np.broadcast_to(np.eye(4), (int(np.sum(redo)), 4, 4)),
+                                     *_frames_x(pl.c, qc[redo]))[1], 1, 2)
+            jac[redo] = jr
+            bound[redo] = np.abs(np.linalg.det(jr)) / np.sum(jr * jr, axis=(1, 2)) ** 3
     is_sing = ~(bound >= G6_NEAR_SINGULAR)
     near_sing = is_sing.copy()
     if np.any(is_sing):
