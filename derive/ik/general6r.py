@@ -33,8 +33,12 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the same QR), the
   remaining rotation q6.
 * Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
-  Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`G6_ACCEPT` m and
-  rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
+  Jacobian; the first step on the chain the back-substitution of the last joint made, a step
+  below :data:`NEWTON_DONE` whose linear residual is below 1e-13 the last), checked on derive's
+  dual-quaternion FK (:func:`derive.kinematics.fk.fk`'s product with its constant factors
+  folded, :func:`_fk_exact`: :data:`G6_ACCEPT` m and rad), near-duplicates within
+  :data:`MERGE_TOL` in every joint merged. The chain is kept in a column layout
+  (:func:`_x_times`) whose thin products stay on one BLAS thread.
 * A pose whose elimination degenerates (the leading matrix ill-conditioned for every offset, or
   Q rank-deficient there) is solved at nearby poses and Newton carries their solutions back
   (:func:`_perturbed`); a pose with a (near-)singular solution is flagged ``degenerate``.
@@ -177,6 +181,8 @@ def _x_times(x, c):
     so the (4, 3 m) block is c^T times x's, in column blocks of :data:`_MM_COLS`."""
     m = x.shape[1]
     x2 = x.reshape(4, 3 * m)
+    if 3 * m <= _MM_COLS:
+        return (c.T @ x2).reshape(4, m, 3)
     ct = np.ascontiguousarray(c.T)
     out = np.empty((4, 3 * m))
     for s in range(0, 3 * m, _MM_COLS):
