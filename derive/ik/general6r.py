@@ -1162,17 +1162,34 @@ def _triple_coefs(c, e):
     return np.linalg.solve(np.kron(np.kron(_BS, _BS), _BS), vals).T
 
 
+#: The fit's inverse: (s, c, 1) x (s, c, 1) coefficients from the values at the 9 sample pairs.
+_KINV9 = np.linalg.inv(np.kron(_BS, _BS))
+
+
 def _pair_coefs(c, e, target):
-    """(n, 14, 9) coefficients of the pair side per pose."""
+    """(n, 14, 9) coefficients of the pair side per pose: the 14 equations of Rz(t0) K_a Rz(t1)
+    K_b (only its z column and origin enter them: Rz(t0) K_a Rz(t1) times K_b's last two
+    columns) at the 9 sample pairs, times the fit's inverse."""
     _, (a, b) = _cut_joints(e)
-    k = _links(c, target)
-    out = []
-    for t0, t1 in itertools.product(_SAMPLES, repeat=2):
-        ga = _rz(np.full(len(target), t0)) @ (k[a] if np.ndim(k[a]) == 3 else np.broadcast_to(k[a], (len(target), 4, 4)))
-        gb = _rz(np.full(len(target), t1)) @ (k[b] if np.ndim(k[b]) == 3 else np.broadcast_to(k[b], (len(target), 4, 4)))
-        out.append(_line_eqs(ga @ gb))
-    vals = np.stack(out, 1)                                  # (n, 9, 14)
-    return np.swapaxes(np.linalg.solve(np.kron(_BS, _BS), vals), 1, 2)
+    n = len(target)
+    k = {j: c[j] for j in range(1, 6)}
+    k[6] = c[6] @ _inv_rigid(target) @ c[0]
+    rz = _rz(_SAMPLES)                                       # (3, 4, 4)
+    cols = k[b][..., :, 2:]                                  # (4, 2) or (n, 4, 2)
+    vals = np.empty((n, 9, 14))
+    for j1 in range(3):
+        inner = k[a] @ (rz[j1] @ cols)                       # (n, 4, 2) (one side holds the pose)
+        for j0 in range(3):
+            m = rz[j0] @ inner
+            vals[:, 3 * j0 + j1] = _line_eqs_lp(m[..., :3, 0], m[..., :3, 1])
+    return np.einsum("cs,nse->nec", _KINV9, vals)
+
+
+def _line_eqs_lp(l, p):
+    """:func:`_line_eqs` of a line given by its direction l and point p (..., 3)."""
+    pp = np.sum(p * p, -1)[..., None]
+    pl = np.sum(p * l, -1)[..., None]
+    return np.concatenate([l, p, pp, pl, np.cross(p, l), pp * l - 2 * pl * p], -1)
 
 
 def _check_cut(c, e):
