@@ -220,7 +220,7 @@ def _chain_x(c, cq, sq, zs, ps, x=None, start=0, stop=6):
         _x_rot(x, cq[:, i, None], sq[:, i, None])
     if stop == 6:
         return _x_times(x, c[6])
-    x = _x_times(x, c[stop])
+    x = _x_start(c[stop], m) if x is None else _x_times(x, c[stop])
     zs[:, stop] = x[2]
     ps[:, stop] = x[3]
     return x
