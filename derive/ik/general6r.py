@@ -1454,7 +1454,7 @@ def _fk_exact(robot, q):
 def _mm(a, b):
     """a (N, k) @ b (k, l) in row blocks small enough that OpenBLAS keeps each on the calling
     thread (see :data:`_MM_COLS`)."""
-    rows = max(256, 200000 // (b.shape[0] * b.shape[1]))
+    rows = max(1, 250000 // (b.shape[0] * b.shape[1]))
     if a.shape[0] <= rows:
         return a @ b
     out = np.empty((a.shape[0], b.shape[1]))
