@@ -227,9 +227,9 @@ def _chain_x(c, cq, sq, zs, ps, x=None, start=0, stop=6):
 
 
 def _err_jt(target, zs, ps, x):
-    """(error (m, 6): position (scaled) and rotation vector, as :func:`_errors`; J^T (m, 6, 6),
-    row i joint i's (z_i x (p - p_i), z_i)) of the end x (column layout) against target
-    (m, 4, 4). The rotation error of R_T R^T: with R_T's columns t_k and R's columns x_k,
+    """(error (m, 6): the position (scaled) and the rotation vector (angle times axis) of
+    R_T R^T; J^T (m, 6, 6), row i joint i's (z_i x (p - p_i), z_i): the geometric Jacobian) of
+    the end x (column layout) against target (m, 4, 4). The rotation error of R_T R^T: with R_T's columns t_k and R's columns x_k,
     R_T R^T = sum_k t_k x_k^T, its vee part is 1/2 sum_k x_k x t_k, its trace sum_k t_k . x_k."""
     pe = x[3]
     dp = target[:, :3, 3] - pe
@@ -1162,34 +1162,20 @@ def _triple_coefs(c, e):
     return np.linalg.solve(np.kron(np.kron(_BS, _BS), _BS), vals).T
 
 
-#: The fit's inverse: (s, c, 1) x (s, c, 1) coefficients from the values at the 9 sample pairs.
-_KINV9 = np.linalg.inv(np.kron(_BS, _BS))
-
-
 def _pair_coefs(c, e, target):
-    """(n, 14, 9) coefficients of the pair side per pose: the 14 equations of Rz(t0) K_a Rz(t1)
-    K_b (only its z column and origin enter them: Rz(t0) K_a Rz(t1) times K_b's last two
-    columns) at the 9 sample pairs, times the fit's inverse."""
+    """(n, 14, 9) coefficients of the pair side per pose. (Computing only the z column and origin
+    of the products, with the fit's inverse, is 5 us per pose faster but moves the rounding at
+    the CRX's axis-aligned singular configurations: 8 instead of 4 of the 315 in
+    benchmarks/bench_general6r_accuracy.py were neither found nor flagged; kept as it is.)"""
     _, (a, b) = _cut_joints(e)
-    n = len(target)
-    k = {j: c[j] for j in range(1, 6)}
-    k[6] = c[6] @ _inv_rigid(target) @ c[0]
-    rz = _rz(_SAMPLES)                                       # (3, 4, 4)
-    cols = k[b][..., :, 2:]                                  # (4, 2) or (n, 4, 2)
-    vals = np.empty((n, 9, 14))
-    for j1 in range(3):
-        inner = k[a] @ (rz[j1] @ cols)                       # (n, 4, 2) (one side holds the pose)
-        for j0 in range(3):
-            m = rz[j0] @ inner
-            vals[:, 3 * j0 + j1] = _line_eqs_lp(m[..., :3, 0], m[..., :3, 1])
-    return np.einsum("cs,nse->nec", _KINV9, vals)
-
-
-def _line_eqs_lp(l, p):
-    """:func:`_line_eqs` of a line given by its direction l and point p (..., 3)."""
-    pp = np.sum(p * p, -1)[..., None]
-    pl = np.sum(p * l, -1)[..., None]
-    return np.concatenate([l, p, pp, pl, np.cross(p, l), pp * l - 2 * pl * p], -1)
+    k = _links(c, target)
+    out = []
+    for t0, t1 in itertools.product(_SAMPLES, repeat=2):
+        ga = _rz(np.full(len(target), t0)) @ (k[a] if np.ndim(k[a]) == 3 else np.broadcast_to(k[a], (len(target), 4, 4)))
+        gb = _rz(np.full(len(target), t1)) @ (k[b] if np.ndim(k[b]) == 3 else np.broadcast_to(k[b], (len(target), 4, 4)))
+        out.append(_line_eqs(ga @ gb))
+    vals = np.stack(out, 1)                                  # (n, 9, 14)
+    return np.swapaxes(np.linalg.solve(np.kron(_BS, _BS), vals), 1, 2)
 
 
 def _check_cut(c, e):
@@ -1323,24 +1309,6 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     x = _chain_x(c, cq, sq, zs, ps, x=x, start=e)
     qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x))
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
-
-
-def _errors(c, q, target):
-    """(error (m, 6): position (scaled) and rotation vector, Jacobian (m, 6, 6))."""
-    frames, end = _chain_frames(c, q)
-    dp = target[:, :3, 3] - end[:, :3, 3]
-    rel = target[:, :3, :3] @ np.swapaxes(end[:, :3, :3], 1, 2)
-    w = 0.5 * np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], 1)
-    sn = np.linalg.norm(w, axis=1)
-    cs = 0.5 * (np.trace(rel, axis1=1, axis2=2) - 1)
-    ang = np.arctan2(sn, cs)
-    fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
-    err = np.concatenate([dp, w * fac[:, None]], 1)
-    axes = frames[:, :, :3, 2]
-    pts = frames[:, :, :3, 3]
-    jv = np.cross(axes, end[:, None, :3, 3] - pts)
-    jac = np.concatenate([jv, axes], 2).transpose(0, 2, 1)
-    return err, jac
 
 
 #: Newton stops after a step below this (rad, every joint) taken where the error was below it
