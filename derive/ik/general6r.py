@@ -244,13 +244,19 @@ def _err_jt(target, zs, ps, x):
     ang = np.arctan2(sn, 0.5 * (tr - 1))
     fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
     err = np.concatenate([dp, w * fac[:, None]], 1)
+    return err, _jt(zs, ps, pe)
+
+
+def _jt(zs, ps, pe):
+    """J^T (m, 6, 6) of the geometric Jacobian: row i (z_i x (p - p_i), z_i), from the joints'
+    z axes and origins zs, ps (m, 6, 3) and the end's origin pe (m, 3)."""
     jt = np.empty((len(pe), 6, 6))
     r = pe[:, None, :] - ps
     jt[:, :, 0] = zs[:, :, 1] * r[:, :, 2] - zs[:, :, 2] * r[:, :, 1]
     jt[:, :, 1] = zs[:, :, 2] * r[:, :, 0] - zs[:, :, 0] * r[:, :, 2]
     jt[:, :, 2] = zs[:, :, 0] * r[:, :, 1] - zs[:, :, 1] * r[:, :, 0]
     jt[:, :, 3:] = zs
-    return err, jt
+    return jt
 
 
 def _frames_x(c, q):
@@ -1467,8 +1473,8 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
             bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
             redo = ~(bound >= 10 * G6_NEAR_SINGULAR)
         if np.any(redo):
-            jr = np.swapaxes(_err_jt(np.broadcast_to(np.eye(4), (int(np.sum(redo)), 4, 4)),
-                                     *_frames_x(pl.c, qc[redo]))[1], 1, 2)
+            zs, ps, x = _frames_x(pl.c, qc[redo])
+            jr = np.swapaxes(_jt(zs, ps, x[3]), 1, 2)
             jac[redo] = jr
             bound[redo] = np.abs(np.linalg.det(jr)) / np.sum(jr * jr, axis=(1, 2)) ** 3
     is_sing = ~(bound >= G6_NEAR_SINGULAR)
