@@ -25,7 +25,8 @@ from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
 from derive.ik.select import LIMIT_SLACK
-from derive.ik.ir import leaf_of, leaf_weights
+from derive.ik.tolerances import SP_ROOT_MODULUS
+from derive.ik.ir import leaf_of, leaf_weights, roots4_names
 from derive.ik.program import ik_program
 from derive.ik.redundant import FREE_CHOICES, redundant_kind
 from derive.model.robot import load_robot
@@ -277,6 +278,8 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
         if op.kind == "branch":
             d["index"] = "b" + op.name[2:]
             branch_index.append(d["index"])
+        if op.kind == "roots4":
+            d["coef"], d["names"] = [pr(e) for e in op.args], list(roots4_names(op.name))
         ops.append(d)
     k = len(branch_index)
     leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
@@ -308,7 +311,10 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
                    "same_as": same_as, "near": near, "dups": dups, "gates": gates,
                    "free": prog.free, "free_doc": prog.free_doc,
                    "singular_doc": prog.singular_doc or "sin theta5 = 0",
-                   "steps_source": prog.steps_source or "from the derived equations"},
+                   "steps_source": prog.steps_source or "from the derived equations",
+                   # the root finder of the "roots4" lines, printed only where a program has them
+                   "roots4": ({"root_modulus": repr(SP_ROOT_MODULUS)}
+                              if any(op.kind == "roots4" for op in prog.ops) else None)},
             "ik_missing": ""}
 
 
@@ -436,6 +442,9 @@ def _magnitude_bounds(prog) -> dict:
             bound[op.name] = max(mag(sp.sympify(op.expr)), mag(sp.sympify(op.other)))
         elif op.kind in ("sincos", "double"):
             bound[op.name] = bound[op.name2] = 1.0
+        elif op.kind == "roots4":           # angles in (-pi, pi], flags 0 or 1
+            names = roots4_names(op.name)
+            bound.update({n: math.pi for n in names[:4]} | {n: 1.0 for n in names[4:]})
     return bound
 
 
@@ -453,6 +462,8 @@ def _flat_ops(prog, printer, numeric) -> list:
             depth_of[op.name] = op.depth
         if op.kind in ("sincos", "double"):
             depth_of[op.name] = depth_of[op.name2] = op.depth
+        if op.kind == "roots4":
+            depth_of.update({n: op.depth for n in (op.name, *roots4_names(op.name))})
 
     def name(n, path):
         d = depth_of[n]
@@ -489,6 +500,9 @@ def _flat_ops(prog, printer, numeric) -> list:
             d["hs"], d["hc"] = (name(a, path) for a in op.args)
         elif op.kind == "require":
             d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
+        elif op.kind == "roots4":
+            d["names"] = [name(n, path) for n in roots4_names(op.name)]
+            d["coef"] = [pr(e, path) for e in op.args]
         elif op.kind == "solution":
             leaf = leaf_of(prog, path)
             d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
@@ -534,10 +548,16 @@ def _live(flat: list, full: bool = False) -> list:
             names = {d["name"], d.get("name2")}
             if not names & live:
                 continue
+        if d["kind"] == "roots4":
+            if not set(d["names"]) & live:
+                continue
+            d = {**d, "used": [n in live for n in d["names"]]}     # one call, the names read
         if d["kind"] == "select":
             reads = [d["other"]] if d["regular"] and not full else [d["e"], d["cond"], d["other"]]
         elif d["kind"] == "double":
             reads = [d["hs"], d["hc"]]
+        elif d["kind"] == "roots4":
+            reads = d["coef"]
         elif d["kind"] == "solution":
             reads = [*d["q"], d["ok"], d["sing"]]
         else:
