@@ -227,7 +227,7 @@ def test_kernels_on_the_wrist_singularity(arm, kernel_sols, lang):
     """Poses of configurations with q5 = 0, where axis 6 is parallel to axes 2-4 and subproblem
     6's quartic has a double root in q1 (its second equation is even in q5): a double root is
     only defined to about the square root of the rounding, so the solutions of those slots are
-    within 1e-7 of the pose (the numpy reference, which checks every candidate by FK at 1e-10,
+    within 1e-6 of the pose (the numpy reference, which checks every candidate by FK at 1e-10,
     drops some of them: then the kernels have more solutions). Joints 1 and 5 of every solution of
     the reference and of the generating configuration are among the kernels', no NaN."""
     P, out, _, _ = kernel_sols
@@ -242,7 +242,7 @@ def test_kernels_on_the_wrist_singularity(arm, kernel_sols, lang):
         assert all(_wrapped(y[[0, 4]], s[:, [0, 4]]).max(-1).min() < 1e-6 for y in ref_q[i, :ref_c[i]]), i
         assert _wrapped(s[:, [0, 4]], qs[i, [0, 4]]).max(-1).min() < 1e-6, i
         dp, dr = reference.pose_error(reference.fk(arm, s), np.repeat(P[i:i + 1], C[i], axis=0))
-        assert dp.max() < 1e-7 and dr.max() < 1e-7, i
+        assert dp.max() < 1e-6 and dr.max() < 1e-6, i
 
 
 def test_c_kernels_hold_every_eaik_solution(eaik, poses, kernel_sols):
@@ -362,6 +362,7 @@ ROOTS_DRIVER = r"""#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #define DQ_NOINLINE
+#define dq_atan2 atan2
 static double dq_max(double a, double b) { return a > b ? a : b; }
 %s
 
