@@ -285,7 +285,11 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
     leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
     flat_raw = _flat_ops(prog, _C(), numeric)
     flat_full = _live(flat_raw, full=True)
-    flat = _live(flat_raw)
+    roots4 = _roots4_context(prog, flat_raw)
+    if roots4 and roots4["prefix"]:           # the vectorised loop reads the roots from the block
+        flat = _live([{**d, "loaded": True} if d["kind"] == "roots4" else d for d in flat_raw])
+    else:
+        flat = _live(flat_raw)
     # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
     # is common to four leaves of the UR, ...): the nearest pass computes each value's winding once
     first: dict = {}
@@ -313,9 +317,25 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
                    "singular_doc": prog.singular_doc or "sin theta5 = 0",
                    "steps_source": prog.steps_source or "from the derived equations",
                    # the root finder of the "roots4" lines, printed only where a program has them
-                   "roots4": ({"root_modulus": repr(SP_ROOT_MODULUS)}
-                              if any(op.kind == "roots4" for op in prog.ops) else None)},
+                   "roots4": roots4},
             "ik_missing": ""}
+
+
+def _roots4_context(prog, flat_raw):
+    """What the printers need for the program's "roots4" lines (None without one): the root
+    test's threshold and, for the C batch loop, ``prefix``: where the program has one such line,
+    outside every branch, the flat lines its coefficients need and the line itself
+    (``roots4_store``), which the C template runs in a scalar loop of their own before the
+    vectorised loop (which then reads the roots from the block: a call inside it would keep the
+    whole loop from vectorising); None otherwise (the loop calls the root finder)."""
+    at = [i for i, d in enumerate(flat_raw) if d["kind"] == "roots4"]
+    if not at:
+        return None
+    prefix = None
+    if len(at) == 1 and sum(op.kind == "roots4" and op.depth == 0 for op in prog.ops) == 1:
+        pre = [d for d in flat_raw[:at[0]] if not d["kind"].startswith("ok_")]
+        prefix = _live(pre + [{**flat_raw[at[0]], "kind": "roots4_store"}])
+    return {"root_modulus": repr(SP_ROOT_MODULUS), "prefix": prefix}
 
 
 def _general_ik_context(robot, free=None):
@@ -556,8 +576,8 @@ def _live(flat: list, full: bool = False) -> list:
             reads = [d["other"]] if d["regular"] and not full else [d["e"], d["cond"], d["other"]]
         elif d["kind"] == "double":
             reads = [d["hs"], d["hc"]]
-        elif d["kind"] == "roots4":
-            reads = d["coef"]
+        elif d["kind"] in ("roots4", "roots4_store"):
+            reads = [] if d.get("loaded") else d["coef"]
         elif d["kind"] == "solution":
             reads = [*d["q"], d["ok"], d["sing"]]
         else:
