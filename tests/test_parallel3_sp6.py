@@ -303,11 +303,12 @@ def _root_cases():
     constant), F = 0, a double root, and tiny and huge scales."""
     rng = np.random.default_rng(30)
     known, _ = _known_roots(rng, 200)
+    close, _ = _known_roots(rng, 40, spread=0.01)             # roots 0.01 rad apart or more
     special = [[0.0, 0.0, 0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0, 0.0], [0.3, 1.0, 0.0, 0.0, 0.0],
                [1.0, 1.0, 0.0, 0.0, 0.0],                     # 1 + cos t: a double root at pi
                [0.0, 0.0, 0.0, 1.0, 0.0],                     # cos 2t: +-pi/4, +-3 pi/4
                [1e-150, 2e-150, 0.5e-150, -1e-150, 0.3e-150], [1e150, 2e150, 0.5e150, -1e150, 0.3e150]]
-    return np.concatenate([rng.normal(size=(300, 5)), known, np.array(special)])
+    return np.concatenate([rng.normal(size=(300, 5)), known, close, np.array(special)])
 
 
 def _sorted_roots(coef):
@@ -386,7 +387,7 @@ int main(void)
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="gcc not installed")
 def test_c_source_compiles_as_c99_and_cxx_and_its_roots4(kernel_texts, tmp_path):
     """The emitted C with -Wall -Wextra -Wpedantic -Werror as C99 and C++17, and its dq_roots4
-    (the Durand-Kerner quartic) through a driver that includes its text, under the address and
+    (Ferrari's roots polished by the Durand-Kerner iteration) through a driver that includes its text, under the address and
     undefined-behaviour sanitizers, against numpy's companion-matrix roots."""
     for name, text in kernel_texts.values():
         (tmp_path / name).write_text(text)
@@ -400,8 +401,8 @@ def test_c_source_compiles_as_c99_and_cxx_and_its_roots4(kernel_texts, tmp_path)
         assert res.returncode == 0, (cmd, res.stderr[-3000:])
     # the emitted dq_roots4, cut from the source (a sanitizer build of the whole kernel takes 30 s)
     text = kernel_texts["c_source"][1]
-    start = text.index("static DQ_NOINLINE void dq_roots4(")
-    (tmp_path / "driver.c").write_text(ROOTS_DRIVER % text[start:text.index("\n}\n", start) + 3])
+    start, end = text.index("static void dq_quad_roots("), text.index("static DQ_NOINLINE void dq_roots4(")
+    (tmp_path / "driver.c").write_text(ROOTS_DRIVER % text[start:text.index("\n}\n", end) + 3])
     res = subprocess.run(["gcc", "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
                           "-fno-sanitize-recover=all", "-o", str(tmp_path / "driver"), str(tmp_path / "driver.c"),
                           "-lm"], capture_output=True, text=True)
