@@ -2,7 +2,9 @@
 subproblem 6, derive.ik.parallel3.solve_batch_sp6) on a test arm of that layout
 (tests/data/ur5-wrist-offset.yaml: the UR5 with a5 = 0.05 m): its file against EAIK's DH model,
 its classification, and the numpy reference's solution sets against EAIK's solver (family
-6R-THREE_INNER_PARALLEL)."""
+6R-THREE_INNER_PARALLEL); its kernels (C, numpy, pure Python: the IK program of
+derive.ik.program_parallel3.parallel3_sp6_program) against the reference branch by branch, EAIK
+and ssik, and the root finder of the program's roots4 line in each printed language."""
 
 import math
 import shutil

@@ -17,6 +17,11 @@ Z1's axes along x, y, z make most terms vanish), and written to be total:
   (|h_6 x R_5^T h_2| below WRIST_SINGULAR: q6 free, set to 0; flag ``singular_wr``).
 
 Branch numbering as :func:`derive.ik.parallel3.solve_batch`: k = 4 i1 + 2 i5 + i3.
+
+The layout with axes 5 and 6 not meeting (:func:`parallel3_sp6_program`) solves q1 and q5 by
+subproblem 6: q5's 2x2 block eliminated, a "roots4" line for the quartic in q1
+(:meth:`derive.ik.ir.Builder.roots4`), steps 3-6 as above; branch k = 2 i6 + i3 as
+:func:`derive.ik.parallel3.solve_batch_sp6`.
 """
 
 from __future__ import annotations
