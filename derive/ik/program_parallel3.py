@@ -36,7 +36,7 @@ from derive.errors import DeriveError
 from derive.ik.extract import _rot
 from derive.ik.ir import Builder, IKProgram, Op, pos
 from derive.ik.parallel3 import P3Geometry
-from derive.ik.tolerances import REACH_TOL, SP_EXACT_TOL, SP_FREE_ANGLE, SP_RANK_TOL, WRIST_SINGULAR
+from derive.ik.tolerances import REACH_TOL, SP6_DOUBLE_ROOT, SP_EXACT_TOL, SP_FREE_ANGLE, SP_RANK_TOL, WRIST_SINGULAR
 
 #: Numbers of the geometry within this of an integer are that integer.
 SNAP = 1e-12
@@ -317,6 +317,11 @@ def parallel3_sp6_program(robot, geo: P3Geometry) -> IKProgram:
     bld.require(valid > 0.5)
     q1 = bld.select("q1", sing_sh, 0, t1)
     c1, s1 = sp.cos(q1), sp.sin(q1)
+    # a (near-)double root of the quartic is only good to about the square root of the rounding
+    # (FK errors up to 1e-7 at the wrist singularity q5 = 0): flag singular_dr where
+    # |F'(q1)| < SP6_DOUBLE_ROOT (|A0| + |A1| + |B1| + |A2| + |B2|)
+    dfq = bld.let("dfq", -cf[1] * s1 + cf[2] * c1 - 2 * cf[3] * sp.sin(2 * q1) + 2 * cf[4] * sp.cos(2 * q1))
+    sing_dr = bld.flag("singular_dr", sp.Abs(dfq) < SP6_DOUBLE_ROOT * sum(sp.Abs(e) for e in cf))
     # x_5 det = adj (b - M_a x_1) = g - adj(M_a) x_1; q5 from it, its residual in both equations
     nq = _lets(bld, "nq", [g[i] - gm[i][0] * s1 - gm[i][1] * c1 for i in range(2)])
     nn = bld.let("nnq", nq[0] ** 2 + nq[1] ** 2)
@@ -331,7 +336,7 @@ def parallel3_sp6_program(robot, geo: P3Geometry) -> IKProgram:
     bld.set_trig(q5, s5, c5)
     rt, u16 = _shoulder_lets(bld, h, q1, r06, p16)
     p45 = [p[4][i] + e for i, e in enumerate(_rot_vec(h[4], c5, s5, p[5]))]    # p_4 + R_5 p_5
-    _wrist_and_arm(bld, geo, h, p, rt, u16, (q1, q5, s5, c5), sing_sh, p45)
+    _wrist_and_arm(bld, geo, h, p, rt, u16, (q1, q5, s5, c5), sp.Or(sing_sh, sing_dr), p45)
     steps = [
         ("pose, point of axis 6", "R_06 = R R_6T^T, p_16 = t - p_0 - R_06 p_6",
          [f"three-parallel class (axes 5 and 6 not meeting), product-of-exponentials mismatch {geo.error:.1g}"]),
