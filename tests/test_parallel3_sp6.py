@@ -222,7 +222,7 @@ def test_kernels_are_the_numpy_reference_branch_by_branch(arm, poses, kernel_sol
     # quartic (flag singular_dr, which the reference does not have: its FK check at 1e-10 drops
     # an inexact candidate instead): two solutions nearly merge there, so the configuration is
     # near a singular one (the Jacobian's smallest singular value over its largest below 1e-2;
-    # 2.5e-3 at most on 2000 random poses), and few are
+    # 2.3e-4 at most on 2000 random poses), and few are
     got = sing[branch >= 0].astype(bool)
     want = ref_sing[np.arange(len(P))[:, None], np.maximum(branch, 0)][branch >= 0]
     rows = np.concatenate([S[i, :C[i]] for i in range(len(P))])

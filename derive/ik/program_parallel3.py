@@ -14,7 +14,8 @@ Z1's axes along x, y, z make most terms vanish), and written to be total:
   |a|^2 - b^2 < -REACH_TOL max(1, b^2)), within it the root is clipped;
 * singular sets (flag ``singular``): the wrist point on axis 1 (|a| of the q1 step below
   SP_FREE_ANGLE: q1 free, set to 0; flag ``singular_sh``) and axis 6 parallel to the parallel axes
-  (|h_6 x R_5^T h_2| below WRIST_SINGULAR: q6 free, set to 0; flag ``singular_wr``).
+  (|h_6 x R_5^T h_2| below WRIST_SINGULAR: q6 free, set to 0; flag ``singular_wr``); in the sp6
+  layout also q1 a near-double root of subproblem 6's quartic (flag ``singular_dr``).
 
 Branch numbering as :func:`derive.ik.parallel3.solve_batch`: k = 4 i1 + 2 i5 + i3.
 
@@ -264,7 +265,12 @@ def parallel3_sp6_program(robot, geo: P3Geometry) -> IKProgram:
          branch bits select. A slot is kept when its root is real and the two equations' residual
          at (q1, q5) is within SP_EXACT_TOL (the numpy subproblem's test). q1 is free where M_a
          vanishes (a column norm of the row-scaled M below SP_RANK_TOL: p_16 and R_06 h_6 both on
-         axis 1): 0 in slot 0, flag ``singular_sh``;
+         axis 1): 0 in slot 0, flag ``singular_sh``. Where q1 is a (near-)double root of the
+         quartic (|F'(q1)| below SP6_DOUBLE_ROOT times the sum of |coefficients|; at the wrist
+         singularity q5 = 0 among others) it is good to about the square root of the rounding
+         only, and the solution may miss the pose by up to about 2e-7: flag ``singular_dr``, ORed
+         into ``singular`` (solve_batch_sp6 drops such a candidate at its FK check instead;
+         docs/ik.md says why the kernels keep it flagged);
     3-6. as :func:`parallel3_program`, with p_4 + R(h_5, q5) p_5 for p_4 in step 5.
 
     Branch k = 2 i6 + i3 = 4 ia + 2 ib + i3 (slot i6 = 2 ia + ib), as
