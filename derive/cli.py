@@ -272,8 +272,8 @@ def _robot_row(name: str) -> dict:
     r = load_robot(name)
     c = geometric_classify(r)
     p3 = None if c.closed_form or spherical_class(r) is not None else parallel3_class(r)
-    # the three-parallel layout with axes 5 and 6 apart: the numpy closed form (subproblem 6), and
-    # kernels of the general 6R elimination (no IK program, so no CasADi ik)
+    # the three-parallel layout with axes 5 and 6 apart: closed form (subproblem 6) in numpy and in
+    # the kernels (its IK program's quartic roots have no CasADi form, so no CasADi ik)
     sp6 = p3 is not None and p3.layout != "intersecting"
     closed = "UR" if c.closed_form else ("OPW" if spherical_class(r) is not None else
                                          ("three parallel (sp6)" if sp6 else "three parallel") if p3 else "")
@@ -283,7 +283,7 @@ def _robot_row(name: str) -> dict:
     near = (not closed and not kind and (r.nominal or c.near_misses) and reference._near(r))
     # the general 6R route: what its derivation decided, from the cache without deriving (the
     # kernels' own test, derive.ik.general6r.status; "unchecked" until it is first derived)
-    route = sp6 or (not closed and not kind and not near and _general_6r(r))
+    route = not closed and not kind and not near and _general_6r(r)
     g6 = general6r.status(r) if route else None
     ik = closed or (f"{'Panda' if kind == 'panda' else 'SRS'}, {FREE_NAMES[kind]} free" if kind else
                     f"nominal {nearclass.nominal_class(r)} + Newton polish" if near else
@@ -296,7 +296,7 @@ def _robot_row(name: str) -> dict:
     # joint 3 given; any other 6R arm's kernels the general 6R elimination (up to 16 solutions)
     # when its elimination is regular with Q of rank 8 (derive.codegen.general6r)
     general = route and g6 in ("kernels", "unchecked")
-    has_ik = bool((closed and not sp6) or kind or (near and r.dof == 6) or general)
+    has_ik = bool(closed or kind or (near and r.dof == 6) or general)
     given = " (q3 given)" if near and r.dof == 7 else ""
     given += " (elimination unchecked)" if general and g6 == "unchecked" else ""
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
@@ -307,7 +307,7 @@ def _robot_row(name: str) -> dict:
             "ik": ik,
             "kernels": ("FK+IK" if has_ik or given else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else given)
                        + ", " + _where(r.id, "c_source"),
-            "casadi": ("fk, residual, ik" if has_ik and not route else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
+            "casadi": ("fk, residual, ik" if has_ik and not route and not sp6 else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
 
 

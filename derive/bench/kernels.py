@@ -62,7 +62,7 @@ def _harness(robot: str, q: np.ndarray, poses: np.ndarray, repeats: int) -> dict
     compiler = c_compiler()
     if compiler is None:
         return {"error": "no C compiler"}
-    ident = identifier(robot)
+    ident = identifier(load_robot(robot).name)     # a file's robot too, not its path
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         folder, manifest = kernel_folder(robot)      # the shipped or cached sources: no derivation

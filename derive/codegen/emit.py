@@ -25,7 +25,8 @@ from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
 from derive.ik.select import LIMIT_SLACK
-from derive.ik.ir import leaf_of, leaf_weights
+from derive.ik.tolerances import SP_ROOT_MODULUS
+from derive.ik.ir import leaf_of, leaf_weights, roots4_names
 from derive.ik.program import ik_program
 from derive.ik.redundant import FREE_CHOICES, redundant_kind
 from derive.model.robot import load_robot
@@ -277,12 +278,18 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
         if op.kind == "branch":
             d["index"] = "b" + op.name[2:]
             branch_index.append(d["index"])
+        if op.kind == "roots4":
+            d["coef"], d["names"] = [pr(e) for e in op.args], list(roots4_names(op.name))
         ops.append(d)
     k = len(branch_index)
     leaf = " + ".join(f"{w}*{b}" if w != 1 else b for w, b in zip(leaf_weights(prog), branch_index))
     flat_raw = _flat_ops(prog, _C(), numeric)
     flat_full = _live(flat_raw, full=True)
-    flat = _live(flat_raw)
+    roots4 = _roots4_context(prog, flat_raw)
+    if roots4 and roots4["prefix"]:           # the vectorised loop reads the roots from the block
+        flat = _live([{**d, "loaded": True} if d["kind"] == "roots4" else d for d in flat_raw])
+    else:
+        flat = _live(flat_raw)
     # per leaf and joint, the first leaf whose value of that joint is the same expression (theta1
     # is common to four leaves of the UR, ...): the nearest pass computes each value's winding once
     first: dict = {}
@@ -308,8 +315,27 @@ def _ik_context(robot, free: str | None = None, nominal=None) -> dict:
                    "same_as": same_as, "near": near, "dups": dups, "gates": gates,
                    "free": prog.free, "free_doc": prog.free_doc,
                    "singular_doc": prog.singular_doc or "sin theta5 = 0",
-                   "steps_source": prog.steps_source or "from the derived equations"},
+                   "steps_source": prog.steps_source or "from the derived equations",
+                   # the root finder of the "roots4" lines, printed only where a program has them
+                   "roots4": roots4},
             "ik_missing": ""}
+
+
+def _roots4_context(prog, flat_raw):
+    """What the printers need for the program's "roots4" lines (None without one): the root
+    test's threshold and, for the C batch loop, ``prefix``: where the program has one such line,
+    outside every branch, the flat lines its coefficients need and the line itself
+    (``roots4_store``), which the C template runs in a scalar loop of their own before the
+    vectorised loop (which then reads the roots from the block: a call inside it would keep the
+    whole loop from vectorising); None otherwise (the loop calls the root finder)."""
+    at = [i for i, d in enumerate(flat_raw) if d["kind"] == "roots4"]
+    if not at:
+        return None
+    prefix = None
+    if len(at) == 1 and sum(op.kind == "roots4" and op.depth == 0 for op in prog.ops) == 1:
+        pre = [d for d in flat_raw[:at[0]] if not d["kind"].startswith("ok_")]
+        prefix = _live(pre + [{**flat_raw[at[0]], "kind": "roots4_store"}])
+    return {"root_modulus": repr(SP_ROOT_MODULUS), "prefix": prefix}
 
 
 def _general_ik_context(robot, free=None):
@@ -436,6 +462,9 @@ def _magnitude_bounds(prog) -> dict:
             bound[op.name] = max(mag(sp.sympify(op.expr)), mag(sp.sympify(op.other)))
         elif op.kind in ("sincos", "double"):
             bound[op.name] = bound[op.name2] = 1.0
+        elif op.kind == "roots4":           # angles in (-pi, pi], flags 0 or 1
+            names = roots4_names(op.name)
+            bound.update({n: math.pi for n in names[:4]} | {n: 1.0 for n in names[4:]})
     return bound
 
 
@@ -453,6 +482,8 @@ def _flat_ops(prog, printer, numeric) -> list:
             depth_of[op.name] = op.depth
         if op.kind in ("sincos", "double"):
             depth_of[op.name] = depth_of[op.name2] = op.depth
+        if op.kind == "roots4":
+            depth_of.update({n: op.depth for n in (op.name, *roots4_names(op.name))})
 
     def name(n, path):
         d = depth_of[n]
@@ -489,6 +520,9 @@ def _flat_ops(prog, printer, numeric) -> list:
             d["hs"], d["hc"] = (name(a, path) for a in op.args)
         elif op.kind == "require":
             d = {"kind": "ok_and", "name": ok(path), "e": pr(op.expr, path)}
+        elif op.kind == "roots4":
+            d["names"] = [name(n, path) for n in roots4_names(op.name)]
+            d["coef"] = [pr(e, path) for e in op.args]
         elif op.kind == "solution":
             leaf = leaf_of(prog, path)
             d = {"kind": "solution", "leaf": leaf, "ok": ok(path), "q": [pr(e, path) for e in op.args],
@@ -534,10 +568,16 @@ def _live(flat: list, full: bool = False) -> list:
             names = {d["name"], d.get("name2")}
             if not names & live:
                 continue
+        if d["kind"] == "roots4":
+            if not set(d["names"]) & live:
+                continue
+            d = {**d, "used": [n in live for n in d["names"]]}     # one call, the names read
         if d["kind"] == "select":
             reads = [d["other"]] if d["regular"] and not full else [d["e"], d["cond"], d["other"]]
         elif d["kind"] == "double":
             reads = [d["hs"], d["hc"]]
+        elif d["kind"] in ("roots4", "roots4_store"):
+            reads = [] if d.get("loaded") else d["coef"]
         elif d["kind"] == "solution":
             reads = [*d["q"], d["ok"], d["sing"]]
         else:

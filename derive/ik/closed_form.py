@@ -430,8 +430,10 @@ def classify(robot) -> Classification:
         notes = [n for n in c.notes if "derive.refine" not in n and "no closed form" not in n
                  and "derive.ik.parallel3" not in n]
         return dataclasses.replace(c, closed_form=True, notes=notes + [
-            "closed-form IK of the three-parallel class (derive.ik.parallel3), up to 8 solutions: "
-            + parallel3.describe(p3)])
+            "closed-form IK of the three-parallel class (derive.ik.parallel3), up to 8 solutions, in "
+            "the numpy reference and the generated kernels (derive.kernels(robot).ik"
+            + ("" if p3.layout == "intersecting" else "; each kernel solves subproblem 6's quartic")
+            + "): " + parallel3.describe(p3)])
     rel = closed_form_relation(robot)
     if rel is None:
         if robot.dof == 6 and all(j.type == "revolute" and not j.is_mimic for j in robot.joints):

@@ -26,7 +26,10 @@ class Op:
     kind: "let" (name = expr), "sincos" (name, name2 = sin, cos of expr), "double"
     (name, name2 = sin, cos of twice the angle whose sin, cos are args), "branch" (name = +1,
     then -1, for everything after), "require" (drop the branch unless expr, a relational,
-    holds), "select" (name = expr if cond else other), "solution" (exprs, one per joint).
+    holds), "select" (name = expr if cond else other), "solution" (exprs, one per joint),
+    "roots4" (the up to 4 real roots of a trigonometric polynomial of degree 2, a quartic in the
+    tangent half-angle: :meth:`Builder.roots4`; args its five coefficients, names
+    :func:`roots4_names`).
     """
 
     kind: str
@@ -57,6 +60,12 @@ class IKProgram:
     free_doc: str = ""                      # what it is, for the generated files' headers
     singular_doc: str = ""                  # where the free joint is free, for the headers ("" : sin theta5 = 0)
     steps_source: str = ""                  # where the steps come from, for the headers ("": the derived equations)
+
+
+def roots4_names(stem: str) -> tuple:
+    """The names a "roots4" line defines: the four angles ``stem0`` .. ``stem3`` and their
+    validity flags ``stem_ok0`` .. ``stem_ok3`` (1.0 for a real root, 0.0 for an empty slot)."""
+    return tuple(f"{stem}{i}" for i in range(4)) + tuple(f"{stem}_ok{i}" for i in range(4))
 
 
 def leaf_weights(prog: IKProgram) -> tuple:
@@ -127,6 +136,23 @@ class Builder:
                            other=self._trig(self._num(b)), depth=self.depth))
         self.known.add(sym)
         return sym
+
+    def roots4(self, stem: str, coef) -> tuple:
+        """A "roots4" line: the real roots t in (-pi, pi] of
+        F(t) = A0 + A1 cos t + B1 sin t + A2 cos 2t + B2 sin 2t, coef = (A0, A1, B1, A2, B2): up to
+        4, the real roots of the quartic (1 + u^2)^2 F in u = tan((t - t0) / 2) (the shift t0 and
+        the root test of :func:`derive.ik.subproblems._common._trig_roots`, two Newton steps on F).
+        The slots hold the real roots first, in ascending order of the angle, then the empty slots
+        (angle 0, flag 0.0): every printer computes the same slots, so that branches that select a
+        slot agree across the languages. Total: no root (all flags 0.0) where F vanishes or
+        is tiny at every sample. Returns the symbols (angles (4,), flags (4,))."""
+        args = tuple(self._trig(self._num(e)) for e in coef)
+        if len(args) != 5:
+            raise DeriveError("IK program: roots4 takes five coefficients (A0, A1, B1, A2, B2)")
+        self.ops.append(Op("roots4", stem, args=args, depth=self.depth))
+        syms = [sp.Symbol(n, real=True) for n in roots4_names(stem)]
+        self.known.update(syms)
+        return tuple(syms[:4]), tuple(syms[4:])
 
     def set_trig(self, arg, s, c):
         self.trig[sp.expand(arg)] = (s, c)

@@ -372,7 +372,9 @@ def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None
     ``IK_3_parallel``, module docstring): (q (n, 8, 6), singular (n, 8), reason codes (n, 8): 0
     ok, 1 subproblem 6 without a solution in that slot (``REASON_SP6``), 2 q3 unreachable
     (``REASON_REACH``)); branch k = 2 i6 + i3 with i6 the slot of subproblem 6 (0-3) and i3 the
-    root of q3. ``q_ref``: its q6 is used where q6 is free (R_5^T h_2 along h_6), else 0.
+    root of q3; the solutions of subproblem 6 fill the first slots, ascending in q1 (the order
+    of the IK program, :func:`derive.ik.program_parallel3.parallel3_sp6_program`, so that the
+    kernels' branches are these). ``q_ref``: its q6 is used where q6 is free (R_5^T h_2 along h_6), else 0.
     Subproblem 6 returns no least-squares solution, so ``keep_unreachable`` keeps only the q3
     roots of the slots it solved."""
     n = poses.shape[0]
@@ -395,10 +397,16 @@ def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None
     pp = np.stack([p16, np.broadcast_to(-p[5], (n, 3)), r06h6, -hb[5]], axis=1)
     d = np.stack([np.full(n, geo.d1), np.zeros(n)], axis=-1)
     s6 = sp6(hh, kk, pp, d)
+    # the slots in a canonical order, as the IK program's (derive.ik.program_parallel3): the
+    # solutions first, ascending in q1, then the empty slots
+    ok_all = _ok(s6)
+    order = np.argsort(np.where(ok_all, s6.theta[:, :, 0], np.inf), axis=-1, kind="stable")
+    ok_all = np.take_along_axis(ok_all, order, axis=-1)
+    theta6 = np.take_along_axis(s6.theta, order[..., None], axis=1)
     for i6 in range(4):
-        ok6 = _ok(s6)[:, i6]
-        q1 = np.where(ok6, s6.theta[:, i6, 0], 0.0)
-        q5 = np.where(ok6, s6.theta[:, i6, 1], 0.0)
+        ok6 = ok_all[:, i6]
+        q1 = np.where(ok6, theta6[:, i6, 0], 0.0)
+        q5 = np.where(ok6, theta6[:, i6, 1], 0.0)
         r1 = _rotm(hb[0], q1)
         rt = np.einsum("nji,njk->nik", r1, r06)                          # R_1^T R_06
         # 3. q6 and 4. theta = q2 + q3 + q4 (subproblems 1)

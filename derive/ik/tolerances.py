@@ -212,3 +212,8 @@ G6_PERTURB_TRIALS = 3
 #: merged pair can be lost; at a singular solution the joints are only determined to about the
 #: square root of G6_ACCEPT).
 G6_NEAR_SINGULAR = 1e-6
+#: The sp6 layout's IK program (derive.ik.program_parallel3.parallel3_sp6_program) flags a
+#: solution singular (flag ``singular_dr``) where its q1 is a (near-)double root of subproblem
+#: 6's quartic: |F'(q1)| below this times the sum of |coefficients| of F (a trigonometric
+#: polynomial of degree 2). There the root is good to about the square root of the rounding only.
+SP6_DOUBLE_ROOT = 1e-4

@@ -358,6 +358,10 @@ def _ik_function(robot, free: str | None = None):
         prog = ik_program(robot, free)
     except DeriveError:
         return None
+    if any(op.kind == "roots4" for op in prog.ops):
+        # the roots of a quartic (the three-parallel sp6 layout's subproblem 6) have no SX form:
+        # CasADi has no polynomial root or eigenvalue function of symbolic arguments
+        return None
     name = "ik" if free is None else f"ik_{free}"
     pose = ca.SX.sym("pose", 8)
     env = {f"p{i}": pose[i] for i in range(8)}
