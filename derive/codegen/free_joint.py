@@ -1,23 +1,154 @@
 """``derive.kernels(robot, backend, free="qK")``: a seven-joint arm's IK with any joint K given.
 
 The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding joint K leaves
-one, else the general 6R with a numeric per-value construction of the elimination). No code is
-emitted for it yet: the "python" and "numpy" backends run that numpy solver for ``ik``,
-``ik_sweep`` and ``nearest``, and the backend's generated kernels for ``fk`` (and every other
-kernel: ``with_tool``, ``jacobian``, ...); the "c" backend has no such IK kernel
-(``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that of :class:`derive.codegen.loader.Kernels` with the
-7R ``free=`` argument: ``ik(P, free=values)`` -> (solutions (n, 16, 7) NaN-padded, counts (n,)),
-``ik_sweep(P, n)`` over joint K's range, ``nearest(P, q_seed)`` with joint K chosen for the path.
+one, else the general 6R with a numeric per-value construction of the elimination). The "python"
+and "numpy" backends run that numpy solver for ``ik``, ``ik_sweep`` and ``nearest``, and the
+backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, ``jacobian``, ...).
+The "c" backend on the general route (:func:`derive.ik.free_joint.route`) runs emitted C99
+(templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
+templates/general6r.c.j2 with the locked chain and those coefficients as runtime arguments (one
+copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
+as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
+folder and loaded with ctypes. On the class routes the "c" backend has no such IK kernel
+(``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
+of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P, free=values)``
+-> (solutions (n, 16, 7) NaN-padded, counts (n,)), ``ik_sweep(P, n)`` over joint K's range,
+``nearest(P, q_seed)`` with joint K chosen for the path.
 """
 
 from __future__ import annotations
 
+import ctypes
+import re
+
 import numpy as np
 
+from derive._version import __version__
 from derive.algebra import dualquat as dq
+from derive.cache import memo
 from derive.errors import DeriveError, InputError
-from derive.ik import free_joint, redundant, select
+from derive.ik import free_joint, general6r as g6, redundant, select
+from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_RANK_TOL,
+                                  G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
 from derive.kinematics.pose import as_pose_batch
+
+#: Solutions per pose and value at most (a 6R has at most 16).
+MAX_SOLUTIONS = free_joint.MAX_SOLUTIONS
+
+
+def _identifier(robot, joint: int) -> str:
+    stem = robot.name.replace("-", "_").replace(".", "_")
+    return (stem if stem[:1].isalpha() else "r_" + stem) + f"_free_q{joint}"
+
+
+def _core_context(pl: free_joint.Plan) -> dict:
+    """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
+    (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
+    the locked chain and the coefficients are the solver core's runtime arguments."""
+    from derive.codegen.general6r import _arr, _lit
+    e, ev = int(pl.e), int(pl.ev)
+    triple, pair = g6._cut_joints(e)
+    order = [ev] + [i for i in range(3) if i != ev]
+    perm = []
+    for a in range(3):                    # perm[9 i + 3 j + k] = the triple's index: eigen joint first
+        for b in range(3):
+            for c in range(3):
+                old = [0, 0, 0]
+                old[order[0]], old[order[1]], old[order[2]] = a, b, c
+                perm.append(9 * old[0] + 3 * old[1] + old[2])
+    return {
+        "runtime": True, "mode": {"kind": "runtime"}, "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+        "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
+        "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
+        "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
+        "n_d3": len(pl.d3), "start": _arr(g6._START), "nudge": _lit(g6._NUDGE),
+        "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
+        "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
+        "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
+        "max_solutions": MAX_SOLUTIONS, "n_perturb": 0, "notes": [" ".join(pl.notes.split())],
+        "how": ("the loop cut at joint %d of the %s locked 6R (pair %s eliminated linearly, triple %s, "
+                "eigen-variable q%d of the 6R), coefficients per pose and value"
+                % (e, "reversed" if pl.reverse else "forward", tuple(pair), tuple(triple), triple[ev])),
+    }
+
+
+def c_source(robot, joint: int) -> str:
+    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given on the general
+    route (templates/free_joint.c.j2; see the module docstring). DeriveError when the route is
+    not the general one or the arm has no plan."""
+    from derive.codegen.general6r import _arr, _lit
+    from derive.codegen.templates import template_environment
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    if free_joint.route(robot, joint) != "general":
+        raise DeriveError(f"{robot.name} with q{joint} given is solved by a class's closed form "
+                          f"({free_joint.route(robot, joint)}), not the general route the C source covers")
+    pl = free_joint.plan(robot, joint)
+    plans = [pl, pl.alt if pl.alt is not None else pl]
+    env = template_environment()
+    core = env.get_template("general6r.c.j2")
+    cores = []
+    for i, p in enumerate(plans):
+        text = core.render(ik={"general": _core_context(p)})
+        cores.append(re.sub(r"\bg6_", f"fj{i}_", text))
+    c7 = pl.c
+    return env.get_template("free_joint.c.j2").render(
+        robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores,
+        plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
+                "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1]} for p in plans],
+        c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
+        k3inv=_arr(free_joint._KRON3_INV), k2inv=_arr(free_joint._KRON2_INV),
+        accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), max_solutions=MAX_SOLUTIONS)
+
+
+class _CLibrary:
+    """The compiled IK of one (arm, joint) on the general route, through ctypes."""
+
+    def __init__(self, robot, joint: int):
+        from derive.cache import build_folder, writable_root, write_atomic
+        from derive.codegen import loader
+        ident = _identifier(robot, joint)
+        text = c_source(robot, joint)
+        folder = build_folder(writable_root()) / "free-joint"
+        folder.mkdir(parents=True, exist_ok=True)
+        import hashlib
+        src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
+        if not src.exists() or src.read_text(encoding="utf-8") != text:
+            write_atomic(src, text)
+        self.path = loader._compile(src, ident)
+        try:
+            lib = ctypes.CDLL(str(self.path))
+        except OSError as exc:
+            self.path = loader._compile(src, ident, again=f"the C library {self.path} did not load ({exc})")
+            lib = ctypes.CDLL(str(self.path))
+        f = getattr(lib, f"{ident}_ik_batch_free")
+        f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
+        f.restype = None
+        self._lib, self._f = lib, f
+
+    def solve(self, poses, values):
+        """(q (n, 16, 7) NaN-padded, counts (n,), singular (n, 16), degenerate (n,)) of poses (n, 8)
+        with the joint at values (n,)."""
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        n = len(poses)
+        q = np.empty((n, MAX_SOLUTIONS, 7))
+        counts = np.empty(n, dtype=np.intc)
+        sing = np.empty((n, MAX_SOLUTIONS), dtype=np.intc)
+        degen = np.empty(n, dtype=np.intc)
+        if n:
+            self._f(n, poses.ctypes.data, values.ctypes.data, q.ctypes.data, counts.ctypes.data,
+                    sing.ctypes.data, degen.ctypes.data)
+        return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
+
+
+def c_library(robot, joint: int) -> _CLibrary:
+    """The compiled C IK of ``robot`` with ``joint`` given (once per process; the library is
+    cached by source digest in the user cache's build folder)."""
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    return memo("free-joint-c", (robot.id, joint), lambda: _CLibrary(robot, joint))
 
 
 class FreeJointKernels:
