@@ -73,6 +73,37 @@ def _core_context(pl: free_joint.Plan) -> dict:
     }
 
 
+def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
+    """(14, 27): the triple's side of the plan's loop cut with the joint held at v (it does not
+    depend on the pose: the cut's triple side holds links 1-5 of the locked 6R, never the pose link)."""
+    d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+    return g6._triple_coefs(g6._reverse(d) if pl.reverse else d, pl.e)
+
+
+def _harmonics(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return np.stack([np.ones_like(v), np.cos(v), np.sin(v), np.cos(2 * v), np.sin(2 * v), np.cos(3 * v),
+                     np.sin(3 * v)], -1)
+
+
+def triple_harmonics(pl: free_joint.Plan, samples: int = 16) -> np.ndarray:
+    """(7, 378): the triple side Y(v) of a plan as a trigonometric polynomial of degree 3 in the held
+    value, Y(v) = sum_k H[k] h_k(v), h = (1, cos v, sin v, cos 2v, sin 2v, cos 3v, sin 3v): the held
+    joint's link C_K Rz(v) C_{K+1} enters the cut's triple at most once, so the transform whose z line
+    is taken, and its inverse, have entries of degree 1 in (cos v, sin v), and the 14 line equations
+    are of degree <= 3 in them (the Lagrange product (p.p) l - 2 (p.l) p). Least squares over
+    ``samples`` equispaced values, checked at 5 random values (DeriveError past 1e-10)."""
+    vs = 2 * np.pi * np.arange(samples) / samples
+    ys = np.array([_triple_side(pl, v).ravel() for v in vs])
+    coef = np.linalg.lstsq(_harmonics(vs), ys, rcond=None)[0]
+    test = np.random.default_rng(5).uniform(-np.pi, np.pi, 5)
+    err = max(float(np.abs(_harmonics(v) @ coef - _triple_side(pl, v).ravel()).max()) for v in test)
+    if not err < 1e-10 * max(1.0, float(np.abs(ys).max())):
+        raise DeriveError(f"{pl.robot} with q{pl.joint} given: the triple side is not a trigonometric "
+                          f"polynomial of degree 3 in the held value (misses by {err:.1e})")
+    return coef
+
+
 def c_source(robot, joint: int) -> str:
     """The C99 source of the IK of a seven-joint arm with joint ``joint`` given on the general
     route (templates/free_joint.c.j2; see the module docstring). DeriveError when the route is
@@ -96,9 +127,10 @@ def c_source(robot, joint: int) -> str:
     return env.get_template("free_joint.c.j2").render(
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores,
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
-                "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1]} for p in plans],
+                "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
+                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27))} for p in plans],
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
-        k3inv=_arr(free_joint._KRON3_INV), k2inv=_arr(free_joint._KRON2_INV),
+        sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), max_solutions=MAX_SOLUTIONS)
 
 
@@ -163,8 +195,11 @@ class FreeJointKernels:
         self.free = f"q{joint}"
         #: which solver holds the joint: "srs", "panda" or "general" (:func:`derive.ik.free_joint.route`)
         self.route = free_joint.route(robot, joint)
+        self._c = None
         if self.route == "general":
             free_joint.plan(robot, joint)            # DeriveError now for a geometry it cannot solve
+            if backend == "c":
+                self._c = c_library(robot, joint)    # compiled on first use (templates/free_joint.c.j2)
         self._fk = fk_kernels
         self._tool = None
 
@@ -214,8 +249,7 @@ class FreeJointKernels:
         solution (:func:`derive.ik.select.within_limits`)."""
         self._need(free)
         poses, single = self._poses(P)
-        r = free_joint.solve(self.robot, poses, self.joint, redundant.free_values(free, len(poses)))
-        sols, counts, branch, sing = r.q, r.counts, r.branch, r.singular
+        sols, counts, branch, sing = self._solver(poses, redundant.free_values(free, len(poses)))
         if within_limits:
             sols, counts, branch, sing = select.within_limits(sols, counts, self.robot.limits, self.robot.revolute,
                                                               branch, sing)
@@ -224,28 +258,51 @@ class FreeJointKernels:
         return (sols, counts, branch, sing) if details else (sols, counts)
 
     def _solver(self, poses, f):
+        """(q, counts, branch, singular) of poses (m, 8) of the end frame at values f (m,): the C
+        kernel on the "c" backend, else :func:`derive.ik.free_joint.solve`."""
+        if self._c is not None:
+            q, counts, sing, _ = self._c.solve(poses, f)
+            branch = np.full((len(q), MAX_SOLUTIONS), -1, dtype=np.int64)     # no branch structure
+            return q, counts, branch, sing
         r = free_joint.solve(self.robot, poses, self.joint, f)
         return r.q, r.counts, r.branch, r.singular
+
+    def ik_degenerate(self, P, free=None) -> np.ndarray:
+        """(n,) or a bool: the general route's degenerate flag of each pose at its value (the
+        elimination degenerates for both plans, or more than 16 solutions: those returned are
+        checked, some may be missing); False on the class routes."""
+        self._need(free)
+        poses, single = self._poses(P)
+        f = redundant.free_values(free, len(poses))
+        if self._c is not None:
+            out = self._c.solve(poses, f)[3]
+        elif self.route == "general":
+            out = free_joint.solve(self.robot, poses, self.joint, f).degenerate
+        else:
+            out = np.zeros(len(poses), dtype=bool)
+        return bool(out[0]) if single else out
 
     def ik_sweep(self, P, n: int, within_limits: bool = True) -> redundant.Sweep:
         """The solutions at ``n`` values of joint K over its range
         (:func:`derive.ik.free_joint.ik_sweep`)."""
         poses, single = self._poses(P)
         return free_joint.ik_sweep(self.robot, poses[0] if single else poses, self.joint, n,
-                                   within_limits=within_limits)
+                                   within_limits=within_limits,
+                                   solver=self._solver if self._c is not None else None)
 
     def nearest(self, P, q_seed, tol=None) -> select.Nearest:
         """Per pose the solution nearest to the seed along a path, joint K chosen by the 1-D
         search of :func:`derive.ik.free_joint.nearest`."""
         poses, single = self._poses(P)
-        return free_joint.nearest(self.robot, poses[0] if single else poses, self.joint, q_seed, tol=tol)
+        return free_joint.nearest(self.robot, poses[0] if single else poses, self.joint, q_seed, tol=tol,
+                                  solver=self._solver if self._c is not None else None)
 
 
 def free_joint_kernels(robot, backend: str, joint: int, fk_kernels) -> FreeJointKernels:
-    """:class:`FreeJointKernels`; DeriveError for the "c" backend (no emitted IK for a joint
-    given outside a class's own choice yet)."""
-    if backend == "c":
-        raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given yet (the general "
-                          "6R with a joint held is solved by derive.ik.free_joint in numpy); use "
-                          f"derive.kernels({robot.name!r}, 'numpy', free='q{joint}')")
+    """:class:`FreeJointKernels`; for the "c" backend only on the general route (DeriveError on
+    a class route: no emitted IK for a joint given outside a class's own choice there)."""
+    if backend == "c" and free_joint.route(robot, joint) != "general":
+        raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
+                          f"{free_joint.route(robot, joint)} route (solved by derive.ik.free_joint in numpy); "
+                          f"use derive.kernels({robot.name!r}, 'numpy', free='q{joint}')")
     return FreeJointKernels(robot, backend, joint, fk_kernels)
