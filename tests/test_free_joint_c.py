@@ -1,0 +1,133 @@
+"""The C kernels of a seven-joint arm with a joint given on the general route (issue 31, item 4):
+``derive.kernels(robot, "c", free="qK")`` (templates/free_joint.c.j2, derive.codegen.free_joint)
+against the numpy reference :func:`derive.ik.free_joint.solve`, the plain 4x4-matrix FK
+(``reference.fk_matrix``) and the generating configuration."""
+
+import math
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+import derive
+from derive import reference
+from derive.codegen import free_joint as cfree
+from derive.ik import free_joint
+
+needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
+
+
+def _wrapped(d):
+    return np.abs((np.asarray(d) + math.pi) % (2 * math.pi) - math.pi)
+
+
+def _inside(robot, n, rng):
+    lim = np.where(np.isfinite(robot.limits), robot.limits, np.array([-math.pi, math.pi]))
+    return rng.uniform(np.maximum(lim[:, 0], -math.pi), np.minimum(lim[:, 1], math.pi), (n, 7))
+
+
+def _same_set(a, b, tol=1e-6):
+    """Every row of a within tol (every joint, modulo 2 pi) of a row of b, and back."""
+    if len(a) != len(b):
+        return False
+    if not len(a):
+        return True
+    d = _wrapped(a[:, None] - b[None]).max(-1)
+    return bool(np.all(d.min(1) < tol) and np.all(d.min(0) < tol))
+
+
+@pytest.mark.parametrize("name,k", [("xarm7", 2), ("xarm7", 4), ("gen3", 2)])
+def test_c_free_joint_matches_the_reference(name, k):
+    """100 configurations inside the limits, joint k held at its generating value and at two
+    other values in its range: the C kernel's solution sets equal free_joint.solve's (counts
+    and every solution within 1e-6 rad); every C solution reproduces the pose within 1e-10 by
+    the plain matrix FK and holds joint k; the generating configuration is among them at its
+    value; nothing but the padding is NaN."""
+    robot = derive.load_robot(name)
+    assert free_joint.route(robot, k) == "general"
+    rng = np.random.default_rng(31 + k)
+    q = _inside(robot, 100, rng)
+    lo, hi = free_joint.joint_range(robot, k)
+    values = np.stack([q[:, k - 1], rng.uniform(lo, hi, 100), rng.uniform(lo, hi, 100)], 1)   # (100, 3)
+    poses = np.repeat(reference.fk(robot, q), 3, axis=0)
+    target = np.repeat(reference.fk_matrix(robot, q), 3, axis=0)
+    v = values.reshape(-1)
+    cq, cc, _, _ = cfree.c_library(robot, k).solve(poses, v)
+    ref = free_joint.solve(robot, poses, k, v)
+    np.testing.assert_array_equal(cc, ref.counts)
+    assert cc.sum() > 300 and cc.max() <= 16
+    for i in range(len(v)):
+        assert _same_set(cq[i, :cc[i]], ref.q[i, :ref.counts[i]]), i
+    valid = np.arange(16)[None] < cc[:, None]
+    assert not np.isnan(cq[valid]).any() and np.isnan(cq[~valid]).all()
+    rows = np.nonzero(valid)[0]
+    assert np.abs(reference.fk_matrix(robot, cq[valid]) - target[rows]).max() < 1e-10
+    np.testing.assert_array_equal(cq[valid][:, k - 1], v[rows])
+    gen = np.nanmin(np.where(valid, _wrapped(cq - np.repeat(q, 3, axis=0)[:, None]).max(-1), np.inf), axis=1)
+    assert np.all(gen[::3] < 1e-6)
+
+
+@pytest.mark.parametrize("name,k", [("xarm7", 4), ("gen3", 2)])
+def test_triple_side_harmonics_equal_the_per_value_fit(name, k):
+    """The triple side baked as a trigonometric polynomial of degree 3 in the held value equals
+    the reference's fit from 27 sample angles per value (free_joint._coefs) at random values and
+    poses, for the plan and its rescue."""
+    robot = derive.load_robot(name)
+    pl = free_joint.plan(robot, k)
+    rng = np.random.default_rng(8)
+    q = _inside(robot, 6, rng)
+    target = free_joint.g6._to_matrix(reference.fk(robot, q))
+    target[:, :3, 3] /= pl.scale
+    for p in (pl, pl.alt):
+        h = cfree.triple_harmonics(p)
+        d = free_joint.locked_chain(p.c, k, q[:, k - 1])
+        t = target
+        if p.reverse:
+            d = np.stack([free_joint.g6._reverse(x) for x in d])
+            t = np.linalg.inv(target)
+        y, _ = free_joint._coefs(d, p.e, t)
+        np.testing.assert_allclose((cfree._harmonics(q[:, k - 1]) @ h).reshape(6, 14, 27), y, atol=1e-12)
+
+
+@needs_gcc
+def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path):
+    """The emitted source (two copies of the general 6R solver core, the plan and its rescue),
+    warnings as errors, -Wpedantic, as C99 and C++17."""
+    src = tmp_path / "xarm7_q5.c"
+    src.write_text(cfree.c_source("xarm7", 5))
+    for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
+                ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
+        if shutil.which(cmd[0]) is None:
+            continue
+        res = subprocess.run([*cmd, "-Wall", "-Wextra", "-Werror", str(src)], capture_output=True, text=True)
+        assert res.returncode == 0, (cmd, res.stderr[-3000:])
+
+
+def test_c_free_joint_kernels_api():
+    """derive.kernels("xarm7", "c", free="q4"): ik of one pose and a batch (details, within
+    limits), ik_sweep and nearest through the C kernel agree with the numpy kernels."""
+    robot = derive.load_robot("xarm7")
+    kc = derive.kernels("xarm7", "c", free="q4")
+    kn = derive.kernels("xarm7", "numpy", free="q4")
+    assert kc.route == "general" and kc.free == "q4"
+    q = _inside(robot, 6, np.random.default_rng(12))
+    poses = kn.fk(q)
+    np.testing.assert_allclose(kc.fk(q), poses, atol=1e-12)
+    s1, c1 = kc.ik(poses[0], free=q[0, 3])
+    assert s1.shape == (16, 7) and c1 >= 1 and _wrapped(s1[:c1] - q[0]).max(-1).min() < 1e-6
+    sols, counts, branch, sing = kc.ik(poses, free=q[:, 3], details=True)
+    ns, nc = kn.ik(poses, free=q[:, 3])
+    np.testing.assert_array_equal(counts, nc)
+    assert all(_same_set(sols[i, :counts[i]], ns[i, :nc[i]]) for i in range(6))
+    assert np.all(branch == -1) and sing.dtype == bool
+    assert not kc.ik_degenerate(poses, free=q[:, 3]).any()
+    wl, wc = kc.ik(poses, free=q[:, 3], within_limits=True)
+    ok = np.arange(wl.shape[1])[None] < wc[:, None]
+    assert np.all((wl[ok] >= robot.limits[:, 0] - 1e-9) & (wl[ok] <= robot.limits[:, 1] + 1e-9))
+    sw_c, sw_n = kc.ik_sweep(poses[:2], 5), kn.ik_sweep(poses[:2], 5)
+    np.testing.assert_allclose(sw_c.free, sw_n.free)
+    np.testing.assert_array_equal(sw_c.counts, sw_n.counts)
+    near = kc.nearest(poses[:2], q[:2] + 0.01)
+    assert np.all(near.found) and np.all(near.max_move <= 0.015 + 1e-9)
+    np.testing.assert_allclose(kc.fk(near.q), poses[:2], atol=1e-9)
