@@ -58,7 +58,7 @@ def _core_context(pl: free_joint.Plan) -> dict:
                 old[order[0]], old[order[1]], old[order[2]] = a, b, c
                 perm.append(9 * old[0] + 3 * old[1] + old[2])
     return {
-        "runtime": True, "mode": {"kind": "runtime"}, "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+        "runtime": True, "mode": {"kind": "runtime"}, "defl": None, "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
         "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
         "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
