@@ -1,11 +1,11 @@
 """Seven-joint arms with joint K given (derive.ik.free_joint): per arm and K, on configurations
 drawn within the joint limits with the generating value of joint K given: the route taken,
 the solution counts, how often the generating configuration is found, the largest FK error
-(4x4 matrix FK, m / entry), the degenerate flags, and the time per pose (numpy, batched).
+(4x4 matrix FK, m / entry), the degenerate flags, and the CPU time per pose (numpy, batched).
 With ``--ssik M``: on the first M poses of xarm7 and gen3, ssik's joint-lock solver
 (ssik.solvers.jointlock.seven_r, same held value) and whether its solutions are all ours.
 With ``--c``: on the general route, the C kernel (derive.codegen.free_joint.c_library, batched,
-one thread; compiled before timing) on the same poses and values: its time per pose and value
+one thread; compiled before timing) on the same poses and values: its CPU time per pose and value
 (best of ``--repeats``), and on how many poses its solution set equals the numpy reference's.
 
     .venv/bin/python benchmarks/bench_free_joint.py [--poses N] [--arms a,b] [--joints 1,2] [--ssik M]
@@ -70,9 +70,9 @@ def main():
                 print(f"| {name} | {k} | refused | | | | | | |")
                 continue
             free_joint.solve(robot, poses[:2], k, q[:2, k - 1])          # plan, caches
-            t = time.perf_counter()
+            t = time.process_time()          # CPU time (one thread): less sensitive to a loaded machine
             r = free_joint.solve(robot, poses, k, q[:, k - 1])
-            dt = (time.perf_counter() - t) / args.poses * 1e3
+            dt = (time.process_time() - t) / args.poses * 1e3
             valid = np.arange(r.q.shape[1])[None] < r.counts[:, None]
             rows = np.nonzero(valid)[0]
             err = float(np.abs(reference.fk_matrix(robot, r.q[valid]) - target[rows]).max()) if len(rows) else 0.0
@@ -105,9 +105,9 @@ def main():
                     lib = c_library(robot, k)
                     times = []
                     for _ in range(max(args.repeats, 1)):
-                        t0 = time.perf_counter()
+                        t0 = time.process_time()
                         cq, cc, _, _ = lib.solve(poses, q[:, k - 1])
-                        times.append(time.perf_counter() - t0)
+                        times.append(time.process_time() - t0)
                     us = min(times) / args.poses * 1e6
                     same = sum(_same(cq[i, :cc[i]], r.q[i, :r.counts[i]]) for i in range(args.poses))
                     ctext = f" {us:.1f} | {same}/{args.poses} | {dt * 1e3 / us:.0f}x |"
