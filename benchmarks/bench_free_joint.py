@@ -102,7 +102,8 @@ def main():
                 ctext = " | | |"
                 if how == "general":
                     from derive.codegen.free_joint import c_library
-                    lib = c_library(robot, k)
+                    from derive.codegen.loader import _compile
+                    lib = c_library(robot, k, _compile)
                     times = []
                     for _ in range(max(args.repeats, 1)):
                         t0 = time.process_time()

@@ -13,6 +13,7 @@ import pytest
 import derive
 from derive import reference
 from derive.codegen import free_joint as cfree
+from derive.codegen.loader import _compile
 from derive.ik import free_joint
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
@@ -53,7 +54,7 @@ def test_c_free_joint_matches_the_reference(name, k):
     poses = np.repeat(reference.fk(robot, q), 3, axis=0)
     target = np.repeat(reference.fk_matrix(robot, q), 3, axis=0)
     v = values.reshape(-1)
-    cq, cc, _, _ = cfree.c_library(robot, k).solve(poses, v)
+    cq, cc, _, _ = cfree.c_library(robot, k, _compile).solve(poses, v)
     ref = free_joint.solve(robot, poses, k, v)
     np.testing.assert_array_equal(cc, ref.counts)
     assert cc.sum() > 300 and cc.max() <= 16

@@ -135,11 +135,12 @@ def c_source(robot, joint: int) -> str:
 
 
 class _CLibrary:
-    """The compiled IK of one (arm, joint) on the general route, through ctypes."""
+    """The compiled IK of one (arm, joint) on the general route, through ctypes. ``compile_fn``:
+    (source path, prefix, again=None) -> shared library path, the C backend's compile step
+    (:func:`derive.codegen.loader._compile`, passed in: the loader imports this module)."""
 
-    def __init__(self, robot, joint: int):
+    def __init__(self, robot, joint: int, compile_fn):
         from derive.cache import build_folder, writable_root, write_atomic
-        from derive.codegen import loader
         ident = _identifier(robot, joint)
         text = c_source(robot, joint)
         folder = build_folder(writable_root()) / "free-joint"
@@ -148,11 +149,11 @@ class _CLibrary:
         src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
         if not src.exists() or src.read_text(encoding="utf-8") != text:
             write_atomic(src, text)
-        self.path = loader._compile(src, ident)
+        self.path = compile_fn(src, ident)
         try:
             lib = ctypes.CDLL(str(self.path))
         except OSError as exc:
-            self.path = loader._compile(src, ident, again=f"the C library {self.path} did not load ({exc})")
+            self.path = compile_fn(src, ident, again=f"the C library {self.path} did not load ({exc})")
             lib = ctypes.CDLL(str(self.path))
         f = getattr(lib, f"{ident}_ik_batch_free")
         f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
@@ -175,18 +176,19 @@ class _CLibrary:
         return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
 
 
-def c_library(robot, joint: int) -> _CLibrary:
+def c_library(robot, joint: int, compile_fn) -> _CLibrary:
     """The compiled C IK of ``robot`` with ``joint`` given (once per process; the library is
-    cached by source digest in the user cache's build folder)."""
+    cached by source digest and compiler flags in the user cache's build folder). ``compile_fn``:
+    :func:`derive.codegen.loader._compile`."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
-    return memo("free-joint-c", (robot.id, joint), lambda: _CLibrary(robot, joint))
+    return memo("free-joint-c", (robot.id, joint, compile_fn), lambda: _CLibrary(robot, joint, compile_fn))
 
 
 class FreeJointKernels:
     """The kernels of a 7R arm whose IK takes the value of joint K (``free="qK"``)."""
 
-    def __init__(self, robot, backend: str, joint: int, fk_kernels):
+    def __init__(self, robot, backend: str, joint: int, fk_kernels, compile_fn=None):
         self.robot = robot
         self.backend = backend
         self.dof = 7
@@ -199,7 +201,10 @@ class FreeJointKernels:
         if self.route == "general":
             free_joint.plan(robot, joint)            # DeriveError now for a geometry it cannot solve
             if backend == "c":
-                self._c = c_library(robot, joint)    # compiled on first use (templates/free_joint.c.j2)
+                if compile_fn is None:
+                    raise DeriveError("the C free-joint kernels need the C backend's compile step "
+                                      "(derive.kernels passes it)")
+                self._c = c_library(robot, joint, compile_fn)    # compiled on first use
         self._fk = fk_kernels
         self._tool = None
 
@@ -298,11 +303,12 @@ class FreeJointKernels:
                                   solver=self._solver if self._c is not None else None)
 
 
-def free_joint_kernels(robot, backend: str, joint: int, fk_kernels) -> FreeJointKernels:
+def free_joint_kernels(robot, backend: str, joint: int, fk_kernels, compile_fn=None) -> FreeJointKernels:
     """:class:`FreeJointKernels`; for the "c" backend only on the general route (DeriveError on
-    a class route: no emitted IK for a joint given outside a class's own choice there)."""
+    a class route: no emitted IK for a joint given outside a class's own choice there).
+    ``compile_fn``: the C backend's compile step (:func:`derive.codegen.loader._compile`)."""
     if backend == "c" and free_joint.route(robot, joint) != "general":
         raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
                           f"{free_joint.route(robot, joint)} route (solved by derive.ik.free_joint in numpy); "
                           f"use derive.kernels({robot.name!r}, 'numpy', free='q{joint}')")
-    return FreeJointKernels(robot, backend, joint, fk_kernels)
+    return FreeJointKernels(robot, backend, joint, fk_kernels, compile_fn)

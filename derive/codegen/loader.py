@@ -878,7 +878,7 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
                              f"C kernels only where joint {k} given leaves the general 6R)")
         from derive.codegen.free_joint import free_joint_kernels
         return memo("kernels-free-joint", (r.id, r.limits_id, backend, k),
-                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend)))
+                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend), _compile))
     if nominal is None:
         nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)
