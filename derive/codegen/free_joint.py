@@ -42,6 +42,39 @@ def _identifier(robot, joint: int) -> str:
     return (stem if stem[:1].isalpha() else "r_" + stem) + f"_free_q{joint}"
 
 
+class _Context(dict):
+    """A template context whose missing keys are None: the general 6R template's optional parts
+    (a feature a newer template adds, named by a key this module does not set) stay off."""
+
+    def __missing__(self, key):
+        return None
+
+
+def _deflation(pl: free_joint.Plan) -> dict | None:
+    """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
+    :func:`derive.ik.general6r._deflation`) where it holds for every value: joint 1 or 7 held
+    (the held link is the first or last, so the locked 6R's loop links 1-5 are the same for every
+    value and the value moves only the pose link); with a middle joint held the eigenvectors at
+    x = +-i change with the value (and the pose), so there is none. The keys of the general 6R
+    template's ``defl`` (``keep``, ``b`` the bases [W V] per offset, ``w1b2`` = W1^T B2,
+    ``leak``); None when it does not apply."""
+    from derive.codegen.general6r import _arr, _lit
+    if pl.joint not in (1, 7):
+        return None
+    from types import SimpleNamespace
+    d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
+    if pl.reverse:
+        d = g6._reverse(d)
+    found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
+                                          offsets=pl.offsets, d3=pl.d3))
+    if found is None:
+        return None
+    b, keep, _ = found
+    b = np.asarray(b, dtype=float)
+    const = np.einsum("kij,kil->kjl", b[:, :12, :keep], b[:, 12:, :])
+    return {"keep": int(keep), "b": _arr(b), "w1b2": _arr(const), "leak": _lit(g6.DEFLATE_LEAK)}
+
+
 def _core_context(pl: free_joint.Plan) -> dict:
     """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
     (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
@@ -57,8 +90,8 @@ def _core_context(pl: free_joint.Plan) -> dict:
                 old = [0, 0, 0]
                 old[order[0]], old[order[1]], old[order[2]] = a, b, c
                 perm.append(9 * old[0] + 3 * old[1] + old[2])
-    return {
-        "runtime": True, "mode": {"kind": "runtime"}, "defl": None, "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+    return _Context({
+        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
         "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
         "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
@@ -70,7 +103,7 @@ def _core_context(pl: free_joint.Plan) -> dict:
         "how": ("the loop cut at joint %d of the %s locked 6R (pair %s eliminated linearly, triple %s, "
                 "eigen-variable q%d of the 6R), coefficients per pose and value"
                 % (e, "reversed" if pl.reverse else "forward", tuple(pair), tuple(triple), triple[ev])),
-    }
+    })
 
 
 def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
