@@ -132,3 +132,45 @@ def test_c_free_joint_kernels_api():
     near = kc.nearest(poses[:2], q[:2] + 0.01)
     assert np.all(near.found) and np.all(near.max_move <= 0.015 + 1e-9)
     np.testing.assert_allclose(kc.fk(near.q), poses[:2], atol=1e-9)
+
+
+@needs_gcc
+def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path):
+    """xarm7 with q4 given, built with -fsanitize=address,undefined, on axis-aligned
+    configurations (singular: shared roots, degenerate pencils) and random ones: no invalid
+    access, no undefined behaviour, counts within 0..16, no NaN before the padding and only NaN
+    after it."""
+    robot = derive.load_robot("xarm7")
+    grid = np.array(np.meshgrid(*[[0.0, math.pi / 2, -math.pi / 2]] * 3, indexing="ij")).reshape(3, -1).T
+    q = np.zeros((len(grid), 7))
+    q[:, [1, 3, 5]] = grid
+    q = np.concatenate([q, np.random.default_rng(6).uniform(-math.pi, math.pi, (13, 7))])
+    poses = reference.fk(robot, q)
+    n = len(q)
+    rows = ",\n".join("{" + ", ".join(repr(float(v)) for v in p) + "}" for p in poses)
+    vals = ", ".join(repr(float(v)) for v in q[:, 3])
+    ident = cfree._identifier(robot, 4)
+    (tmp_path / "t.c").write_text(cfree.c_source(robot, 4) + f"""
+#include <stdio.h>
+static const double poses[{n}][8] = {{{rows}}};
+static const double vals[{n}] = {{{vals}}};
+int main(void) {{
+    static double sols[{n} * 16 * 7];
+    static int counts[{n}], sg[{n} * 16], dg[{n}];
+    {ident}_ik_batch_free({n}, &poses[0][0], vals, sols, counts, sg, dg);
+    int bad = 0;
+    for (int i = 0; i < {n}; ++i) {{
+        bad += counts[i] < 0 || counts[i] > 16;
+        for (int k = 0; k < 16 * 7; ++k) bad += k < counts[i] * 7 ? !isfinite(sols[i * 112 + k]) : !isnan(sols[i * 112 + k]);
+    }}
+    printf("%d\\n", bad);
+    return 0;
+}}
+""")
+    res = subprocess.run(["gcc", "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+                          "-fno-sanitize-recover=all", "-o", str(tmp_path / "t"), str(tmp_path / "t.c"), "-lm"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-3000:]
+    run = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert run.stdout.split() == ["0"]
