@@ -156,9 +156,13 @@ def c_source(robot, joint: int) -> str:
     for i, p in enumerate(plans):
         text = core.render(ik={"general": _core_context(p)})
         cores.append(re.sub(r"\bg6_", f"fj{i}_", text))
+    # the width of the core's candidate rows (6 joints, and more where the core stores flags there)
+    width = re.search(r"static int fj0_candidates\([^)]*\(\*DQ_RESTRICT cq\)\[(\d+)\]", cores[0])
+    if width is None:
+        raise DeriveError("free-joint C: the general 6R core's g6_candidates(pose, cq, degenerate) was not found")
     c7 = pl.c
     return env.get_template("free_joint.c.j2").render(
-        robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores,
+        robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
                 "yh": _arr(triple_harmonics(p).reshape(7, 14, 27))} for p in plans],
