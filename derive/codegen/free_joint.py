@@ -7,8 +7,8 @@ backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, `
 The "c" backend on the general route (:func:`derive.ik.free_joint.route`) runs emitted C99
 (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
-templates/general6r.c.j2 with the locked chain and those coefficients as runtime arguments (one
-copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
+templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
+through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
 folder and loaded with ctypes. On the class routes the "c" backend has no such IK kernel
 (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
@@ -78,7 +78,7 @@ def _deflation(pl: free_joint.Plan) -> dict | None:
 def _core_context(pl: free_joint.Plan) -> dict:
     """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
     (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
-    the locked chain and the coefficients are the solver core's runtime arguments."""
+    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2)."""
     from derive.codegen.general6r import _arr, _lit
     e, ev = int(pl.e), int(pl.ev)
     triple, pair = g6._cut_joints(e)
