@@ -50,29 +50,32 @@ class _Context(dict):
         return None
 
 
-def _deflation(pl: free_joint.Plan) -> dict | None:
+def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value: joint 1 or 7 held
     (the held link is the first or last, so the locked 6R's loop links 1-5 are the same for every
     value and the value moves only the pose link); with a middle joint held the eigenvectors at
-    x = +-i change with the value (and the pose), so there is none. The keys of the general 6R
-    template's ``defl`` (``keep``, ``b`` the bases [W V] per offset, ``w1b2`` = W1^T B2,
-    ``leak``); None when it does not apply."""
-    from derive.codegen.general6r import _arr, _lit
-    if pl.joint not in (1, 7):
-        return None
+    x = +-i change with the value (and the pose), so there is none. As the general 6R kernels'
+    template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
+    given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
+    module has no such context (a template without the deflation)."""
     from types import SimpleNamespace
-    d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
-    if pl.reverse:
-        d = g6._reverse(d)
-    found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
-                                          offsets=pl.offsets, d3=pl.d3))
-    if found is None:
+
+    from derive.codegen import general6r as cg6
+    make = getattr(cg6, "_deflation_context", None) or getattr(cg6, "deflation_context", None)
+    if make is None:
         return None
-    b, keep, _ = found
-    b = np.asarray(b, dtype=float)
-    const = np.einsum("kij,kil->kjl", b[:, :12, :keep], b[:, 12:, :])
-    return {"keep": int(keep), "b": _arr(b), "w1b2": _arr(const), "leak": _lit(g6.DEFLATE_LEAK)}
+    found = None
+    if pl.joint in (1, 7):
+        d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
+        if pl.reverse:
+            d = g6._reverse(d)
+        found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
+                                              offsets=pl.offsets, d3=pl.d3))
+    if found is None:
+        return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+    b, keep, spurious = found
+    return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
 
 
 def _core_context(pl: free_joint.Plan) -> dict:
