@@ -4,7 +4,8 @@ the solution counts, how often the generating configuration is found, the larges
 (4x4 matrix FK, m / entry), the degenerate flags, and the CPU time per pose (numpy, batched).
 With ``--ssik M``: on the first M poses of xarm7 and gen3, ssik's joint-lock solver
 (ssik.solvers.jointlock.seven_r, same held value) and whether its solutions are all ours.
-With ``--c``: on the general route, the C kernel (derive.codegen.free_joint.c_library, batched,
+With ``--c``: wherever the general elimination has a plan (the general route, and the class
+routes, where the numpy column is the class's closed form), the C kernel (derive.codegen.free_joint.c_library, batched,
 one thread; compiled before timing) on the same poses and values: its CPU time per pose and value
 (best of ``--repeats``), and on how many poses its solution set equals the numpy reference's.
 
@@ -23,7 +24,7 @@ import numpy as np
 
 import derive
 from derive import reference
-from derive.errors import InputError
+from derive.errors import DeriveError, InputError
 from derive.ik import free_joint
 
 SSIK = {"xarm7": "ssik.prebuilt.ufactory.xarm7_ik", "gen3": "ssik.prebuilt.kinova.gen3_ik"}
@@ -100,7 +101,11 @@ def main():
             ctext = ""
             if args.c:
                 ctext = " | | |"
-                if how == "general":
+                try:
+                    free_joint.plan(robot, k)          # the C runs the general elimination, class routes too
+                except DeriveError:
+                    pass
+                else:
                     from derive.codegen.free_joint import c_library
                     from derive.codegen.loader import _compile
                     lib = c_library(robot, k, _compile)

@@ -174,3 +174,46 @@ int main(void) {{
     run = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     assert run.stdout.split() == ["0"]
+
+
+@pytest.mark.parametrize("k", [1, 2, 6, 7])
+def test_c_free_joint_on_the_srs_class_routes_matches_the_closed_form(k):
+    """iiwa14 with joint k given (a class route: the SRS closed form in numpy, srs.ik_joint or
+    _srs_joint2): ``derive.kernels("iiwa14", "c", free="qk")`` runs the general elimination in C.
+    100 configurations inside the limits, joint k held at its generating value and at one other
+    value in its range: every C solution reproduces the pose within 1e-10 by the plain matrix
+    FK, holds joint k and is one of the closed form's solutions (within 1e-6 rad); the sets are
+    equal and the generating configuration among them, but on poses within 0.01 rad of the SRS
+    elbow singularity (q4 = 0: the axes of joints 3 and 5 nearly collinear, the elimination's
+    eigenvalues cluster and solutions can be lost, the generating one too; docs/ik.md), at most
+    2 of the 200."""
+    robot = derive.load_robot("iiwa14")
+    assert free_joint.route(robot, k) in ("srs", "srs-2")
+    kc = derive.kernels("iiwa14", "c", free=f"q{k}")
+    assert kc.route == free_joint.route(robot, k) and kc._c is not None
+    rng = np.random.default_rng(31 + k)
+    q = _inside(robot, 100, rng)
+    lo, hi = free_joint.joint_range(robot, k)
+    v = np.stack([q[:, k - 1], rng.uniform(lo, hi, 100)], 1).reshape(-1)      # (200,)
+    poses = np.repeat(reference.fk(robot, q), 2, axis=0)
+    target = np.repeat(reference.fk_matrix(robot, q), 2, axis=0)
+    cq, cc = kc.ik(poses, free=v)
+    ref = free_joint.solve(robot, poses, k, v)
+    assert cc.sum() > 1000 and ref.counts.max() == 8
+    differ = []
+    for i in range(len(v)):
+        c, r = cq[i, :cc[i]], ref.q[i, :ref.counts[i]]
+        if len(c):
+            assert _wrapped(c[:, None] - r[None]).max(-1).min(1).max() < 1e-6, i     # no spurious solution
+        if not _same_set(c, r):
+            differ.append(i)
+            assert np.abs(r[:, 3]).min() < 0.01, (i, r[:, 3])                      # near the elbow singularity
+    assert len(differ) <= 2, differ
+    valid = np.arange(16)[None] < cc[:, None]
+    assert not np.isnan(cq[valid]).any() and np.isnan(cq[~valid]).all()
+    rows = np.nonzero(valid)[0]
+    assert np.abs(reference.fk_matrix(robot, cq[valid]) - target[rows]).max() < 1e-10
+    np.testing.assert_array_equal(cq[valid][:, k - 1], v[rows])
+    gen = np.nanmin(np.where(valid, _wrapped(cq - np.repeat(q, 2, axis=0)[:, None]).max(-1), np.inf), axis=1)
+    missed = [i for i in range(0, len(v), 2) if not gen[i] < 1e-6]
+    assert set(missed) <= set(differ), (missed, differ)

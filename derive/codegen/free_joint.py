@@ -4,14 +4,17 @@ The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding
 one, else the general 6R with a numeric per-value construction of the elimination). The "python"
 and "numpy" backends run that numpy solver for ``ik``, ``ik_sweep`` and ``nearest``, and the
 backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, ``jacobian``, ...).
-The "c" backend on the general route (:func:`derive.ik.free_joint.route`) runs emitted C99
-(templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+The "c" backend runs emitted C99, the general elimination, wherever it has a plan
+(:func:`derive.ik.free_joint.plan`): on the general route (:func:`derive.ik.free_joint.route`)
+and on the class routes too (the SRS class with q1, q2, q5, q6 or q7 given, where the numpy and
+python backends run the class's closed form and C does not; the sets agree but on poses very
+near the SRS elbow singularity, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
 through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
-folder and loaded with ctypes. On the class routes the "c" backend has no such IK kernel
-(``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
+folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
+IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
 of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P, free=values)``
 -> (solutions (n, 16, 7) NaN-padded, counts (n,)), ``ik_sweep(P, n)`` over joint K's range,
 ``nearest(P, q_seed)`` with joint K chosen for the path.
@@ -141,16 +144,15 @@ def triple_harmonics(pl: free_joint.Plan, samples: int = 16) -> np.ndarray:
 
 
 def c_source(robot, joint: int) -> str:
-    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given on the general
-    route (templates/free_joint.c.j2; see the module docstring). DeriveError when the route is
-    not the general one or the arm has no plan."""
+    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given by the general
+    elimination (templates/free_joint.c.j2; see the module docstring), on a class route too
+    (the class's closed form is not emitted here). DeriveError when the arm has no plan,
+    InputError for a joint that cannot be given (the SRS class's q4)."""
     from derive.codegen.general6r import _arr, _lit
     from derive.codegen.templates import template_environment
     from derive.model.robot import load_robot
     robot = load_robot(robot)
-    if free_joint.route(robot, joint) != "general":
-        raise DeriveError(f"{robot.name} with q{joint} given is solved by a class's closed form "
-                          f"({free_joint.route(robot, joint)}), not the general route the C source covers")
+    free_joint.route(robot, joint)            # InputError for a joint that cannot be given (SRS q4)
     pl = free_joint.plan(robot, joint)
     plans = [pl, pl.alt if pl.alt is not None else pl]
     env = template_environment()
@@ -238,9 +240,9 @@ class FreeJointKernels:
         #: which solver holds the joint: "srs", "panda" or "general" (:func:`derive.ik.free_joint.route`)
         self.route = free_joint.route(robot, joint)
         self._c = None
-        if self.route == "general":
+        if self.route == "general" or backend == "c":
             free_joint.plan(robot, joint)            # DeriveError now for a geometry it cannot solve
-            if backend == "c":
+            if backend == "c":       # the general elimination in C, on a class route too (module docstring)
                 if compile_fn is None:
                     raise DeriveError("the C free-joint kernels need the C backend's compile step "
                                       "(derive.kernels passes it)")
@@ -290,7 +292,7 @@ class FreeJointKernels:
         """Every solution with joint K held at ``free`` (rad, a number or one per pose):
         (solutions (n, 16, 7) NaN-padded, valid rows first, counts (n,)); one pose gives
         ((16, 7), count). ``details``: also (branch (n, 16): the class's branch ids, -1 on the
-        general route; singular (n, 16)). ``within_limits``: every in-limit winding of each
+        general route and from the C kernel; singular (n, 16)). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`)."""
         self._need(free)
         poses, single = self._poses(P)
@@ -313,9 +315,10 @@ class FreeJointKernels:
         return r.q, r.counts, r.branch, r.singular
 
     def ik_degenerate(self, P, free=None) -> np.ndarray:
-        """(n,) or a bool: the general route's degenerate flag of each pose at its value (the
+        """(n,) or a bool: the general elimination's degenerate flag of each pose at its value (the
         elimination degenerates for both plans, or more than 16 solutions: those returned are
-        checked, some may be missing); False on the class routes."""
+        checked, some may be missing): the C kernel's on the "c" backend (any route), the numpy
+        reference's on the general route; False for the class's closed forms (numpy, python)."""
         self._need(free)
         poses, single = self._poses(P)
         f = redundant.free_values(free, len(poses))
@@ -344,11 +347,15 @@ class FreeJointKernels:
 
 
 def free_joint_kernels(robot, backend: str, joint: int, fk_kernels, compile_fn=None) -> FreeJointKernels:
-    """:class:`FreeJointKernels`; for the "c" backend only on the general route (DeriveError on
-    a class route: no emitted IK for a joint given outside a class's own choice there).
+    """:class:`FreeJointKernels`; the "c" backend wherever the general elimination has a plan
+    (:func:`derive.ik.free_joint.plan`), on a class route too; DeriveError where it has none
+    (``derive.kernels`` turns it into an InputError naming the numpy kernels).
     ``compile_fn``: the C backend's compile step (:func:`derive.codegen.loader._compile`)."""
     if backend == "c" and free_joint.route(robot, joint) != "general":
-        raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
-                          f"{free_joint.route(robot, joint)} route (solved by derive.ik.free_joint in numpy); "
-                          f"use derive.kernels({robot.name!r}, 'numpy', free='q{joint}')")
+        try:
+            free_joint.plan(robot, joint)
+        except DeriveError as exc:
+            raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
+                              f"{free_joint.route(robot, joint)} route ({exc}); it is solved by the class's "
+                              f"closed form in numpy: derive.kernels({robot.name!r}, 'numpy', free='q{joint}')") from None
     return FreeJointKernels(robot, backend, joint, fk_kernels, compile_fn)
