@@ -116,7 +116,7 @@ def main():
                         times.append(time.process_time() - t0)
                     us = min(times) / args.poses * 1e6
                     same = sum(_same(cq[i, :cc[i]], r.q[i, :r.counts[i]]) for i in range(args.poses))
-                    ctext = f" {us:.1f} | {same}/{args.poses} | {dt * 1e3 / us:.0f}x |"
+                    ctext = f" {us:.1f} | {same}/{args.poses} | {dt * 1e3 / us:.2g}x |"
             print(f"| {name} | {k} | {how} | {found}/{args.poses} | {err:.1e} | {dist} | "
                   f"{int(r.degenerate.sum())} | {dt:.2f} | {extra} |" + ctext, flush=True)
 
