@@ -175,7 +175,8 @@ def c_source(robot, joint: int) -> str:
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
-        near_roots=_lit(FREE_JOINT_NEAR_ROOTS), max_solutions=MAX_SOLUTIONS)
+        near_roots=_lit(FREE_JOINT_NEAR_ROOTS), max_solutions=MAX_SOLUTIONS,
+        strict=free_joint.route(robot, joint) != "general")
 
 
 class _CLibrary:
