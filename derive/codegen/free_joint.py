@@ -8,7 +8,7 @@ The "c" backend runs emitted C99, the general elimination, wherever it has a pla
 (:func:`derive.ik.free_joint.plan`): on the general route (:func:`derive.ik.free_joint.route`)
 and on the class routes too (the SRS class with q1, q2, q5, q6 or q7 given, where the numpy and
 python backends run the class's closed form and C does not; the sets agree but on poses very
-near the SRS elbow singularity, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
 through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
@@ -319,8 +319,9 @@ class FreeJointKernels:
 
     def ik_degenerate(self, P, free=None) -> np.ndarray:
         """(n,) or a bool: the general elimination's degenerate flag of each pose at its value (the
-        elimination degenerates for both plans, or more than 16 solutions: those returned are
-        checked, some may be missing): the C kernel's on the "c" backend (any route), the numpy
+        elimination degenerates for both plans or is unreliable there, or more than 16 solutions:
+        those returned are checked, some may be missing; templates/free_joint.c.j2, fj_solve, and
+        :func:`derive.ik.free_joint._general`): the C kernel's on the "c" backend (any route), the numpy
         reference's on the general route; False for the class's closed forms (numpy, python)."""
         self._need(free)
         poses, single = self._poses(P)
