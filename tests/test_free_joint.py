@@ -248,10 +248,11 @@ def test_nearest_follows_a_path():
         seed = r.q
 
 
-def test_kernels_with_any_joint():
+def test_kernels_with_any_joint(monkeypatch):
     """derive.kernels(robot, backend, free="qK"): numpy and python give the reference's
-    solutions; fk is the backend's; C has no such kernel yet (InputError says so); free= is
-    required; q3 of the SRS class and q7 of the Panda class stay the generated kernels."""
+    solutions; fk is the backend's; free= is required; C refuses the SRS class's q4 and, where
+    the general elimination has no plan, says so naming the numpy kernels; q3 of the SRS class
+    and q7 of the Panda class stay the generated kernels."""
     robot = derive.load_robot("xarm7")
     q = _inside(robot, 8, np.random.default_rng(4))
     kn = derive.kernels("xarm7", "numpy", free="q5")
@@ -270,10 +271,21 @@ def test_kernels_with_any_joint():
     assert s1.shape == (16, 7) and c1 == rc[0]
     with pytest.raises(InputError, match="need free="):
         kn.ik(poses)
-    with pytest.raises(InputError, match="no C kernel"):
-        derive.kernels("xarm7", "c", free="q5")
-    with pytest.raises(DeriveError, match="no C kernel"):
-        free_joint_kernels(robot, "c", 5, None)
+    # C on a class route runs the general elimination (test_free_joint_c); the SRS q4 stays refused,
+    # and where the elimination has no plan the error names the numpy kernels (the class's closed form)
+    with pytest.raises(InputError, match="joint 4 alone sets the shoulder-wrist distance"):
+        derive.kernels("iiwa14", "c", free="q4")
+
+    def no_plan(robot, joint):
+        raise DeriveError(f"{robot.name} with q{joint} given: the general 6R elimination degenerates")
+
+    monkeypatch.setattr(free_joint, "plan", no_plan)
+    with pytest.raises(InputError, match=r"no C kernels with 'q2'.*degenerates.*"
+                                         r"derive.kernels\('iiwa14', 'numpy', free='q2'\)"):
+        derive.kernels("iiwa14", "c", free="q2")
+    with pytest.raises(DeriveError, match=r"no C kernel for the IK with q2 given on the srs-2 route"):
+        free_joint_kernels(derive.load_robot("iiwa14"), "c", 2, None)
+    monkeypatch.undo()
     assert type(derive.kernels("iiwa14", "numpy", free="q3")).__name__ == "Kernels"
     assert type(derive.kernels("panda", "numpy", free="q7")).__name__ == "Kernels"
     sw = kn.ik_sweep(poses[:2], 4)

@@ -115,13 +115,19 @@ def test_q3_kernels_input_contract():
         (lambda: k.ik(pose, free=math.nan), "free"),
         (lambda: k.ik_sweep(pose, 4), "ik_sweep: these kernels take q3"),
         (lambda: k.nearest(pose, np.zeros(7)), "nearest: these kernels take q3"),
-        (lambda: derive.kernels("iiwa14", "c", free="q5"), "its choices: psi, q3"),
-        (lambda: derive.kernels("panda", "c", free="q3"), "its choices: q7"),
+        (lambda: derive.kernels("iiwa14", "c", free="q4"), "joint 4 alone sets the shoulder-wrist distance"),
+        (lambda: derive.kernels("iiwa14", "c", free="q8"), "its choices: psi, q3"),
+        (lambda: derive.kernels("panda", "c", free="psi"), "its choices: q7"),
         (lambda: derive.kernels("ur5", "c", free="q3"), "none"),
     ]
     for call, text in cases:
         with pytest.raises(InputError, match=text):
             call()
+    # any other joint of a 7R arm: the free-joint kernels (in C the general elimination, on the
+    # SRS class's routes too: tests/test_free_joint_c.py), not the class's generated kernels
+    assert derive.kernels("iiwa14", "c", free="q2").free == "q2"      # built by test_free_joint_c too
+    from derive.codegen.loader import _any_joint
+    assert _any_joint(derive.load_robot("panda"), "q3") and not _any_joint(derive.load_robot("iiwa14"), "q3")
     # the class's default parameter by name is the default kernels
     assert derive.kernels("iiwa14", "c", free="psi") is derive.kernels("iiwa14", "c")
 

@@ -1,29 +1,239 @@
 """``derive.kernels(robot, backend, free="qK")``: a seven-joint arm's IK with any joint K given.
 
 The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding joint K leaves
-one, else the general 6R with a numeric per-value construction of the elimination). No code is
-emitted for it yet: the "python" and "numpy" backends run that numpy solver for ``ik``,
-``ik_sweep`` and ``nearest``, and the backend's generated kernels for ``fk`` (and every other
-kernel: ``with_tool``, ``jacobian``, ...); the "c" backend has no such IK kernel
-(``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that of :class:`derive.codegen.loader.Kernels` with the
-7R ``free=`` argument: ``ik(P, free=values)`` -> (solutions (n, 16, 7) NaN-padded, counts (n,)),
-``ik_sweep(P, n)`` over joint K's range, ``nearest(P, q_seed)`` with joint K chosen for the path.
+one, else the general 6R with a numeric per-value construction of the elimination). The "python"
+and "numpy" backends run that numpy solver for ``ik``, ``ik_sweep`` and ``nearest``, and the
+backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, ``jacobian``, ...).
+The "c" backend runs emitted C99, the general elimination, wherever it has a plan
+(:func:`derive.ik.free_joint.plan`): on the general route (:func:`derive.ik.free_joint.route`)
+and on the class routes too (the SRS class with q1, q2, q5, q6 or q7 given, where the numpy and
+python backends run the class's closed form and C does not; the sets agree but on poses very
+near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
+templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
+through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
+as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
+folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
+IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
+of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P, free=values)``
+-> (solutions (n, 16, 7) NaN-padded, counts (n,)), ``ik_sweep(P, n)`` over joint K's range,
+``nearest(P, q_seed)`` with joint K chosen for the path.
 """
 
 from __future__ import annotations
 
+import ctypes
+import re
+
 import numpy as np
 
+from derive._version import __version__
 from derive.algebra import dualquat as dq
+from derive.cache import memo
 from derive.errors import DeriveError, InputError
-from derive.ik import free_joint, redundant, select
+from derive.ik import free_joint, general6r as g6, redundant, select
+from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_RANK_TOL,
+                                  G6_NEAR_SINGULAR, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+from derive.ik.tolerances import FREE_JOINT_NEAR_ROOTS
 from derive.kinematics.pose import as_pose_batch
+
+#: Solutions per pose and value at most (a 6R has at most 16).
+MAX_SOLUTIONS = free_joint.MAX_SOLUTIONS
+
+
+def _identifier(robot, joint: int) -> str:
+    stem = robot.name.replace("-", "_").replace(".", "_")
+    return (stem if stem[:1].isalpha() else "r_" + stem) + f"_free_q{joint}"
+
+
+class _Context(dict):
+    """A template context whose missing keys are None: the general 6R template's optional parts
+    (a feature a newer template adds, named by a key this module does not set) stay off."""
+
+    def __missing__(self, key):
+        return None
+
+
+def _deflation(pl: free_joint.Plan):
+    """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
+    :func:`derive.ik.general6r._deflation`) where it holds for every value: joint 1 or 7 held
+    (the held link is the first or last, so the locked 6R's loop links 1-5 are the same for every
+    value and the value moves only the pose link); with a middle joint held the eigenvectors at
+    x = +-i change with the value (and the pose), so there is none. As the general 6R kernels'
+    template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
+    given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
+    module has no such context (a template without the deflation)."""
+    from types import SimpleNamespace
+
+    from derive.codegen import general6r as cg6
+    make = getattr(cg6, "_deflation_context", None) or getattr(cg6, "deflation_context", None)
+    if make is None:
+        return None
+    found = None
+    if pl.joint in (1, 7):
+        d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
+        if pl.reverse:
+            d = g6._reverse(d)
+        found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
+                                              offsets=pl.offsets, d3=pl.d3))
+    if found is None:
+        return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+    b, keep, spurious = found
+    return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
+
+
+def _core_context(pl: free_joint.Plan) -> dict:
+    """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
+    (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
+    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2)."""
+    from derive.codegen.general6r import _arr, _lit
+    e, ev = int(pl.e), int(pl.ev)
+    triple, pair = g6._cut_joints(e)
+    order = [ev] + [i for i in range(3) if i != ev]
+    perm = []
+    for a in range(3):                    # perm[9 i + 3 j + k] = the triple's index: eigen joint first
+        for b in range(3):
+            for c in range(3):
+                old = [0, 0, 0]
+                old[order[0]], old[order[1]], old[order[2]] = a, b, c
+                perm.append(9 * old[0] + 3 * old[1] + old[2])
+    return _Context({
+        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+        "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
+        "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
+        "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
+        "n_d3": len(pl.d3), "start": _arr(g6._START), "nudge": _lit(g6._NUDGE),
+        "cluster_tol": _lit(g6.CLUSTER_TOL), "near_roots": _lit(FREE_JOINT_NEAR_ROOTS), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
+        "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
+        "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
+        "max_solutions": MAX_SOLUTIONS, "n_perturb": 0, "notes": [" ".join(pl.notes.split())],
+        "how": ("the loop cut at joint %d of the %s locked 6R (pair %s eliminated linearly, triple %s, "
+                "eigen-variable q%d of the 6R), coefficients per pose and value"
+                % (e, "reversed" if pl.reverse else "forward", tuple(pair), tuple(triple), triple[ev])),
+    })
+
+
+def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
+    """(14, 27): the triple's side of the plan's loop cut with the joint held at v (it does not
+    depend on the pose: the cut's triple side holds links 1-5 of the locked 6R, never the pose link)."""
+    d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+    return g6._triple_coefs(g6._reverse(d) if pl.reverse else d, pl.e)
+
+
+def _harmonics(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    return np.stack([np.ones_like(v), np.cos(v), np.sin(v), np.cos(2 * v), np.sin(2 * v), np.cos(3 * v),
+                     np.sin(3 * v)], -1)
+
+
+def triple_harmonics(pl: free_joint.Plan, samples: int = 16) -> np.ndarray:
+    """(7, 378): the triple side Y(v) of a plan as a trigonometric polynomial of degree 3 in the held
+    value, Y(v) = sum_k H[k] h_k(v), h = (1, cos v, sin v, cos 2v, sin 2v, cos 3v, sin 3v): the held
+    joint's link C_K Rz(v) C_{K+1} enters the cut's triple at most once, so the transform whose z line
+    is taken, and its inverse, have entries of degree 1 in (cos v, sin v), and the 14 line equations
+    are of degree <= 3 in them (the Lagrange product (p.p) l - 2 (p.l) p). Least squares over
+    ``samples`` equispaced values, checked at 5 random values (DeriveError past 1e-10)."""
+    vs = 2 * np.pi * np.arange(samples) / samples
+    ys = np.array([_triple_side(pl, v).ravel() for v in vs])
+    coef = np.linalg.lstsq(_harmonics(vs), ys, rcond=None)[0]
+    test = np.random.default_rng(5).uniform(-np.pi, np.pi, 5)
+    err = max(float(np.abs(_harmonics(v) @ coef - _triple_side(pl, v).ravel()).max()) for v in test)
+    if not err < 1e-10 * max(1.0, float(np.abs(ys).max())):
+        raise DeriveError(f"{pl.robot} with q{pl.joint} given: the triple side is not a trigonometric "
+                          f"polynomial of degree 3 in the held value (misses by {err:.1e})")
+    return coef
+
+
+def c_source(robot, joint: int) -> str:
+    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given by the general
+    elimination (templates/free_joint.c.j2; see the module docstring), on a class route too
+    (the class's closed form is not emitted here). DeriveError when the arm has no plan,
+    InputError for a joint that cannot be given (the SRS class's q4)."""
+    from derive.codegen.general6r import _arr, _lit
+    from derive.codegen.templates import template_environment
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    free_joint.route(robot, joint)            # InputError for a joint that cannot be given (SRS q4)
+    pl = free_joint.plan(robot, joint)
+    plans = [pl, pl.alt if pl.alt is not None else pl]
+    env = template_environment()
+    core = env.get_template("general6r.c.j2")
+    cores = []
+    for i, p in enumerate(plans):
+        text = core.render(ik={"general": _core_context(p)})
+        cores.append(re.sub(r"\bg6_", f"fj{i}_", text))
+    # the width of the core's candidate rows (6 joints, and more where the core stores flags there)
+    width = re.search(r"static int fj0_candidates\([^)]*\(\*DQ_RESTRICT cq\)\[(\d+)\]", cores[0])
+    if width is None:
+        raise DeriveError("free-joint C: the general 6R core's g6_candidates(pose, cq, degenerate) was not found")
+    c7 = pl.c
+    return env.get_template("free_joint.c.j2").render(
+        robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
+        plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
+                "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
+                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27))} for p in plans],
+        c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
+        sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
+        accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
+        near_roots=_lit(FREE_JOINT_NEAR_ROOTS), max_solutions=MAX_SOLUTIONS,
+        strict=free_joint.route(robot, joint) != "general")
+
+
+class _CLibrary:
+    """The compiled IK of one (arm, joint) on the general route, through ctypes. ``compile_fn``:
+    (source path, prefix, again=None) -> shared library path, the C backend's compile step
+    (:func:`derive.codegen.loader._compile`, passed in: the loader imports this module)."""
+
+    def __init__(self, robot, joint: int, compile_fn):
+        from derive.cache import build_folder, writable_root, write_atomic
+        ident = _identifier(robot, joint)
+        text = c_source(robot, joint)
+        folder = build_folder(writable_root()) / "free-joint"
+        folder.mkdir(parents=True, exist_ok=True)
+        import hashlib
+        src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
+        if not src.exists() or src.read_text(encoding="utf-8") != text:
+            write_atomic(src, text)
+        self.path = compile_fn(src, ident)
+        try:
+            lib = ctypes.CDLL(str(self.path))
+        except OSError as exc:
+            self.path = compile_fn(src, ident, again=f"the C library {self.path} did not load ({exc})")
+            lib = ctypes.CDLL(str(self.path))
+        f = getattr(lib, f"{ident}_ik_batch_free")
+        f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
+        f.restype = None
+        self._lib, self._f = lib, f
+
+    def solve(self, poses, values):
+        """(q (n, 16, 7) NaN-padded, counts (n,), singular (n, 16), degenerate (n,)) of poses (n, 8)
+        with the joint at values (n,)."""
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        n = len(poses)
+        q = np.empty((n, MAX_SOLUTIONS, 7))
+        counts = np.empty(n, dtype=np.intc)
+        sing = np.empty((n, MAX_SOLUTIONS), dtype=np.intc)
+        degen = np.empty(n, dtype=np.intc)
+        if n:
+            self._f(n, poses.ctypes.data, values.ctypes.data, q.ctypes.data, counts.ctypes.data,
+                    sing.ctypes.data, degen.ctypes.data)
+        return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
+
+
+def c_library(robot, joint: int, compile_fn) -> _CLibrary:
+    """The compiled C IK of ``robot`` with ``joint`` given (once per process; the library is
+    cached by source digest and compiler flags in the user cache's build folder). ``compile_fn``:
+    :func:`derive.codegen.loader._compile`."""
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    return memo("free-joint-c", (robot.id, joint, compile_fn), lambda: _CLibrary(robot, joint, compile_fn))
 
 
 class FreeJointKernels:
     """The kernels of a 7R arm whose IK takes the value of joint K (``free="qK"``)."""
 
-    def __init__(self, robot, backend: str, joint: int, fk_kernels):
+    def __init__(self, robot, backend: str, joint: int, fk_kernels, compile_fn=None):
         self.robot = robot
         self.backend = backend
         self.dof = 7
@@ -32,8 +242,14 @@ class FreeJointKernels:
         self.free = f"q{joint}"
         #: which solver holds the joint: "srs", "panda" or "general" (:func:`derive.ik.free_joint.route`)
         self.route = free_joint.route(robot, joint)
-        if self.route == "general":
+        self._c = None
+        if self.route == "general" or backend == "c":
             free_joint.plan(robot, joint)            # DeriveError now for a geometry it cannot solve
+            if backend == "c":       # the general elimination in C, on a class route too (module docstring)
+                if compile_fn is None:
+                    raise DeriveError("the C free-joint kernels need the C backend's compile step "
+                                      "(derive.kernels passes it)")
+                self._c = c_library(robot, joint, compile_fn)    # compiled on first use
         self._fk = fk_kernels
         self._tool = None
 
@@ -79,12 +295,11 @@ class FreeJointKernels:
         """Every solution with joint K held at ``free`` (rad, a number or one per pose):
         (solutions (n, 16, 7) NaN-padded, valid rows first, counts (n,)); one pose gives
         ((16, 7), count). ``details``: also (branch (n, 16): the class's branch ids, -1 on the
-        general route; singular (n, 16)). ``within_limits``: every in-limit winding of each
+        general route and from the C kernel; singular (n, 16)). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`)."""
         self._need(free)
         poses, single = self._poses(P)
-        r = free_joint.solve(self.robot, poses, self.joint, redundant.free_values(free, len(poses)))
-        sols, counts, branch, sing = r.q, r.counts, r.branch, r.singular
+        sols, counts, branch, sing = self._solver(poses, redundant.free_values(free, len(poses)))
         if within_limits:
             sols, counts, branch, sing = select.within_limits(sols, counts, self.robot.limits, self.robot.revolute,
                                                               branch, sing)
@@ -93,28 +308,58 @@ class FreeJointKernels:
         return (sols, counts, branch, sing) if details else (sols, counts)
 
     def _solver(self, poses, f):
+        """(q, counts, branch, singular) of poses (m, 8) of the end frame at values f (m,): the C
+        kernel on the "c" backend, else :func:`derive.ik.free_joint.solve`."""
+        if self._c is not None:
+            q, counts, sing, _ = self._c.solve(poses, f)
+            branch = np.full((len(q), MAX_SOLUTIONS), -1, dtype=np.int64)     # no branch structure
+            return q, counts, branch, sing
         r = free_joint.solve(self.robot, poses, self.joint, f)
         return r.q, r.counts, r.branch, r.singular
+
+    def ik_degenerate(self, P, free=None) -> np.ndarray:
+        """(n,) or a bool: the general elimination's degenerate flag of each pose at its value (the
+        elimination degenerates for both plans or is unreliable there, or more than 16 solutions:
+        those returned are checked, some may be missing; templates/free_joint.c.j2, fj_solve, and
+        :func:`derive.ik.free_joint._general`): the C kernel's on the "c" backend (any route), the numpy
+        reference's on the general route; False for the class's closed forms (numpy, python)."""
+        self._need(free)
+        poses, single = self._poses(P)
+        f = redundant.free_values(free, len(poses))
+        if self._c is not None:
+            out = self._c.solve(poses, f)[3]
+        elif self.route == "general":
+            out = free_joint.solve(self.robot, poses, self.joint, f).degenerate
+        else:
+            out = np.zeros(len(poses), dtype=bool)
+        return bool(out[0]) if single else out
 
     def ik_sweep(self, P, n: int, within_limits: bool = True) -> redundant.Sweep:
         """The solutions at ``n`` values of joint K over its range
         (:func:`derive.ik.free_joint.ik_sweep`)."""
         poses, single = self._poses(P)
         return free_joint.ik_sweep(self.robot, poses[0] if single else poses, self.joint, n,
-                                   within_limits=within_limits)
+                                   within_limits=within_limits,
+                                   solver=self._solver if self._c is not None else None)
 
     def nearest(self, P, q_seed, tol=None) -> select.Nearest:
         """Per pose the solution nearest to the seed along a path, joint K chosen by the 1-D
         search of :func:`derive.ik.free_joint.nearest`."""
         poses, single = self._poses(P)
-        return free_joint.nearest(self.robot, poses[0] if single else poses, self.joint, q_seed, tol=tol)
+        return free_joint.nearest(self.robot, poses[0] if single else poses, self.joint, q_seed, tol=tol,
+                                  solver=self._solver if self._c is not None else None)
 
 
-def free_joint_kernels(robot, backend: str, joint: int, fk_kernels) -> FreeJointKernels:
-    """:class:`FreeJointKernels`; DeriveError for the "c" backend (no emitted IK for a joint
-    given outside a class's own choice yet)."""
-    if backend == "c":
-        raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given yet (the general "
-                          "6R with a joint held is solved by derive.ik.free_joint in numpy); use "
-                          f"derive.kernels({robot.name!r}, 'numpy', free='q{joint}')")
-    return FreeJointKernels(robot, backend, joint, fk_kernels)
+def free_joint_kernels(robot, backend: str, joint: int, fk_kernels, compile_fn=None) -> FreeJointKernels:
+    """:class:`FreeJointKernels`; the "c" backend wherever the general elimination has a plan
+    (:func:`derive.ik.free_joint.plan`), on a class route too; DeriveError where it has none
+    (``derive.kernels`` turns it into an InputError naming the numpy kernels).
+    ``compile_fn``: the C backend's compile step (:func:`derive.codegen.loader._compile`)."""
+    if backend == "c" and free_joint.route(robot, joint) != "general":
+        try:
+            free_joint.plan(robot, joint)
+        except DeriveError as exc:
+            raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
+                              f"{free_joint.route(robot, joint)} route ({exc}); it is solved by the class's "
+                              f"closed form in numpy: derive.kernels({robot.name!r}, 'numpy', free='q{joint}')") from None
+    return FreeJointKernels(robot, backend, joint, fk_kernels, compile_fn)

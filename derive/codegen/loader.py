@@ -855,7 +855,12 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     use, about 15 s; ``ik_sweep`` and ``nearest`` search over psi: use the default kernels for
     them; CasADi: ``functions(robot)["ik_q3"]``). Any other ``free="qK"`` (K = 1..7) of a
     7-joint arm: :class:`derive.codegen.free_joint.FreeJointKernels`, the IK with joint K given
-    by :mod:`derive.ik.free_joint` (numpy; "python" and "numpy" backends, no C kernel yet).
+    by :mod:`derive.ik.free_joint` (numpy; "python" and "numpy" backends: the class's closed form
+    where :func:`derive.ik.free_joint.route` names one, else the general 6R). The "c" backend runs
+    templates/free_joint.c.j2, the general 6R elimination, for every K that has a plan
+    (:func:`derive.ik.free_joint.plan`): on the general route and on the class routes too (SRS
+    q1, q2, q5, q6, q7, where C does not use the class's closed form); InputError naming the
+    numpy kernels where there is no plan; the SRS class's q4 is refused for every backend.
 
     ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal` (its exact nominal robot
     and the relation FK(q) ~= B FK_nominal(s q + o) T): the IK runs the nominal's closed form and
@@ -868,15 +873,21 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     if nominal is None and _any_joint(r, free):
         # any joint K of a 7R arm outside its class's own choices: derive.ik.free_joint (numpy)
         k = int(free[1:])
-        if backend == "c":
-            choices = redundant.FREE_CHOICES.get(redundant.redundant_kind(r), ())
-            raise InputError(f"free: {r.name} has no C kernels with {free!r} as the free parameter; its "
-                             f"choices: {', '.join(choices) or 'none'}; any joint K is solved by "
-                             f"derive.kernels({r.name!r}, 'numpy', free='q{k}') (derive.ik.free_joint; "
-                             "no C kernel for it yet)")
+        from derive.ik.free_joint import plan, route
+        if backend == "c" and route(r, k) != "general":
+            # a class route (SRS q1, q2, q5, q6, q7): the C runs the general elimination where it has a plan
+            try:
+                plan(r, k)
+            except DeriveError as exc:
+                choices = redundant.FREE_CHOICES.get(redundant.redundant_kind(r), ())
+                raise InputError(f"free: {r.name} has no C kernels with {free!r} as the free parameter (the "
+                                 f"general 6R elimination has no plan: {exc}); its choices: "
+                                 f"{', '.join(choices) or 'none'}; any joint K is solved by "
+                                 f"derive.kernels({r.name!r}, 'numpy', free='q{k}') (derive.ik.free_joint, "
+                                 f"the class's closed form)") from None
         from derive.codegen.free_joint import free_joint_kernels
         return memo("kernels-free-joint", (r.id, r.limits_id, backend, k),
-                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend)))
+                    lambda: free_joint_kernels(r, backend, k, kernels(r, backend), _compile))
     if nominal is None:
         nominal = near_class_nominal(r, free)
     free = free_choice(r if nominal is None else nominal.robot, free)

@@ -48,7 +48,7 @@ from derive.cache import memo
 from derive.errors import DeriveError, InputError
 from derive.ik import finish, general6r as g6, panda, redundant, select, srs
 from derive.ik.closed_form import IKSolutions
-from derive.ik.tolerances import G6_ACCEPT, G6_NEWTON_MAX, G6_RANK_TOL, G6_SINGULAR, TIE
+from derive.ik.tolerances import G6_ACCEPT, G6_NEAR_SINGULAR, G6_NEWTON_MAX, G6_RANK_TOL, G6_SINGULAR, TIE
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -346,8 +346,10 @@ def _six(pl: Plan, d, target):
 class FreeJointSolutions(finish.Solutions):
     """:class:`derive.ik.finish.Solutions` (q (n, m, 7), ...; ``free`` the held joint's values)
     with ``degenerate`` (n,): the general route's pose is special for the elimination (Q of
-    lower rank or the leading matrix ill-conditioned for every offset): the solutions found are
-    checked, but some may be missing (False on the class routes)."""
+    lower rank or the leading matrix ill-conditioned for every offset) or the elimination is
+    unreliable there (an odd count, the rescue plan's set not the plan's, a solution whose
+    Jacobian's smallest singular value over its largest is below G6_NEAR_SINGULAR): the solutions
+    found are checked, but some may be missing (False on the class routes)."""
 
     degenerate: np.ndarray | None = None
     joint: int = 0
@@ -384,9 +386,13 @@ def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
     count = (ok & ~dup).sum(1)
     suspect = ((count % 2 == 1) | (count == 0) | degen | np.any(dup, 1)
                | np.any(np.all(np.isfinite(cand), -1) & ~ok, 1))
+    disagree = np.zeros(n, dtype=bool)
     if pl.alt is not None and np.any(suspect):
         rows = np.nonzero(suspect)[0]
         ip2, q72, degen2 = _candidates(pl.alt, poses[rows], values[rows])
+        cand2 = _grid(ip2, q72, len(rows))
+        ok2, _ = _check(robot, poses[rows], cand2)
+        disagree[rows] = (ok2 & ~finish.duplicates(cand2, ok2)).sum(1) != count[rows]
         ip, q7 = np.concatenate([ip, rows[ip2]]), np.concatenate([q7, q72])
         order = np.argsort(ip, kind="stable")
         ip, q7 = ip[order], q7[order]
@@ -397,10 +403,15 @@ def _general(robot, pl: Plan, poses, values) -> FreeJointSolutions:
     dup = finish.duplicates(cand, ok)
     keep = ok & ~dup
     sing = np.zeros(ok.shape, dtype=bool)
+    near = np.zeros(ok.shape, dtype=bool)
     if np.any(keep):
-        sing[keep] = _singular(pl, locked_chain(pl.c, k, values[np.nonzero(keep)[0]]),
-                               np.delete(cand[keep], k - 1, axis=1))
+        sing[keep], near[keep] = _singular(pl, locked_chain(pl.c, k, values[np.nonzero(keep)[0]]),
+                                           np.delete(cand[keep], k - 1, axis=1), (G6_SINGULAR, G6_NEAR_SINGULAR))
     q, counts, _, sing, res = finish.compact(cand, keep, sing, residual)
+    # unreliable (templates/free_joint.c.j2 on the general route, the same rule): an odd count (the
+    # real solutions come in pairs but for a lost root), the rescue plan's set not the plan's, a
+    # solution near the singular set (two solutions nearly merged, one can be lost)
+    degen = degen | (counts % 2 == 1) | disagree | np.any(near, 1)
     q, sing, res = q[:, :MAX_SOLUTIONS], sing[:, :MAX_SOLUTIONS], res[:, :MAX_SOLUTIONS]
     over = counts > MAX_SOLUTIONS
     degen = degen | over
@@ -438,12 +449,13 @@ def _check(robot, poses, cand):
     return ok, residual
 
 
-def _singular(pl, d, q6):
+def _singular(pl, d, q6, tols=(G6_SINGULAR,)):
     """Whether the 6R Jacobian (chains d, joints q6 of the locked 6R) is rank-deficient
-    (relative smallest singular value below G6_SINGULAR)."""
+    (relative smallest singular value below G6_SINGULAR), or a tuple: below each of tols."""
     _, jac = _errors(d, q6, np.broadcast_to(np.eye(4), (len(q6), 4, 4)))
     ev = np.linalg.eigvalsh(np.swapaxes(jac, 1, 2) @ jac)
-    return ev[:, 0] < G6_SINGULAR ** 2 * ev[:, -1]
+    out = tuple(ev[:, 0] < t ** 2 * ev[:, -1] for t in tols)
+    return out if len(tols) > 1 else out[0]
 
 
 # --------------------------------------------------------------------------- #
