@@ -144,6 +144,7 @@ def general_context(robot) -> dict:
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
+        "defl": deflation_context(pl),
         "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
                 % (cut["e"], tuple(pair), tuple(triple), triple[ev]) if cut else
@@ -154,3 +155,20 @@ def general_context(robot) -> dict:
 
 def g6_comment(text: str) -> str:
     return " ".join(str(text).split()).replace("*/", "* /")
+
+
+def deflation_context(pl) -> dict | None:
+    """The C kernels' deflation of the pencil's pose-independent eigenvectors (the plan's
+    ``deflate``, :func:`derive.ik.general6r._deflation`), or None when the plan has none: per
+    offset of the eigen-variable the orthonormal basis B = [W V] (24 x 24, W's ``keep`` columns
+    first) and the constant part W1^T B2 (keep x 24) of W^T C B = W1^T B2 + W2^T (lower B), with
+    [B1; B2] B's rows 1-12 and 13-24 and ``lower`` = -M2^-1 [M0 M1] the companion matrix's lower
+    rows (the reference's :func:`derive.ik.general6r._eigvals`). The eigenvalues of its first
+    ``keep`` columns are the pose's roots; its last 24 - keep columns (W^T C V) are zero to
+    rounding, checked per pose against ``leak`` (:data:`derive.ik.general6r.DEFLATE_LEAK`)."""
+    if pl.deflate is None:
+        return None
+    b = np.asarray(pl.deflate, dtype=float)                 # (len(d3), 24, 24)
+    keep = int(pl.deflate_keep)
+    const = np.einsum("kij,kil->kjl", b[:, :12, :keep], b[:, 12:, :])   # W1^T B2 (len(d3), keep, 24)
+    return {"keep": keep, "b": _arr(b), "w1b2": _arr(const), "leak": _lit(g6.DEFLATE_LEAK)}
