@@ -144,7 +144,7 @@ def general_context(robot) -> dict:
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
-        "defl": deflation_context(pl),
+        "defl": deflation_context(pl), "tables": tables_context(pl),
         "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
                 % (cut["e"], tuple(pair), tuple(triple), triple[ev]) if cut else
@@ -172,3 +172,14 @@ def deflation_context(pl) -> dict | None:
     keep = int(pl.deflate_keep)
     const = np.einsum("kij,kil->kjl", b[:, :12, :keep], b[:, 12:, :])   # W1^T B2 (len(d3), keep, 24)
     return {"keep": keep, "b": _arr(b), "w1b2": _arr(const), "leak": _lit(g6.DEFLATE_LEAK)}
+
+
+def tables_context(pl) -> dict | None:
+    """The standard elimination's pose tables transposed for the C kernels (None for a loop
+    cut): ``qkt`` (K x 112) and ``r0t`` (K x 14), so that Q and the pose terms are sums of rows
+    times the K pose monomials (the loops run along the rows: vector instructions)."""
+    if pl.cut:
+        return None
+    el = pl.elim
+    qk = el.q.reshape(112, -1)
+    return {"qkt": _arr(qk.T), "r0t": _arr(np.asarray(el.r0).T)}
