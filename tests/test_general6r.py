@@ -48,6 +48,35 @@ def test_chain_form_reproduces_the_matrix_fk():
     assert np.abs(end - reference.fk_matrix(ROBOT, q)).max() < 1e-12
 
 
+@pytest.mark.parametrize("robot", ["general-6r", "crx10ia", "xarm6"])
+def test_column_layout_chain_and_folded_fk_agree_with_the_matrix_and_quaternion_fk(robot):
+    """The solver's hot path against the independent ones: the column-layout chain (every joint's
+    z axis and origin, the end; stopped before any joint and continued, as the back-substitution
+    does) against plain 4x4 matrices (reference.fk_matrix, scaled), and the FK check's folded
+    dual-quaternion product against derive.kinematics.fk.fk."""
+    from derive.kinematics.fk import _pose_error, fk
+    c, scale = general6r.chain_form(robot)
+    q = np.random.default_rng(4).uniform(-math.pi, math.pi, (40, 6))
+    mats = reference.fk_matrix(robot, q)
+    zs, ps, x = general6r._frames_x(c, q)
+    end = np.stack([x[0], x[1], x[2], x[3]], 2)                  # (n, 3, 4)
+    assert np.abs(end[:, :, :3] - mats[:, :3, :3]).max() < 1e-12
+    assert np.abs(end[:, :, 3] * scale - mats[:, :3, 3]).max() < 1e-12
+    frames, _ = general6r._chain_frames(c, q)
+    assert np.abs(zs - frames[:, :, :3, 2]).max() < 1e-13 and np.abs(ps - frames[:, :, :3, 3]).max() < 1e-13
+    cq, sq = np.cos(q), np.sin(q)
+    for stop in range(6):
+        z2, p2 = np.empty((40, 6, 3)), np.empty((40, 6, 3))
+        a = general6r._chain_x(c, cq, sq, z2, p2, stop=stop)      # A before joint stop's rotation
+        assert np.abs(np.stack(list(a), 2) - frames[:, stop, :3, :]).max() < 1e-13
+        general6r._x_rot(a, cq[:, stop, None], sq[:, stop, None])
+        rest = general6r._chain_x(c, cq, sq, z2, p2, x=a, start=stop + 1)
+        assert np.abs(np.stack(list(rest), 2) - end).max() < 1e-13
+        assert np.abs(z2 - zs).max() < 1e-13
+    dpos, drot = _pose_error(general6r._fk_exact(derive.load_robot(robot), q), fk(robot, q))
+    assert dpos.max() < 1e-13 and drot.max() < 1e-13
+
+
 def test_derived_equations_hold_on_configurations():
     """P(q3) X1 = Q(l, p) X2, the 14 derived equations, at random configurations (their
     coefficients come from sympy; the configurations' poses from the dual-quaternion FK)."""

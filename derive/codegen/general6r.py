@@ -155,11 +155,40 @@ def general_context(robot) -> dict:
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
         "defl": deflation_context(pl), "tables": tables_context(pl),
         "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
+        "defl": _deflation_context(pl),
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
                 % (cut["e"], tuple(pair), tuple(triple), triple[ev]) if cut else
                 "Raghavan-Roth elimination of the %s chain (q1, q2 eliminated linearly, eigen-variable %s)"
                 % ("reversed" if pl.reverse else "forward", "q4 of the reversed chain" if pl.reverse else "q3")),
     }
+
+
+def _deflation_context(pl) -> dict:
+    """The deflation of the plan (:func:`derive.ik.general6r._deflation`) as baked constants,
+    the context's key ``defl``: the pencil's pose-independent eigenvectors (x = +-i, and a cut's
+    constant spurious real roots) removed before the eigenvalues are taken, so that each pose
+    solves ``keep`` x ``keep`` (16 x 16 for a general arm) instead of 24 x 24.
+
+    Per offset k of the eigen-variable (``d3[k]``), the orthonormal basis B_k = [W V] (24 x 24,
+    W its first ``keep`` columns, V spanning the removed eigenvectors). With the companion matrix
+    C = [[0, I], L] (L = -M2^-1 [M0 M1], 12 x 24) and B = [B1; B2] (rows 1-12, 13-24),
+    W^T C B = W1^T B2 + W2^T (L B): its first ``keep`` columns are the deflated block whose
+    eigenvalues are C's others, its last 24 - keep (``leak``) are zero to rounding where the
+    deflation holds (else that pose takes the whole 24 x 24). Keys: ``on`` (whether the plan has
+    a deflation), ``keep``, ``b`` (n_d3, 24, 24), ``w1tb2`` (n_d3, keep, 24) = W1^T B2,
+    ``w2t`` (n_d3, keep, 12) = W2^T, ``n`` = 24 - keep (the removed dimension), ``leak_tol``
+    (DEFLATE_LEAK: the largest |W^T C V| allowed, relative to max(1, L's largest entry)),
+    ``spurious`` (the removed real roots, rad). Arrays as nested C initialisers (the numpy
+    template turns the braces into lists)."""
+    if pl.deflate is None:
+        return {"on": False, "keep": 24, "leak_tol": _lit(g6.DEFLATE_LEAK), "spurious": []}
+    keep = int(pl.deflate_keep)
+    b = np.asarray(pl.deflate)                                  # (n_d3, 24, 24)
+    w1tb2 = np.einsum("kai,kaj->kij", b[:, :12, :keep], b[:, 12:, :])   # W1^T B2
+    w2t = np.swapaxes(b[:, 12:, :keep], 1, 2)                   # W2^T
+    return {"on": True, "keep": keep, "n": 24 - keep, "b": _arr(b), "w1tb2": _arr(w1tb2),
+            "w2t": _arr(w2t), "leak_tol": _lit(g6.DEFLATE_LEAK),
+            "spurious": [_lit(v) for v in pl.spurious]}
 
 
 def g6_comment(text: str) -> str:

@@ -33,8 +33,12 @@ arm's size, the "scale"). Following Raghavan and Roth (1993, J. Mech. Des. 115(3
   14 x 8 system ``Q X2 = P X1`` q1 and q2 (its least-squares solution by the same QR), the
   remaining rotation q6.
 * Every candidate is polished by Newton steps on the product-form FK (damped, the geometric
-  Jacobian), checked on :func:`derive.kinematics.fk.fk` (the exact FK: :data:`G6_ACCEPT` m and
-  rad), near-duplicates within :data:`MERGE_TOL` in every joint merged.
+  Jacobian; the first step on the chain the back-substitution of the last joint made, a step
+  below :data:`NEWTON_DONE` whose linear residual is below 1e-13 the last), checked on derive's
+  dual-quaternion FK (:func:`derive.kinematics.fk.fk`'s product with its constant factors
+  folded, :func:`_fk_exact`: :data:`G6_ACCEPT` m and rad), near-duplicates within
+  :data:`MERGE_TOL` in every joint merged. The chain is kept in a column layout
+  (:func:`_x_times`) whose thin products stay on one BLAS thread.
 * A pose whose elimination degenerates (the leading matrix ill-conditioned for every offset, or
   Q rank-deficient there) is solved at nearby poses and Newton carries their solutions back
   (:func:`_perturbed`); a pose with a (near-)singular solution is flagged ``degenerate``.
@@ -162,6 +166,99 @@ def _chain_frames(c, q):
         a[:, :, 0] = ci * a0 + si * a1
         a[:, :, 1] = ci * a1 - si * a0
     return frames, (a.reshape(4 * m, 4) @ c[6]).reshape(m, 4, 4)
+
+
+#: Columns per block of :func:`_x_times`: OpenBLAS runs a product of more than about 2.6e5
+#: multiply-adds on several threads, and for these thin products (4 x 4 times 4 x N) waking the
+#: threads costs more than the product (measured: 0.3 ms on one thread, 23 ms on two while the
+#: machine is busy); blocks below that size stay on the calling thread.
+_MM_COLS = 12288
+
+
+def _x_times(x, c):
+    """The columns (4, m, 3) of the top three rows of A (m rigid 4x4 transforms: x[j] is
+    column j, rows 1-3) times a constant c (4, 4): column j of A c is sum_i c[i, j] A[:, i],
+    so the (4, 3 m) block is c^T times x's, in column blocks of :data:`_MM_COLS`."""
+    m = x.shape[1]
+    x2 = x.reshape(4, 3 * m)
+    if 3 * m <= _MM_COLS:
+        return (c.T @ x2).reshape(4, m, 3)
+    ct = np.ascontiguousarray(c.T)
+    out = np.empty((4, 3 * m))
+    for s in range(0, 3 * m, _MM_COLS):
+        np.matmul(ct, x2[:, s:s + _MM_COLS], out=out[:, s:s + _MM_COLS])
+    return out.reshape(4, m, 3)
+
+
+def _x_rot(x, cq, sq):
+    """In place: A Rz(q) in the column layout of :func:`_x_times` (cq, sq: (m, 1)); Rz mixes
+    columns 0 and 1 only."""
+    x0 = x[0].copy()
+    x[0] *= cq
+    x[0] += sq * x[1]
+    x[1] *= cq
+    x[1] -= sq * x0
+
+
+def _x_start(c0, m):
+    x = np.empty((4, m, 3))
+    x[:] = c0[:3, :].T[:, None, :]
+    return x
+
+
+def _chain_x(c, cq, sq, zs, ps, x=None, start=0, stop=6):
+    """The product-form chain C1 Rz(q1) C2 ... in the column layout (:func:`_x_times`), for
+    joints ``start`` .. ``stop`` - 1 (0-based) from x (A before joint ``start``'s constant; None:
+    from C_{start+1} alone), writing joint i's z axis and origin (its frame before the rotation:
+    the rotation keeps both) into zs[:, i], ps[:, i] (m, 6, 3). With stop = 6 the result is the
+    end pose (times C7), else A before joint ``stop``'s rotation (its constant applied)."""
+    m = cq.shape[0]
+    for i in range(start, stop):
+        x = _x_start(c[i], m) if x is None else _x_times(x, c[i])
+        zs[:, i] = x[2]
+        ps[:, i] = x[3]
+        _x_rot(x, cq[:, i, None], sq[:, i, None])
+    if stop == 6:
+        return _x_times(x, c[6])
+    x = _x_start(c[stop], m) if x is None else _x_times(x, c[stop])
+    zs[:, stop] = x[2]
+    ps[:, stop] = x[3]
+    return x
+
+
+def _err_jt(target, zs, ps, x):
+    """(error (m, 6): position (scaled) and rotation vector, as :func:`_errors`; J^T (m, 6, 6),
+    row i joint i's (z_i x (p - p_i), z_i)) of the end x (column layout) against target
+    (m, 4, 4). The rotation error of R_T R^T: with R_T's columns t_k and R's columns x_k,
+    R_T R^T = sum_k t_k x_k^T, its vee part is 1/2 sum_k x_k x t_k, its trace sum_k t_k . x_k."""
+    pe = x[3]
+    dp = target[:, :3, 3] - pe
+    t = target[:, :3, :3]
+    # sum_k x_k x t_k and sum_k t_k . x_k, x_k and t_k the columns (x's columns are rows of xr)
+    xr = x[:3].transpose(1, 0, 2)                               # (m, k, i): row k is x_k
+    tr = np.einsum("mik,mki->m", t, xr)
+    w = 0.5 * np.stack([np.einsum("mk,mk->m", xr[:, :, 1], t[:, 2]) - np.einsum("mk,mk->m", xr[:, :, 2], t[:, 1]),
+                        np.einsum("mk,mk->m", xr[:, :, 2], t[:, 0]) - np.einsum("mk,mk->m", xr[:, :, 0], t[:, 2]),
+                        np.einsum("mk,mk->m", xr[:, :, 0], t[:, 1]) - np.einsum("mk,mk->m", xr[:, :, 1], t[:, 0])], 1)
+    sn = np.sqrt(np.einsum("mi,mi->m", w, w))
+    ang = np.arctan2(sn, 0.5 * (tr - 1))
+    fac = np.where(sn > 1e-12, ang / np.where(sn > 1e-12, sn, 1.0), 1.0)
+    err = np.concatenate([dp, w * fac[:, None]], 1)
+    jt = np.empty((len(pe), 6, 6))
+    r = pe[:, None, :] - ps
+    jt[:, :, 0] = zs[:, :, 1] * r[:, :, 2] - zs[:, :, 2] * r[:, :, 1]
+    jt[:, :, 1] = zs[:, :, 2] * r[:, :, 0] - zs[:, :, 0] * r[:, :, 2]
+    jt[:, :, 2] = zs[:, :, 0] * r[:, :, 1] - zs[:, :, 1] * r[:, :, 0]
+    jt[:, :, 3:] = zs
+    return err, jt
+
+
+def _frames_x(c, q):
+    """(zs, ps (m, 6, 3), the end in column layout) of the product-form chain at q (m, 6)."""
+    m = len(q)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, np.cos(q), np.sin(q), zs, ps)
+    return zs, ps, x
 
 
 # --------------------------------------------------------------------------- #
@@ -736,7 +833,7 @@ def _pencil_roots(pl, mats, degen):
 def _standard_front(pl: Plan, target):
     """The pencil of each pose (target: (n, 4, 4) scaled matrices of the forward chain): (c,
     target in the solved direction, the complete QR of Q, degenerate flags, the pencil's
-    coefficients of (s3, c3, 1) (n, 3, 12, 12), P with the pose terms (n, 14, 3, 9))."""
+    coefficients of (s3, c3, 1) (n, 3, 12, 12), the pose terms r0 of P's constant (n, 14))."""
     n = target.shape[0]
     c = _reverse(pl.c) if pl.reverse else pl.c
     if pl.reverse:
@@ -745,8 +842,8 @@ def _standard_front(pl: Plan, target):
     t7 = target @ _inv(c[6])
     lp = np.concatenate([t7[:, :3, 2], t7[:, :3, 3]], axis=1)
     pm = _pose_monomials(lp, el.monomials)
-    qm = (pm @ el.q.reshape(112, -1).T).reshape(n, 14, 8)
-    r0 = pm @ el.r0.T                                        # (n, 14)
+    qm = _mm(pm, el.q.reshape(112, -1).T).reshape(n, 14, 8)
+    r0 = _mm(pm, el.r0.T)                                       # (n, 14)
     # the left null space of Q (rank 8 for a general arm) and the least squares of Q X2 = b
     # (for q1, q2 below) by one complete QR
     qq, rr = np.linalg.qr(qm, mode="complete")               # (n, 14, 14), (n, 14, 8)
@@ -759,9 +856,7 @@ def _standard_front(pl: Plan, target):
     pt[:, :, 2, :] -= r0[:, :, None] * t45[8][None, None, :]
     sig = (null @ pt.reshape(n, 14, 27)).reshape(n, 6, 3, 9).transpose(0, 2, 1, 3)   # s3, c3, 1
     mats = _twelve(sig)                                      # (n, 3, 12, 12)
-    pa = np.broadcast_to(el.pl, (n, 14, 3, 9)).copy()
-    pa[:, :, 2, 8] -= r0
-    return c, target, qq, rr, degen, mats, pa
+    return c, target, qq, rr, degen, mats, r0
 
 
 #: The deflation is used for a pose when the block it drops, W^T C V, is below this relative
@@ -795,7 +890,7 @@ def _eigvals(pl: Plan, lower, best):
         b = pl.deflate[k]
         w1, w2 = b[:12, :keep], b[12:, :keep]
         low = lower[idx]
-        cb = (low.reshape(12 * m, 24) @ b).reshape(m, 12, 24)                 # lower B
+        cb = _mm(low.reshape(12 * m, 24), b).reshape(m, 12, 24)               # lower B
         t = w1.T @ b[12:] + w2.T @ cb                                         # W^T C B (m, keep, 24)
         leak = np.abs(t[:, :, keep:]).max(axis=(1, 2))                        # W^T C V
         good = leak <= DEFLATE_LEAK * np.maximum(1.0, np.abs(low).max(axis=(1, 2)))
@@ -807,11 +902,27 @@ def _eigvals(pl: Plan, lower, best):
     return lam
 
 
+def _lsq_operator(qq, rr):
+    """Per pose the operator (n, 8, 14) of the least squares of Q X2 = b by its complete QR
+    (X2 = R^-1 Q1^T b, Q1 the first 8 columns; a diagonal entry of R below G6_RANK_TOL of its
+    largest set to 1: the rank-deficient Q of a degenerate pose), made once per pose rather
+    than solved once per candidate."""
+    r8 = rr[:, :8]
+    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
+    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
+    q1t = np.swapaxes(qq[:, :, :8], 1, 2)
+    try:
+        with np.errstate(all="ignore"):
+            return np.linalg.solve(r8, q1t)
+    except np.linalg.LinAlgError:
+        return np.stack([np.linalg.lstsq(a, b, rcond=None)[0] for a, b in zip(r8, q1t)])
+
+
 def _solve_chunk(robot, pl: Plan, poses):
     n = poses.shape[0]
     target = _to_matrix(poses)
     target[:, :3, 3] /= pl.scale
-    c, target, qq, rr, degen, mats, pa = _standard_front(pl, target)
+    c, target, qq, rr, degen, mats, r0 = _standard_front(pl, target)
     # the offset of q3: the first whose leading matrix is well conditioned, else the best of
     # those tried (the Moebius substitution against a singular leading matrix)
     d3, mk, lam, real, degen = _pencil_roots(pl, mats, degen)
@@ -830,22 +941,28 @@ def _solve_chunk(robot, pl: Plan, poses):
     q5 = pl.offsets[1] + 2 * np.arctan2(num5, den5)
     q3 = d3[ip] + 2 * np.arctan(x3)
     # q1, q2: least squares of Q X2 = P(q3) X1 (the SVD above)
-    p3 = (pa[ip, :, 0] * np.sin(q3)[:, None, None] + pa[ip, :, 1] * np.cos(q3)[:, None, None] + pa[ip, :, 2])
-    x1 = np.einsum("ma,mb->mab", np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
-                   np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 9)
-    rhs = np.einsum("mej,mj->me", p3, x1)
-    y = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
-    r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
-    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
-    x2 = _solve_safe(r8, y)
+    # P(q3) X1 = pl . ((s3, c3, 1) x X1) less r0 (the monomial 1 x 1 x 1 carries it)
+    m27 = np.einsum("ma,mb,mc->mabc", np.stack([np.sin(q3), np.cos(q3), np.ones_like(q3)], 1),
+                    np.stack([np.sin(q4), np.cos(q4), np.ones_like(q4)], 1),
+                    np.stack([np.sin(q5), np.cos(q5), np.ones_like(q5)], 1)).reshape(-1, 27)
+    rhs = _mm(m27, pl.elim.pl.reshape(14, 27).T) - r0[ip]
+    x2 = np.einsum("mke,me->mk", _lsq_operator(qq, rr)[ip], rhs)
     q1 = np.arctan2(x2[:, 2], x2[:, 5])
     q2 = np.arctan2(x2[:, 6], x2[:, 7])
     qc = np.stack([q1, q2, q3, q4, q5, np.zeros_like(q1)], 1)
-    frames, _ = _chain_frames(c, qc)
-    r6 = np.linalg.inv(frames[:, 5]) @ target[ip] @ _inv(c[6])
-    qc[:, 5] = np.arctan2(r6[:, 1, 0], r6[:, 0, 0])
-    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    # q6 from A6 = C1 Rz1 .. C6 (the frame before joint 6): Rz(q6) = A6^-1 T C7^-1, whose first
+    # column is R_A6^T (R_T c), c the first column of C7^-1's rotation; the chain of q1..q5 is
+    # the one Newton's first step needs (the frames before each joint's rotation), kept
+    m = len(ip)
+    cq, sq = np.cos(qc), np.sin(qc)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, cq, sq, zs, ps, stop=5)
+    tp = target[ip]
+    u = tp[:, :3, :3] @ _inv(c[6])[:3, 0]
+    q6 = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
+    qc[:, 5] = q6
+    _x_rot(x, np.cos(q6)[:, None], np.sin(q6)[:, None])
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])))
     if pl.reverse:
         qc = -qc[:, ::-1]
         jac = None                     # the reversed chain's Jacobian: the forward one is made again
@@ -874,10 +991,13 @@ def _monomial_vectors(mk, ip, x3):
     monomial vectors in the null space V are found by the shift structure of the monomials
     (V[shift] c = x V[base] c, for x4 and x5 combined at random), one per member of the cluster
     (Stetter's eigenvector method)."""
+    # M(x3) has the structure of _twelve (its 6 x 9 block twice): only that block is gathered
     powers = np.stack([np.ones_like(x3), x3, x3 * x3], 1)[:, None, :]            # (k, 1, 3)
-    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip]).reshape(len(ip), 12, 12)
-    scale_m = np.abs(mx).max(axis=(1, 2), keepdims=True)
-    mx = mx / np.where(scale_m > 0, scale_m, 1.0)
+    six = np.ascontiguousarray(mk[:, :, :6, :9]).reshape(len(mk), 3, 54)
+    sx = (powers @ six[ip]).reshape(len(ip), 6, 9)
+    scale_m = np.abs(sx).max(axis=(1, 2), keepdims=True)
+    sx /= np.where(scale_m > 0, scale_m, 1.0)
+    mx = _twelve(sx)
     v = _null_vectors(mx + _NUDGE * np.eye(12))
     if len(ip) < 2:
         return v
@@ -1042,17 +1162,34 @@ def _triple_coefs(c, e):
     return np.linalg.solve(np.kron(np.kron(_BS, _BS), _BS), vals).T
 
 
+#: The fit's inverse: (s, c, 1) x (s, c, 1) coefficients from the values at the 9 sample pairs.
+_KINV9 = np.linalg.inv(np.kron(_BS, _BS))
+
+
 def _pair_coefs(c, e, target):
-    """(n, 14, 9) coefficients of the pair side per pose."""
+    """(n, 14, 9) coefficients of the pair side per pose: the 14 equations of Rz(t0) K_a Rz(t1)
+    K_b (only its z column and origin enter them: Rz(t0) K_a Rz(t1) times K_b's last two
+    columns) at the 9 sample pairs, times the fit's inverse."""
     _, (a, b) = _cut_joints(e)
-    k = _links(c, target)
-    out = []
-    for t0, t1 in itertools.product(_SAMPLES, repeat=2):
-        ga = _rz(np.full(len(target), t0)) @ (k[a] if np.ndim(k[a]) == 3 else np.broadcast_to(k[a], (len(target), 4, 4)))
-        gb = _rz(np.full(len(target), t1)) @ (k[b] if np.ndim(k[b]) == 3 else np.broadcast_to(k[b], (len(target), 4, 4)))
-        out.append(_line_eqs(ga @ gb))
-    vals = np.stack(out, 1)                                  # (n, 9, 14)
-    return np.swapaxes(np.linalg.solve(np.kron(_BS, _BS), vals), 1, 2)
+    n = len(target)
+    k = {j: c[j] for j in range(1, 6)}
+    k[6] = c[6] @ _inv_rigid(target) @ c[0]
+    rz = _rz(_SAMPLES)                                       # (3, 4, 4)
+    cols = k[b][..., :, 2:]                                  # (4, 2) or (n, 4, 2)
+    vals = np.empty((n, 9, 14))
+    for j1 in range(3):
+        inner = k[a] @ (rz[j1] @ cols)                       # (n, 4, 2) (one side holds the pose)
+        for j0 in range(3):
+            m = rz[j0] @ inner
+            vals[:, 3 * j0 + j1] = _line_eqs_lp(m[..., :3, 0], m[..., :3, 1])
+    return np.einsum("cs,nse->nec", _KINV9, vals)
+
+
+def _line_eqs_lp(l, p):
+    """:func:`_line_eqs` of a line given by its direction l and point p (..., 3)."""
+    pp = np.sum(p * p, -1)[..., None]
+    pl = np.sum(p * l, -1)[..., None]
+    return np.concatenate([l, p, pp, pl, np.cross(p, l), pp * l - 2 * pl * p], -1)
 
 
 def _check_cut(c, e):
@@ -1161,24 +1298,30 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     v = _monomial_vectors(mk, ip, x3)
     ip, x3, v = _near_pair_candidates(mk, ip, x3, v)
     qt, ym = triple_angles(v, d3[ip] + 2 * np.arctan(x3), pl.offsets, order)
-    rhs = np.einsum("mek,mk->me", yy[ip], ym)
-    yv = (rhs[:, None, :] @ qq[ip, :, :8])[:, 0]
-    r8 = rr[ip, :8]
-    ok8 = np.abs(np.diagonal(r8, axis1=1, axis2=2)) > G6_RANK_TOL * np.abs(r8).max(axis=(1, 2))[:, None]
-    r8 = np.where(np.eye(8, dtype=bool) & ~ok8[:, :, None], 1.0, r8)
-    x2 = _solve_safe(r8, yv)
+    # Y ym with Y = y less the pair's constant column in column 26 (the monomial 1 x 1 x 1)
+    rhs = _mm(ym, np.asarray(pl.cut["y"]).T) - x[ip, :, 8]
+    x2 = np.einsum("mke,me->mk", _lsq_operator(qq, rr)[ip], rhs)
     qc = np.zeros((len(ip), 6))
     for j, t in zip(triple, qt):
         qc[:, j - 1] = t
     qc[:, f - 1] = np.arctan2(x2[:, 2], x2[:, 5])
     qc[:, h - 1] = np.arctan2(x2[:, 6], x2[:, 7])
-    # joint e from the rest: with q_e = 0 the chain is A_e B (A_e = C1 Rz1 .. C_e, B the rest),
-    # so Rz(q_e) = A_e^-1 T B^-1 = A_e^-1 T (A_e B)^-1 A_e
-    frames, end0 = _chain_frames(c, qc)
-    a_e = frames[:, e - 1]
-    rel = _inv_rigid(a_e) @ target[ip] @ _inv_rigid(end0) @ a_e
-    qc[:, e - 1] = np.arctan2(rel[:, 1, 0], rel[:, 0, 0])
-    qc, err, jac = _newton(c, qc, target[ip], with_error=True)
+    # joint e from the rest: the chain is A_e Rz(q_e) B (A_e = C1 Rz1 .. C_e, B = C_{e+1} .. C7),
+    # so Rz(q_e) = A_e^-1 T B^-1, whose first column is R_Ae^T R_T b, b the first row of R_B;
+    # the chain A_e is continued past joint e for Newton's first step
+    m = len(ip)
+    cq, sq = np.cos(qc), np.sin(qc)
+    zs, ps = np.empty((m, 6, 3)), np.empty((m, 6, 3))
+    x = _chain_x(c, cq, sq, zs, ps, stop=e - 1)
+    xb = _chain_x(c, cq, sq, np.empty((m, 6, 3)), np.empty((m, 6, 3)), start=e)
+    tp = target[ip]
+    u = np.einsum("mij,mj->mi", tp[:, :3, :3], np.stack([xb[0][:, 0], xb[1][:, 0], xb[2][:, 0]], 1))
+    qe = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
+    qc[:, e - 1] = qe
+    cq[:, e - 1], sq[:, e - 1] = np.cos(qe), np.sin(qe)
+    _x_rot(x, cq[:, e - 1, None], sq[:, e - 1, None])
+    x = _chain_x(c, cq, sq, zs, ps, x=x, start=e)
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x))
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
@@ -1200,35 +1343,124 @@ def _errors(c, q, target):
     return err, jac
 
 
-def _newton(c, q, target, steps=None, with_error=False):
+#: Newton stops after a step below this (rad, every joint) taken where the error was below it
+#: too (scaled lengths and rad) and the linear model's residual |e - J dq| is below 1e-13: the
+#: error the step leaves is that residual plus the order of the step's square (the second
+#: derivatives of the scaled FK are of order one), so below the 1e-13 the loop asks for, and the
+#: exact FK check decides; no evaluation only to confirm it.
+NEWTON_DONE = 1e-7
+
+
+def _newton(c, q, target, steps=None, with_error=False, first=None):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
-    error (scaled lengths and rad) is below 1e-13 or G6_NEWTON_MAX steps are done. With
-    ``with_error``, also the last error measured per candidate (max of scaled position and
-    rotation) and the Jacobian there (at the returned q: the loop measures before it steps)."""
+    error (scaled lengths and rad) is below 1e-13, or after a step below :data:`NEWTON_DONE`
+    from an error below it, or when G6_NEWTON_MAX steps are done. ``first``: the chain at q
+    ((zs, ps, end) of :func:`_frames_x`) when the caller has it. With ``with_error``, also the
+    last error measured per candidate (max of scaled position and rotation; after a last step
+    below NEWTON_DONE, the bound on the error it leaves) and the Jacobian
+    there (m, 6, 6) (at the returned q, or before that last step)."""
     q = q.copy()
     last = np.full(len(q), np.inf)
-    last_jac = np.zeros((len(q), 6, 6))
+    last_jt = np.zeros((len(q), 6, 6))
     idx = np.arange(len(q))
     for k in range(G6_NEWTON_MAX + 1):
-        err, jac = _errors(c, q[idx], target[idx])
+        if k == 0 and first is not None:
+            err, jt = _err_jt(target, *first)
+        else:
+            err, jt = _err_jt(target[idx], *_frames_x(c, q[idx]))
         size = np.max(np.abs(err), axis=1)
         last[idx] = size
         if with_error:
-            last_jac[idx] = jac
+            last_jt[idx] = jt
         todo = size > 1e-13
-        idx, err, jac = idx[todo], err[todo], jac[todo]
+        if not np.all(todo):
+            idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
             break
-        jt = np.swapaxes(jac, 1, 2)
-        a = jt @ jac
+        a = jt @ np.swapaxes(jt, 1, 2)
         lam = 1e-14 * (np.trace(a, axis1=1, axis2=2) + 1e-30)
-        a = a + lam[:, None, None] * np.eye(6)
+        a += lam[:, None, None] * np.eye(6)
         dq_ = _solve_safe(a, np.einsum("mij,mj->mi", jt, err))
-        big = np.max(np.abs(dq_), axis=1, keepdims=True)
-        dq_ = np.where(big > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300)), dq_)
+        big = np.max(np.abs(dq_), axis=1)
+        dq_ = np.where(big[:, None] > 0.5, dq_ * (0.5 / np.maximum(big, 1e-300))[:, None], dq_)
         new = q[idx] + dq_
         q[idx] = np.where(np.isfinite(new), new, q[idx])
-    return (q, last, last_jac) if with_error else q
+        # done: a small step that the linear model says leaves an error below 1e-13 (not so
+        # at a singular Jacobian, where the damped step misses part of the error)
+        left = np.max(np.abs(err - np.einsum("mji,mj->mi", jt, dq_)), axis=1) + big ** 2
+        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < 1e-13)
+        last[idx[done]] = left[done]
+        idx = idx[~done]
+        if len(idx) == 0:
+            break
+    return (q, last, np.swapaxes(last_jt, 1, 2)) if with_error else q
+
+
+def _right_matrix(b):
+    """R (8, 8) with a b = a @ R for dual quaternions a (rows) and the constant b (8,)."""
+    eye = np.eye(8)
+    return np.array([dq._mul(e, b) for e in eye])
+
+
+def _fk_form(robot):
+    """derive's dual-quaternion FK (:func:`derive.kinematics.fk.fk`: each joint's ``pre``
+    factors, its rotation cos(t/2) + sin(t/2) n, its ``post`` factors, then the end's) with the
+    constant factors between two rotations multiplied once: (K_0 (8,) the constant before joint
+    1, per joint the (8, 16) matrix [R(K) | R((0, n_i)) R(K)] (R(b): right multiplication by b,
+    K the constant after the joint), the joints' variables, multipliers and offsets), or None
+    for a chain that is not a plain serial one."""
+    joints = robot.joints
+    end = robot.ends[robot.default_end]
+    if len(joints) != 6 or any(j.type != "revolute" or j.parent != i - 1 for i, j in enumerate(joints)) \
+            or end.parent != 5:
+        return None
+    ident = np.array([1.0, 0, 0, 0, 0, 0, 0, 0])
+
+    def product(ops):
+        out = ident
+        for op in ops:
+            out = dq._mul(out, dq._rotation(op.axis, op.angle) if op.kind == "R" else dq._translation_dq(op.vector))
+        return out
+
+    consts = [product(joints[0].pre)] + [dq._mul(product(joints[i - 1].post), product(joints[i].pre))
+                                         for i in range(1, 6)] + [dq._mul(product(joints[5].post), product(end.ops))]
+    mats = []
+    for i, j in enumerate(joints):
+        kr = _right_matrix(consts[i + 1])
+        nr = _right_matrix(np.concatenate([[0.0], np.asarray(j.axis, float), np.zeros(4)]))
+        mats.append(np.concatenate([kr, nr @ kr], 1))
+    return (consts[0], np.array(mats), np.array([j.variable for j in joints]),
+            np.array([j.multiplier for j in joints]), np.array([j.mimic_offset + j.offset for j in joints]))
+
+
+def _fk_exact(robot, q):
+    """Unit dual quaternions (m, 8) of the end frame at q (m, 6), up to sign: derive's
+    dual-quaternion product (:func:`_fk_form`; equal to :func:`derive.kinematics.fk.fk` to
+    rounding) as one (m, 8) x (8, 16) product per joint: A Rot_i K = cos(t/2) A K +
+    sin(t/2) A N_i K (Rot_i = cos(t/2) + sin(t/2) (0, n_i), K the constants that follow)."""
+    form = memo("general6r-fk", robot.id, lambda: _fk_form(robot))
+    if form is None:
+        return fk(robot, q)
+    k0, mats, var, mult, off = form
+    half = 0.5 * (mult * q[:, var] + off)
+    ch, sh = np.cos(half), np.sin(half)
+    a = np.broadcast_to(k0, (len(q), 8))
+    for i in range(6):
+        both = _mm(a, mats[i])
+        a = ch[:, i, None] * both[:, :8] + sh[:, i, None] * both[:, 8:]
+    return a
+
+
+def _mm(a, b):
+    """a (N, k) @ b (k, l) in row blocks small enough that OpenBLAS keeps each on the calling
+    thread (see :data:`_MM_COLS`)."""
+    rows = max(1, 250000 // (b.shape[0] * b.shape[1]))
+    if a.shape[0] <= rows:
+        return a @ b
+    out = np.empty((a.shape[0], b.shape[1]))
+    for s in range(0, a.shape[0], rows):
+        np.matmul(a[s:s + rows], b, out=out[s:s + rows])
+    return out
 
 
 def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
@@ -1246,24 +1478,31 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
         jac = None if jac is None else jac[near]
     if len(ip) == 0:
         return q, counts, sing, degen
-    dpos, drot = _pose_error(fk(robot, qc), poses[ip])
+    dpos, drot = _pose_error(_fk_exact(robot, qc), poses[ip])
     ok = (dpos < G6_ACCEPT) & (drot < G6_ACCEPT) & np.all(np.isfinite(qc), axis=1)
     ip, qc = ip[ok], qc[ok]
     if len(ip) == 0:
         return q, counts, sing, degen
     # singular flag: the Jacobian's relative smallest singular value
-    if jac is None:
-        frames, end = _chain_frames(pl.c, qc)
-        axes = frames[:, :, :3, 2]
-        jac = np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2)
-        jac = jac.transpose(0, 2, 1)
-    else:
-        jac = jac[ok]
     # sigma_min / sigma_max >= |det J| / |J|_F^6 (sigma_min >= |det J| / sigma_max^5 and
     # sigma_max <= |J|_F): where that bound already clears G6_SINGULAR the Jacobian is regular;
-    # the others get the singular values (eigenvalues of J^T J)
+    # the others get the singular values (eigenvalues of J^T J). Newton's Jacobian can be the
+    # one before its last step (below NEWTON_DONE): where its bound is within a factor 10 of
+    # G6_NEAR_SINGULAR, the Jacobian at qc itself is made
     with np.errstate(all="ignore"):
-        bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+        if jac is None:
+            redo = np.ones(len(qc), dtype=bool)
+            jac = np.empty((len(qc), 6, 6))
+            bound = np.zeros(len(qc))
+        else:
+            jac = jac[ok]
+            bound = np.abs(np.linalg.det(jac)) / np.sum(jac * jac, axis=(1, 2)) ** 3
+            redo = ~(bound >= 10 * G6_NEAR_SINGULAR)
+        if np.any(redo):
+            jr = np.swapaxes(_err_jt(np.broadcast_to(np.eye(4), (int(np.sum(redo)), 4, 4)),
+                                     *_frames_x(pl.c, qc[redo]))[1], 1, 2)
+            jac[redo] = jr
+            bound[redo] = np.abs(np.linalg.det(jr)) / np.sum(jr * jr, axis=(1, 2)) ** 3
     is_sing = ~(bound >= G6_NEAR_SINGULAR)
     near_sing = is_sing.copy()
     if np.any(is_sing):
@@ -1276,14 +1515,23 @@ def _collect(robot, pl, poses, ip, qc, n, degen, err=None, jac=None):
     ip, qc, is_sing = ip[order], qc[order], is_sing[order]
     # duplicates: an earlier candidate of the same pose within MERGE_TOL in every joint (the
     # pairs (j, j + d) of one pose, d = 1, 2, ...)
+    # pairs (j, j + d) of one pose, d = 1, 2, ...; sorted by q1, only pairs whose q1 are within
+    # MERGE_TOL can be close: d grows while some are, and the pairs across +-pi (the largest q1 of
+    # a pose against its smallest) are compared on their own
     dup = np.zeros(len(ip), dtype=bool)
+    q1 = qc[:, 0]
     for d in range(1, len(ip)):
-        same = ip[d:] == ip[:-d]
-        if not np.any(same):
+        j = np.nonzero((ip[d:] == ip[:-d]) & (q1[d:] - q1[:-d] < MERGE_TOL))[0]
+        if len(j) == 0:
             break
-        j = np.nonzero(same)[0]
         close = np.all(np.abs(wrap_angle(qc[j + d] - qc[j])) < MERGE_TOL, axis=1)
         dup[j[close] + d] = True
+    hi = np.nonzero(q1 > np.pi - MERGE_TOL)[0]
+    lo = np.nonzero(q1 < -np.pi + MERGE_TOL)[0]
+    for a in lo:
+        for b in hi[ip[hi] == ip[a]]:
+            if np.all(np.abs(wrap_angle(qc[b] - qc[a])) < MERGE_TOL):
+                dup[b] = True
     ip, qc, is_sing = ip[~dup], qc[~dup], is_sing[~dup]
     starts = np.searchsorted(ip, ip)
     rank = np.arange(len(ip)) - starts
