@@ -22,7 +22,7 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    shares (x = +-i and a cut's constant real roots: the plan's deflation,
    :func:`derive.ik.general6r._deflation`) are deflated as the reference does
    (:func:`derive.ik.general6r._eigvals`): with the baked orthonormal basis [W V]
-   (:func:`deflation_context`) the roots are the eigenvalues of W^T C W (16 x 16), where the
+   (:func:`_deflation_context`) the roots are the eigenvalues of W^T C W (16 x 16), where the
    dropped block W^T C V is zero to DEFLATE_LEAK; the whole 24 x 24 elsewhere.
 4. **Eigenvalues** by balancing, reduction to upper Hessenberg form by stabilised elementary
    similarity transformations and Francis's double-shift QR iteration (Wilkinson and Reinsch,
@@ -153,7 +153,7 @@ def general_context(robot) -> dict:
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
-        "defl": deflation_context(pl), "tables": tables_context(pl),
+        "tables": tables_context(pl),
         "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
         "defl": _deflation_context(pl),
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
@@ -193,23 +193,6 @@ def _deflation_context(pl) -> dict:
 
 def g6_comment(text: str) -> str:
     return " ".join(str(text).split()).replace("*/", "* /")
-
-
-def deflation_context(pl) -> dict | None:
-    """The C kernels' deflation of the pencil's pose-independent eigenvectors (the plan's
-    ``deflate``, :func:`derive.ik.general6r._deflation`), or None when the plan has none: per
-    offset of the eigen-variable the orthonormal basis B = [W V] (24 x 24, W's ``keep`` columns
-    first) and the constant part W1^T B2 (keep x 24) of W^T C B = W1^T B2 + W2^T (lower B), with
-    [B1; B2] B's rows 1-12 and 13-24 and ``lower`` = -M2^-1 [M0 M1] the companion matrix's lower
-    rows (the reference's :func:`derive.ik.general6r._eigvals`). The eigenvalues of its first
-    ``keep`` columns are the pose's roots; its last 24 - keep columns (W^T C V) are zero to
-    rounding, checked per pose against ``leak`` (:data:`derive.ik.general6r.DEFLATE_LEAK`)."""
-    if pl.deflate is None:
-        return None
-    b = np.asarray(pl.deflate, dtype=float)                 # (len(d3), 24, 24)
-    keep = int(pl.deflate_keep)
-    const = np.einsum("kij,kil->kjl", b[:, :12, :keep], b[:, 12:, :])   # W1^T B2 (len(d3), keep, 24)
-    return {"keep": keep, "b": _arr(b), "w1b2": _arr(const), "leak": _lit(g6.DEFLATE_LEAK)}
 
 
 def tables_context(pl) -> dict | None:
