@@ -252,3 +252,21 @@ int main(void) {{
     run = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     assert run.stdout.split() == ["0"]
+
+
+@needs_gcc
+def test_general_bench_reports_the_one_call_latency(quick_c):
+    """`dq-derive bench kernels` of a general arm (derive.bench.general6r): beside the batch
+    figures, the one-call latency (k.ik(pose) from Python) of the C and numpy kernels; the C
+    batch's solution count is the kernels' own on the same poses. (Times are not asserted:
+    only that each was measured.)"""
+    from derive.bench.general6r import bench_general, general_report
+    r = bench_general("general-6r", n=8, repeats=1, n_peer=2, n_single=4)
+    for part in ("c", "numpy", "reference"):
+        assert 0 < r[part]["ik_batch_us"] < math.inf
+    for part in ("c", "numpy"):
+        assert 0 < r[part]["ik_single_us"] < math.inf and r[part]["n_single"] >= 1
+    q, P = _poses("general-6r", 8, 0)
+    assert r["c"]["mean_count"] == pytest.approx(derive.kernels("general-6r", "c").ik(P)[1].mean())
+    text = general_report(r)
+    assert "C one call" in text and "numpy one call" in text and "ssik" not in text

@@ -1,7 +1,9 @@
 """Speed of the general 6R kernels (``dq-derive bench kernels --robot crx10ia``): the C batch IK,
 the numpy kernels and the numpy reference (:func:`derive.ik.general6r.solve`) on the same poses,
-and ssik's solver of the same arm where ssik ships one (``ssik.prebuilt``; its FK equals ours,
-tests/test_vendor_arms.py), with the solution counts of each."""
+the one-call latency of the C and numpy kernels (one pose per call from Python through the loaded
+kernels, as the closed-form classes' benchmark measures it), and ssik's solver of the same arm
+where ssik ships one (``ssik.prebuilt``; its FK equals ours, tests/test_vendor_arms.py), with the
+solution counts of each."""
 
 from __future__ import annotations
 
@@ -28,10 +30,13 @@ def is_general(robot) -> bool:
     return k._manifest.get("ik") == "general6r"
 
 
-def bench_general(robot: str, n: int = 2000, repeats: int = 3, seed: int = 0, n_peer: int = 200) -> dict:
+def bench_general(robot: str, n: int = 2000, repeats: int = 3, seed: int = 0, n_peer: int = 200,
+                  n_single: int = 200) -> dict:
     """Per pose times (us) of the C batch IK (n poses), the numpy kernels and the numpy reference
-    (n // 4 poses) and ssik (native, one call per pose, n_peer poses), configurations uniform within
-    the limits (at most one turn), and the mean solution count of each on the same poses."""
+    (n // 4 poses), the one-call latency of the C and numpy kernels (``k.ik(pose)`` for each of
+    n_single poses, the best of ``repeats`` loops for C, one loop for numpy) and ssik (native, one
+    call per pose, n_peer poses), configurations uniform within the limits (at most one turn), and
+    the mean solution count of each on the same poses."""
     r = load_robot(robot)
     rng = np.random.default_rng(seed)
     lo = np.maximum(r.limits[:, 0], -np.pi)
@@ -44,10 +49,16 @@ def bench_general(robot: str, n: int = 2000, repeats: int = 3, seed: int = 0, n_
     k.ik(poses[:4])
     sols, counts = k.ik(poses)
     out["c"] = {"ik_batch_us": _time(lambda: k.ik(poses), repeats) / n * 1e6, "mean_count": float(counts.mean())}
+    s = min(n_single, n)
+    out["c"]["ik_single_us"] = _time(lambda: [k.ik(row) for row in poses[:s]], repeats) / s * 1e6
+    out["c"]["n_single"] = s
     m = max(1, n // 4)
     kn = kernels(r, "numpy")
     kn.ik(poses[:4])
     out["numpy"] = {"ik_batch_us": _time(lambda: kn.ik(poses[:m]), 1) / m * 1e6, "n": m}
+    s1 = max(1, min(n_single, m) // 4)
+    out["numpy"]["ik_single_us"] = _time(lambda: [kn.ik(row) for row in poses[:s1]], 1) / s1 * 1e6
+    out["numpy"]["n_single"] = s1
     general6r.solve(r, poses[:4])
     out["reference"] = {"ik_batch_us": _time(lambda: general6r.solve(r, poses[:m]), 1) / m * 1e6, "n": m}
     name = SSIK_MODULES.get(r.name)
@@ -69,7 +80,11 @@ def general_report(r: dict) -> str:
     lines = [f"general 6R kernels of {r['robot']}, {r['n']} poses within the limits, {r['machine']}, {r['date']}",
              f"C flags: {r['flags']}",
              f"  C batch IK          {r['c']['ik_batch_us']:10.1f} us per pose  ({r['c']['mean_count']:.2f} solutions per pose)",
+             f"  C one call          {r['c']['ik_single_us']:10.1f} us per call  (k.ik(pose) from Python, "
+             f"{r['c']['n_single']} poses)",
              f"  numpy kernels       {r['numpy']['ik_batch_us']:10.1f} us per pose  ({r['numpy']['n']} poses)",
+             f"  numpy one call      {r['numpy']['ik_single_us']:10.1f} us per call  (k.ik(pose) from Python, "
+             f"{r['numpy']['n_single']} poses)",
              f"  numpy reference     {r['reference']['ik_batch_us']:10.1f} us per pose  ({r['reference']['n']} poses)"]
     if "ssik" in r:
         s = r["ssik"]

@@ -18,16 +18,24 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
 3. **The 12 x 12 quadratic pencil** M(x) = M0 + x M1 + x^2 M2 (x the half-angle tangent of the
    eigen-variable moved by an offset d3, the Moebius substitution: the first of three offsets
    whose leading matrix has a 1-norm condition below G6_GOOD_COND, else the best), and the
-   24 x 24 companion matrix [[0, I], [-M2^-1 M0, -M2^-1 M1]].
+   24 x 24 companion matrix C = [[0, I], [-M2^-1 M0, -M2^-1 M1]]. Its eigenvectors every pose
+   shares (x = +-i and a cut's constant real roots: the plan's deflation,
+   :func:`derive.ik.general6r._deflation`) are deflated as the reference does
+   (:func:`derive.ik.general6r._eigvals`): with the baked orthonormal basis [W V]
+   (:func:`_deflation_context`) the roots are the eigenvalues of W^T C W (16 x 16), where the
+   dropped block W^T C V is zero to DEFLATE_LEAK; the whole 24 x 24 elsewhere.
 4. **Eigenvalues** by balancing, reduction to upper Hessenberg form by stabilised elementary
    similarity transformations and Francis's double-shift QR iteration (Wilkinson and Reinsch,
    *Handbook for Automatic Computation II*, 1971: balance, elmhes, hqr; Golub and Van Loan,
    *Matrix Computations*, 4th ed., algorithms 7.4.2 and 7.5.1). A pose whose QR iteration does not
    converge in 30 sweeps per eigenvalue is flagged degenerate.
 5. **Eigenvectors**: for each (nearly) real eigenvalue x the null vector of M(x) (the monomials
-   x4^i x5^j) by one step of inverse iteration from a fixed start (an LU solve with partial
-   pivoting of M(x) + 1e-11 I), or, where its residual is large, the last column of the Q of a
-   Householder QR with column pivoting of M(x)^T. Eigenvalues shared by several solutions (a
+   x4^i x5^j) from M's block structure (M(x) = [[S, 0], [0, S]], S 6 x 9 shifted by three
+   columns: S's null space N by an LU with complete pivoting, then one step of inverse iteration
+   on the 6 x 6 [N[3:9], -N[0:6]]); where its residual |M(x) v| is above 1e-6, one step of
+   inverse iteration on the whole M(x) (an LU solve with partial pivoting of M(x) + 1e-11 I),
+   or, where that residual is large too, the last column of the Q of a Householder QR with
+   column pivoting of M(x)^T. Eigenvalues shared by several solutions (a
    cluster within CLUSTER_TOL, as the CRX's pairs with the same q3) take the null space of that
    QR (its dimension from the small pivots) and separate the members by the shift structure of
    the monomials (Stetter's method: V[shift] c = x V[base] c), a small eigenproblem solved by the
@@ -37,7 +45,8 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
 7. **Newton polish** on the product-form FK (damped Gauss-Newton with the geometric Jacobian, at
    most G6_NEWTON_MAX steps), the **check** on the kernels' own dual-quaternion FK (position and
    rotation angle within G6_ACCEPT), the **singular** flag (Jacobian's smallest over largest
-   singular value below G6_SINGULAR, by a cyclic Jacobi eigenvalue sweep of J^T J), the
+   singular value below G6_SINGULAR: clear where Newton's last |det J| / |J|_F^6 is above 100
+   times that, else the last over the first pivot of a pivoted QR of J), the
    **merge** of duplicates (MERGE_TOL in every joint) and the **order** (ascending q1), at most
    16 solutions. Every value is tested with isfinite; no NaN leaves a kernel but the padding.
 8. **Nearby poses** (:func:`derive.ik.general6r._perturbed`): a pose flagged degenerate by the
@@ -144,6 +153,7 @@ def general_context(robot) -> dict:
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
+        "tables": tables_context(pl),
         "perturb_q": _arr(pq.reshape(-1, 4)), "perturb_t": _arr(pt.reshape(-1, 3)), "notes": [g6_comment(n) for n in pl.notes],
         "defl": _deflation_context(pl),
         "how": ("the loop cut at joint %d (pair %s eliminated linearly, triple %s, eigen-variable q%d)"
@@ -183,3 +193,14 @@ def _deflation_context(pl) -> dict:
 
 def g6_comment(text: str) -> str:
     return " ".join(str(text).split()).replace("*/", "* /")
+
+
+def tables_context(pl) -> dict | None:
+    """The standard elimination's pose tables transposed for the C kernels (None for a loop
+    cut): ``qkt`` (K x 112) and ``r0t`` (K x 14), so that Q and the pose terms are sums of rows
+    times the K pose monomials (the loops run along the rows: vector instructions)."""
+    if pl.cut:
+        return None
+    el = pl.elim
+    qk = el.q.reshape(112, -1)
+    return {"qkt": _arr(qk.T), "r0t": _arr(np.asarray(el.r0).T)}
