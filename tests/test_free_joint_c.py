@@ -216,7 +216,9 @@ def test_c_free_joint_on_the_srs_class_routes_matches_the_closed_form(k):
     differ = np.array(differ, dtype=int)
     assert np.all(flag[differ]), differ[~flag[differ]]                               # never silently incomplete
     assert flag[:200].mean() <= 0.02, np.nonzero(flag[:200])[0]
-    assert len(differ[differ >= 200]) >= 20 and flag[200::2].mean() >= 0.5          # near poses at their values: lost, flagged
+    # the near poses exercise the rule: some C sets there differ (17 of 100 per joint after the
+    # general 6R core's speed-ups, about 40 before) and most near poses at their values are flagged
+    assert len(differ[differ >= 200]) >= 10 and flag[200::2].mean() >= 0.5
     valid = np.arange(16)[None] < cc[:, None]
     assert not np.isnan(cq[valid]).any() and np.isnan(cq[~valid]).all()
     rows = np.nonzero(valid)[0]
