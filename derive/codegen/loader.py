@@ -796,9 +796,16 @@ class Kernels:
         elif self.backend == "numpy":
             sols, counts, res, its = self._mod.ik_polish(poses, *extra)
         else:
-            self._load_ctypes()
             if not hasattr(self, "_ik_polish"):
-                g = getattr(self._lib, f"{self._ident}_ik_batch_polish")
+                # the extension module holds the kernel source's functions too (pyext.c.j2
+                # includes it): ctypes on its file, so that the kernel is not compiled a second
+                # time; without the extension, the kernels' own library
+                if self._ext is not None and getattr(self._ext, "__file__", None):
+                    lib = ctypes.CDLL(self._ext.__file__)
+                else:
+                    self._load_ctypes()
+                    lib = self._lib
+                g = getattr(lib, f"{self._ident}_ik_batch_polish")
                 g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * (8 if self.free else 7)
                 g.restype = None
                 self._ik_polish = g
