@@ -76,6 +76,9 @@ SEED_TURN = (math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2, 3 * math.pi /
 #: set: the nominal's miss within SEED_REACH deviations, as derive.ik.nearclass._near_reach, and
 #: the arm's own mismatch on top.
 SEED_KEEP = SEED_REACH + 1.0
+#: The most Newton steps of a seed near a singular set (a seed that leads to a root gets there in a
+#: few; most lead nowhere, and their steps were most of the seeds' cost).
+SEED_MAX_ITER = 20
 #: Cyclic Jacobi sweeps at most for the eigenvalues of J^T J of a candidate the cheap bound marks
 #: (:func:`seed_context`); a sweep stops the iteration when every off-diagonal entry is at most
 #: 1e-30 of the trace.
@@ -337,4 +340,4 @@ def seed_context(dof: int, nominal: Nominal, hold: int | None) -> dict:
     ts = [t * r for t in SEED_FOLD] + list(SEED_TURN)
     keep = SEED_KEEP * r2 + 1e-9
     return {"seed_near": repr(SEED_SINGULAR ** 2 * r2), "seed_keep2": repr(keep * keep), "seed_ts": [repr(float(t)) for t in ts],
-            "seed_sweeps": SEED_JACOBI_SWEEPS, "free_idx": [k for k in range(dof) if k != hold]}
+            "seed_sweeps": SEED_JACOBI_SWEEPS, "seed_max_iter": SEED_MAX_ITER, "free_idx": [k for k in range(dof) if k != hold]}
