@@ -83,9 +83,25 @@ SEED_MAX_ITER = 20
 #: (:func:`seed_context`); a sweep stops the iteration when every off-diagonal entry is at most
 #: 1e-30 of the trace.
 SEED_JACOBI_SWEEPS = 12
+#: The output width of near-class kernels with six joints to solve (a general 6R has at most 16
+#: solutions, Raghavan and Roth); other arms get :data:`POLISH_EXTRA_SLOTS` slots past the nominal's
+#: branches. The nominal's branches keep their slots; a seed's solution takes an extra slot.
+POLISH_WIDTH_6R = 16
+POLISH_EXTRA_SLOTS = 8
 #: The one metric of the residual each solution reports.
 RESIDUAL_METRIC = ("max(|t_fk - t_pose| (m), rotation angle between fk and pose (rad)), fk the "
                    "kernels' own fk of the solution")
+
+
+def polish_width(branches: int, free_joints: int) -> int:
+    """The most solutions near-class kernels return per pose: the nominal's ``branches`` slots (its
+    candidates, polished) and extra slots for the solutions the seeds near singular sets find
+    (a near-class arm is a general arm and may have more solutions than its nominal): 16 for six
+    joints to solve (:data:`POLISH_WIDTH_6R`, at least ``branches``), else ``branches`` +
+    :data:`POLISH_EXTRA_SLOTS`."""
+    if free_joints == 6:
+        return max(int(branches), POLISH_WIDTH_6R)
+    return int(branches) + POLISH_EXTRA_SLOTS
 
 
 def _number(x: float):
