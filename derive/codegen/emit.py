@@ -20,7 +20,7 @@ from derive.cache import claim_folder, step, task, write_manifest
 from derive.codegen.fk import fk_kernel
 from derive.codegen.general6r import general_context as general6r_context
 from derive.codegen.formats import FILES, KERNEL_FORMAT, nominal_key  # defined there for the loader
-from derive.codegen.polish import held_joint, nominal_program, polish_context
+from derive.codegen.polish import held_joint, nominal_program, polish_context, polish_width
 from derive.codegen.templates import template_environment
 from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
@@ -185,8 +185,12 @@ def _context(robot, command: str, free: str | None = None, nominal=None) -> dict
 def _polish_context(robot, nominal, free=None) -> dict:
     """:func:`derive.codegen.polish.polish_context` with this module's printers, each let line
     marked ``used`` when the C code reads it (no unused variable under -Wall -Werror)."""
-    hold = held_joint(nominal_program(robot, nominal, free))
+    prog = nominal_program(robot, nominal, free)
+    hold = held_joint(prog)
     ctx = polish_context(robot, nominal, {"py": _Py(), "cc": _C()}, hold)
+    # the output width: the nominal's branches, then the extra slots of the seeds' solutions
+    ctx["branches"] = prog.branches
+    ctx["width"] = polish_width(prog.branches, robot.dof - (hold is not None))
     used: set = set()
     for e in [*ctx["R"], *ctx["t"]]:
         used.update(_IDENT.findall(e["cc"]))
@@ -687,6 +691,9 @@ def kernel_manifest(robot, free: str | None = None, nominal=None) -> dict:
         out["ik"] = "general6r"
     if prog is not None and prog.free:
         out["free"] = prog.free            # the IK functions take the free parameter fv
+    if nominal is not None and prog is not None:
+        # near-class kernels: the nominal's branches, then extra slots (derive.codegen.polish.polish_width)
+        out["max_solutions"] = polish_width(prog.branches, robot.dof - (held_joint(prog) is not None))
     if nominal is not None:
         out["nominal"] = {"robot": nominal.robot.name, "id": nominal.robot.id, "key": nominal_key(nominal),
                           "deviation": float(nominal.deviation), "how": nominal.how}

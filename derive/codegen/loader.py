@@ -437,7 +437,8 @@ class Kernels:
         ident = manifest["prefix"]
         self.folder = folder
         self.free = manifest.get("free")   # the free parameter of a 7-joint arm's IK, else None
-        #: the most solutions one pose has (8 for the closed forms, 16 for a general 6R)
+        #: the most solutions one pose has (8 for the closed forms, 16 for a general 6R and for
+        #: near-class kernels of a 6R: derive.codegen.polish.polish_width)
         self.max_solutions = int(manifest.get("max_solutions", 8))
         if backend == "python":
             self._mod = _import(folder / files["python"],
@@ -771,8 +772,9 @@ class Kernels:
         return res
 
     def ik_polish(self, P, free=None):
-        """Near-class kernels (``nominal=``): the solutions with their polish, (solutions (n, 8,
-        dof) NaN-padded, counts (n,), residual (n, 8), iterations (n, 8)): per solution its
+        """Near-class kernels (``nominal=``): the solutions with their polish, (solutions (n, W,
+        dof) NaN-padded, counts (n,), residual (n, W), iterations (n, W)), W = ``max_solutions``
+        (the nominal's branches, then extra slots for the seeds' solutions): per solution its
         residual, the larger of the position error (m) and the rotation angle (rad) between the
         kernels' FK of it and the pose, and the Newton steps it took (NaN and -1 in the padding).
         ``free``: the given joint value of kernels that hold one (a 7-joint arm, ``free="q3"``)."""
@@ -785,9 +787,10 @@ class Kernels:
         fv = None if free is None else np.ascontiguousarray(redundant.free_values(free, n))
         extra = () if fv is None else (fv,)
         if self.backend == "python":
-            sols = np.full((n, 8, self.dof), np.nan)
+            w = self.max_solutions
+            sols = np.full((n, w, self.dof), np.nan)
             counts = np.zeros(n, dtype=np.int64)
-            res, its = np.full((n, 8), np.nan), np.full((n, 8), -1, dtype=np.int64)
+            res, its = np.full((n, w), np.nan), np.full((n, w), -1, dtype=np.int64)
             for i, row in enumerate(poses.tolist()):
                 found = self._mod.ik_polish(row, *[float(x[i]) for x in extra])
                 counts[i] = len(found)
@@ -796,14 +799,22 @@ class Kernels:
         elif self.backend == "numpy":
             sols, counts, res, its = self._mod.ik_polish(poses, *extra)
         else:
-            self._load_ctypes()
             if not hasattr(self, "_ik_polish"):
-                g = getattr(self._lib, f"{self._ident}_ik_batch_polish")
+                # the extension module holds the kernel source's functions too (pyext.c.j2
+                # includes it): ctypes on its file, so that the kernel is not compiled a second
+                # time; without the extension, the kernels' own library
+                if self._ext is not None and getattr(self._ext, "__file__", None):
+                    lib = ctypes.CDLL(self._ext.__file__)
+                else:
+                    self._load_ctypes()
+                    lib = self._lib
+                g = getattr(lib, f"{self._ident}_ik_batch_polish")
                 g.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * (8 if self.free else 7)
                 g.restype = None
                 self._ik_polish = g
-            sols, res = np.empty((n, 8, self.dof)), np.empty((n, 8))
-            c, it = np.empty(n, dtype=np.intc), np.empty((n, 8), dtype=np.intc)
+            w = self.max_solutions
+            sols, res = np.empty((n, w, self.dof)), np.empty((n, w))
+            c, it = np.empty(n, dtype=np.intc), np.empty((n, w), dtype=np.intc)
             self._ik_polish(n, poses.ctypes.data, *[x.ctypes.data for x in extra], sols.ctypes.data,
                             c.ctypes.data, None, None, res.ctypes.data, it.ctypes.data)
             counts, its = c.astype(np.int64), it.astype(np.int64)

@@ -30,6 +30,8 @@ a :class:`derive.ik.nearclass.Nominal`, FK_R(q) ~= B FK_N(s q + o) T. The kernel
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import sympy as sp
 
@@ -40,7 +42,7 @@ from derive.errors import DeriveError
 from derive.ik.ir import IKProgram, Op, pos
 from derive.ik.nearclass import Nominal
 from derive.ik.program import ik_program
-from derive.ik.tolerances import REACH_TOL
+from derive.ik.tolerances import REACH_TOL, SEED_REACH, SEED_SINGULAR
 from derive.kinematics.fk import fk_matrix
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
@@ -62,9 +64,44 @@ POLISH_LAST_STEP = 1e-9
 #: block's poses (no early exit), before the residual decides which candidates go on one at a
 #: time: two steps take a mismatch of 1e-5 (decimal DH, a URDF's printed constants) to rounding.
 POLISH_VEC_STEPS = 2
+#: The offsets t (in units of r = sqrt(deviation), rad) of the seeds q + t v along the singular
+#: direction v of a candidate near a singular set (as derive.ik.nearclass._singular_seeds: the
+#: two roots of a fold part as the square root of the offset) ...
+SEED_FOLD = (1.0, -1.0, 3.0, -3.0)
+#: ... and the offsets (rad) that do not scale with it (a joint pair that is nearly free).
+SEED_TURN = (math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2, 3 * math.pi / 4, -3 * math.pi / 4, math.pi)
+#: A candidate of the nominal closed form (its reach checks dropped, :func:`_reach_check`) is
+#: polished only when its start misses the pose by at most this many deviations (+ 1e-9; m, and
+#: sin of the rotation angle, each compared; the rotation less than pi/2) or lies near a singular
+#: set: the nominal's miss within SEED_REACH deviations, as derive.ik.nearclass._near_reach, and
+#: the arm's own mismatch on top.
+SEED_KEEP = SEED_REACH + 1.0
+#: The most Newton steps of a seed near a singular set (a seed that leads to a root gets there in a
+#: few; most lead nowhere, and their steps were most of the seeds' cost).
+SEED_MAX_ITER = 20
+#: Cyclic Jacobi sweeps at most for the eigenvalues of J^T J of a candidate the cheap bound marks
+#: (:func:`seed_context`); a sweep stops the iteration when every off-diagonal entry is at most
+#: 1e-30 of the trace.
+SEED_JACOBI_SWEEPS = 12
+#: The output width of near-class kernels with six joints to solve (a general 6R has at most 16
+#: solutions, Raghavan and Roth); other arms get :data:`POLISH_EXTRA_SLOTS` slots past the nominal's
+#: branches. The nominal's branches keep their slots; a seed's solution takes an extra slot.
+POLISH_WIDTH_6R = 16
+POLISH_EXTRA_SLOTS = 8
 #: The one metric of the residual each solution reports.
 RESIDUAL_METRIC = ("max(|t_fk - t_pose| (m), rotation angle between fk and pose (rad)), fk the "
                    "kernels' own fk of the solution")
+
+
+def polish_width(branches: int, free_joints: int) -> int:
+    """The most solutions near-class kernels return per pose: the nominal's ``branches`` slots (its
+    candidates, polished) and extra slots for the solutions the seeds near singular sets find
+    (a near-class arm is a general arm and may have more solutions than its nominal): 16 for six
+    joints to solve (:data:`POLISH_WIDTH_6R`, at least ``branches``), else ``branches`` +
+    :data:`POLISH_EXTRA_SLOTS`."""
+    if free_joints == 6:
+        return max(int(branches), POLISH_WIDTH_6R)
+    return int(branches) + POLISH_EXTRA_SLOTS
 
 
 def _number(x: float):
@@ -138,12 +175,11 @@ def nominal_program(robot, nominal: Nominal, free: str | None = None) -> IKProgr
     if moved_same:
         rep = {k: v for k, v in rep.items() if k not in p}
     ops = [] if moved_same else [Op("let", str(s), sp.expand(e), depth=0) for s, e in zip(moved_syms, moved)]
-    reach = near_reach_tol(nominal)
     for op in nom.ops:
         args = op.args
-        if op.kind == "require":
-            op = Op(op.kind, op.name, _relaxed(op.expr, reach), op.name2, op.cond, op.other, op.args, op.depth)
-        elif op.kind == "let" and isinstance(op.expr, sp.Basic) and op.expr.has(pos):
+        if op.kind == "require" and _reach_check(op.expr):
+            continue
+        if op.kind == "let" and isinstance(op.expr, sp.Basic) and op.expr.has(pos):
             # a root clipped at the edge of the nominal's reach: sqrt(|x|) instead of sqrt(max(x, 0)),
             # so that the two branches start on either side of the fold (where the arm's two
             # nearby roots are), not both on it
@@ -163,27 +199,21 @@ def nominal_program(robot, nominal: Nominal, free: str | None = None) -> IKProgr
                      free=nom.free, free_doc=nom.free_doc, bit_weights=nom.bit_weights)
 
 
-def near_reach_tol(nominal: Nominal) -> float:
-    """The reach tolerance of the nominal program's checks in near-class kernels (relative, as
-    :data:`derive.ik.tolerances.REACH_TOL`): four times the relation's mismatch, at most 0.1 and
-    at least REACH_TOL. A pose the arm reaches may be out of the nominal robot's reach by about
-    the mismatch (an elbow nearly stretched, a wrist centre near the shoulder's cylinder); its
-    roots are then clipped rather than dropped, and the polish decides."""
-    return float(min(0.1, max(REACH_TOL, 4.0 * float(nominal.deviation))))
-
-
-def _relaxed(expr, tol: float):
-    """A require line of the nominal program with :data:`REACH_TOL` replaced by ``tol``: the
-    constants -REACH_TOL (an S1 discriminant's margin) and 1 + REACH_TOL (an acos argument's)."""
-    e = sp.sympify(expr)
-    rep = {}
-    for f in e.atoms(sp.Float):
+def _reach_check(expr) -> bool:
+    """Whether a require line of the nominal program checks the nominal robot's reach (it holds
+    one of the constants -REACH_TOL, an S1 discriminant's margin, or 1 + REACH_TOL, an acos
+    argument's). Near-class kernels drop those lines: a pose the arm reaches may be out of the
+    nominal's reach by about the mismatch (an elbow nearly stretched, a wrist centre near the
+    shoulder's cylinder) or by much more on a branch near a singular set (the nominal's arm plane
+    turns by about deviation / sin q5 near the wrist's); the roots are clipped instead
+    (sqrt(|x|), acos of the clipped cosine) and the polish decides, after the candidates whose
+    start misses the pose by more than SEED_KEEP deviations and that lie near no singular set
+    are left out (as derive.ik.nearclass._near_reach)."""
+    for f in sp.sympify(expr).atoms(sp.Float):
         x = float(f)
-        if abs(abs(x) - REACH_TOL) <= 1e-6 * REACH_TOL:
-            rep[f] = sp.Float(tol if x > 0 else -tol, 17)
-        elif abs(x - (1.0 + REACH_TOL)) <= 1e-15:
-            rep[f] = sp.Float(1.0 + tol, 17)
-    return e.xreplace(rep)
+        if abs(abs(x) - REACH_TOL) <= 1e-6 * REACH_TOL or abs(x - (1.0 + REACH_TOL)) <= 1e-15:
+            return True
+    return False
 
 
 def _comment_safe(text: str) -> str:
@@ -312,4 +342,18 @@ def polish_context(robot, nominal: Nominal, printers: dict, hold: int | None = N
             "max_step": repr(POLISH_MAX_STEP), "last_step": repr(POLISH_LAST_STEP), "vec_steps": POLISH_VEC_STEPS, "metric": RESIDUAL_METRIC,
             "nominal": nominal.robot.name, "nominal_id": nominal.robot.id, "key": nominal_key(nominal),
             "deviation": f"{nominal.deviation:.3g}", "how": _comment_safe(nominal.how),
-            "revolute": robot.revolute.tolist(), "hold": hold}
+            "revolute": robot.revolute.tolist(), "hold": hold, **seed_context(robot.dof, nominal, hold)}
+
+
+def seed_context(dof: int, nominal: Nominal, hold: int | None) -> dict:
+    """The constants of the seeds near singular sets (derive.ik.nearclass._singular_seeds, emitted):
+    a candidate whose Jacobian J (the free joints' columns) has lambda_min(J^T J) <
+    ``seed_near`` lambda_max(J^T J), i.e. s_min / s_max < SEED_SINGULAR sqrt(deviation), lies
+    near a singular set; ``seed_ts`` the offsets t (rad) of its seeds q + t v (v the unit
+    eigenvector of lambda_min); ``free_idx`` the joints the polish moves."""
+    r2 = max(float(nominal.deviation), 1e-12)
+    r = math.sqrt(r2)
+    ts = [t * r for t in SEED_FOLD] + list(SEED_TURN)
+    keep = SEED_KEEP * r2 + 1e-9
+    return {"seed_near": repr(SEED_SINGULAR ** 2 * r2), "seed_keep2": repr(keep * keep), "seed_ts": [repr(float(t)) for t in ts],
+            "seed_sweeps": SEED_JACOBI_SWEEPS, "seed_max_iter": SEED_MAX_ITER, "free_idx": [k for k in range(dof) if k != hold]}

@@ -367,7 +367,7 @@ def _twist_error(target: np.ndarray, pose: np.ndarray) -> np.ndarray:
 
 
 def polish(robot, poses, q, fixed=None, *, tol: float = POLISH_TOL,
-           max_iter: int = POLISH_MAX_ITER) -> Polished:
+           max_iter: int = POLISH_MAX_ITER, monotone=None) -> Polished:
     """Newton steps on the arm's own forward kinematics: every configuration of ``q`` moved onto
     an exact solution of its pose.
 
@@ -386,7 +386,13 @@ def polish(robot, poses, q, fixed=None, *, tol: float = POLISH_TOL,
     grows tenfold when a step does not lower |e|^2 (the step is then rejected) and shrinks
     tenfold after an accepted one; a step larger than POLISH_MAX_STEP in any joint is scaled
     down. Converged: residual max(|dp| m, rotation angle rad) <= ``tol`` (POLISH_TOL), at most
-    ``max_iter`` steps."""
+    ``max_iter`` steps.
+
+    Two passes: Newton steps always taken (:func:`_newton_free`), then, from the same starts
+    where that failed, the monotone iteration above (:func:`_newton`). ``monotone``: None (every
+    start), or a bool mask of q's shape without its last axis: the starts that get the second
+    pass (:func:`solve` leaves the seeds near singular sets out: they approach a root in the first
+    pass or not at all, and the second pass was most of the time of a calibrated UR5)."""
     robot = load_robot(robot)
     P, _ = as_pose_batch(poses)
     q = np.asarray(q, dtype=float)
@@ -407,6 +413,8 @@ def polish(robot, poses, q, fixed=None, *, tol: float = POLISH_TOL,
         x0 = x[idx].copy()
         x[idx], residual[idx], iters[idx] = _newton_free(model, target[idx], x0, free, tol, max_iter)
         again = idx[~(residual[idx] <= tol)]
+        if monotone is not None:
+            again = again[np.asarray(monotone, dtype=bool).reshape(-1)[again]]
         if len(again):      # the monotone iteration from the same starts where that one failed
             sub = np.searchsorted(idx, again)
             xa, ra, ia = _newton(model, target[again], x0[sub], free, tol, max_iter)
@@ -854,12 +862,14 @@ def solve(robot, poses, q_ref=None, given=None, chunk: int = 8192) -> NearSoluti
         if nom.deviation > HOMOTOPY_FROM:
             start = track(robot, nom, P[s:e], start, fixed=fixed)
         extra = _singular_seeds(robot, start, fixed, nom.deviation)
+        second = np.ones(start.shape[:2], dtype=bool)
         if extra.shape[1]:
+            second = np.concatenate([second, np.zeros(extra.shape[:2], dtype=bool)], axis=1)
             start = np.concatenate([start, extra], axis=1)
             sing = np.concatenate([sing, np.zeros(extra.shape[:2], dtype=bool)], axis=1)
             reached = np.concatenate([reached, np.zeros(extra.shape[:2], dtype=bool)], axis=1)
             k = start.shape[1]
-        pol = polish(robot, P[s:e], start, fixed=fixed)
+        pol = polish(robot, P[s:e], start, fixed=fixed, monotone=second)
         dropped[s:e] = (reached & ~pol.converged).sum(1)
         # the converged candidates first (in candidate order), the columns no pose fills cut
         front = np.argsort(~pol.converged, axis=1, kind="stable")
