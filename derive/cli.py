@@ -353,7 +353,8 @@ def cmd_robots(args) -> int:
         return EXIT_OK
     for line in _robots_table(rows):
         print(line)
-    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
+    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, three parallel = "
+          "axes 2, 3, 4 parallel (sp6: axes 5 and 6 apart, a quartic per pose, so no CasADi ik), Panda / SRS = the "
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
           "--seed Q; SRS also with joint 3 given: --free V --free-joint 3), nominal X + Newton polish = "
           "a near-class arm solved by its nominal robot's closed form and Newton steps on its own FK; "
