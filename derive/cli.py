@@ -290,7 +290,7 @@ def _robot_row(name: str) -> dict:
                     f"no: refine, seeded by {r.nominal}" if r.nominal else
                     ("no: refine (the general 6R elimination degenerates)" if g6 == "degenerate" else
                      "general 6R elimination") if _general_6r(r) else
-                    "any joint given (numpy)" if _seven_revolute(r) else "no: refine")
+                    "any joint given" if _seven_revolute(r) else "no: refine")
     # the seven-joint arms' kernels solve IK with the free parameter; a near-class 6R arm's kernels
     # run the nominal's closed form and polish (derive.codegen.polish), a seven-joint one's with
     # joint 3 given; any other 6R arm's kernels the general 6R elimination (up to 16 solutions)
@@ -299,13 +299,16 @@ def _robot_row(name: str) -> dict:
     has_ik = bool(closed or kind or (near and r.dof == 6) or general)
     given = " (q3 given)" if near and r.dof == 7 else ""
     given += " (elimination unchecked)" if general and g6 == "unchecked" else ""
+    # any other seven-revolute arm: no default IK kernel, but derive.kernels(r, backend, free="qK")
+    # solves it with joint K given (numpy, and C by the general elimination where it has a plan)
+    any_joint = " (+IK: free=qK)" if ik == "any joint given" else ""
     return {"name": name, "dof": r.dof, "joints": list(r.variable_names),
             "types": [j.type for j in _variables(r)], "class": cls,
             "closed_form_ik": closed or (("Panda" if kind == "panda" else "SRS") if kind else
                                          f"nominal {nearclass.nominal_class(r)} + polish" if near else None),
             "free_parameter": FREE_NAMES[kind] if kind else None,
             "ik": ik,
-            "kernels": ("FK+IK" if has_ik or given else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else given)
+            "kernels": ("FK+IK" if has_ik or given else "FK") + (f" ({FREE_NAMES[kind]} free)" if kind else given + any_joint)
                        + ", " + _where(r.id, "c_source"),
             "casadi": ("fk, residual, ik" if has_ik and not route and not sp6 else "fk, residual") + ", " + _where(r.id, "casadi/fk"),
             "convention": r.convention, "title": r.title}
@@ -350,10 +353,13 @@ def cmd_robots(args) -> int:
         return EXIT_OK
     for line in _robots_table(rows):
         print(line)
-    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, Panda / SRS = the "
+    print("closed-form IK: UR = the UR family, OPW = the spherical-wrist class, three parallel = "
+          "axes 2, 3, 4 parallel (sp6: axes 5 and 6 apart, a quartic per pose, so no CasADi ik), Panda / SRS = the "
           "seven-joint classes with a free parameter (q7 / the arm angle psi: ik --free V, --sweep N, "
           "--seed Q; SRS also with joint 3 given: --free V --free-joint 3), nominal X + Newton polish = "
           "a near-class arm solved by its nominal robot's closed form and Newton steps on its own FK; "
+          "any joint given = a seven-revolute arm solved with any joint J held (ik --free V --free-joint J; "
+          "kernels with free='qJ', numpy and C); "
           "(elimination unchecked) = a general 6R arm not derived yet: its kernels have IK when its "
           "elimination is regular, checked on first use (dq-derive kernels or ik); kernels and CasADi "
           "functions: shipped in the package, cached (derived earlier), or derived on first use and cached")

@@ -271,6 +271,10 @@ def test_kernels_with_any_joint(monkeypatch):
     assert s1.shape == (16, 7) and c1 == rc[0]
     with pytest.raises(InputError, match="need free="):
         kn.ik(poses)
+    # the default kernels of a seven-revolute arm outside the classes have no IK: the error names
+    # the free="qK" kernels (whose solutions above hold the pose's configuration)
+    with pytest.raises(DeriveError, match=r"derive.kernels\('xarm7', 'numpy', free='qK'\)"):
+        derive.kernels("xarm7", "numpy").ik(poses[0])
     # C on a class route runs the general elimination (test_free_joint_c); the SRS q4 stays refused,
     # and where the elimination has no plan the error names the numpy kernels (the class's closed form)
     with pytest.raises(InputError, match="joint 4 alone sets the shoulder-wrist distance"):

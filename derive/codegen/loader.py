@@ -555,8 +555,12 @@ class Kernels:
             why = ("its fixed angles are not all multiples of pi/12, so there are no exact equations "
                    "to solve" if not self.robot.exact else
                    "the extraction found no closed form for this chain")
-            raise DeriveError(f"{self.robot.name}: no closed-form IK kernel ({why}); "
-                              "use derive.refine")
+            r = self.robot
+            seven = r.dof == 7 and all(j.type == "revolute" and not j.is_mimic for j in r.joints)
+            raise DeriveError(f"{r.name}: no closed-form IK kernel ({why}); "
+                              + (f"with a joint K given: derive.kernels({r.name!r}, {self.backend!r}, "
+                                 "free='qK') (K = 1..7), or " if seven else "")
+                              + "use derive.refine")
 
     def _check_free(self, free):
         """InputError unless ``free`` is given exactly when the arm has a free parameter."""

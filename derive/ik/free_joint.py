@@ -24,8 +24,9 @@ angles (each side is multilinear in (sin, cos, 1) of its joints), so no symbolic
 needed for any K and v. What is derived once per (arm, K) (:func:`plan`, cached) is only the
 choice of the cut and the eigen-variable, checked on random configurations with random v
 (:func:`derive.ik.general6r._check_cut`); it takes milliseconds. The numbers (docs/ik.md,
-"Seven joints with any joint given"): the per-value fit costs about as much as the
-eigenproblem itself.
+"Seven-joint arms with any joint given"): the per-value fit costs about as much as the
+eigenproblem itself. The same elimination in C: :mod:`derive.codegen.free_joint`
+(``derive.kernels(robot, "c", free="qK")``, on the class routes too).
 
 Every candidate is polished by damped Newton steps on the 6R product form, checked on the 7R's
 exact FK (:func:`derive.kinematics.fk.fk`, G6_ACCEPT), and near-duplicates merged (MERGE_TOL);
