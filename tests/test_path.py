@@ -275,3 +275,17 @@ def test_cli_path_urscript_needs_six_joints(tmp_path, capsys):
     rc = main(["path", "iiwa14", "--poses", str(good), "--seed", *["0.1"] * 7, "--urscript", str(tmp_path / "x")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "six-joint" in err[0]
+
+
+def test_branch_change_labels_name_steps_only_for_closed_form_branches():
+    """Which closed-form steps changed root between two branch ids: the bits of ids inside the
+    closed form's 2^len(labels) branches (bit 0 the last label); a near-class kernel's extra slot
+    (ids 8..15 of a width-16 output, derive.codegen.polish.polish_width) or -1 names none."""
+    from types import SimpleNamespace
+
+    from derive.apps.path import _labels
+    k = SimpleNamespace(branch_labels=["q1", "q5", "q3"])
+    assert _labels(k, 0, 1) == " (q3)"
+    assert _labels(k, 0b100, 0b010) == " (q1, q5)"
+    assert _labels(k, 5, 5) == ""
+    assert "seed" in _labels(k, 3, 9) and "seed" in _labels(k, -1, 2)

@@ -152,6 +152,10 @@ def _labels(k, a: int, b: int) -> str:
     if not labels:
         return ""
     width = len(labels)
+    if min(a, b) < 0 or max(a, b) >= 1 << width:
+        # a solution outside the closed form's branches (a near-class arm's seeded extra slot,
+        # derive.codegen.polish.polish_width; a general arm's -1): no steps to name
+        return " (a solution found by a seed, outside the closed form's branches)"
     changed = [labels[bit] for bit in range(width) if (a >> (width - 1 - bit)) & 1 != (b >> (width - 1 - bit)) & 1]
     return f" ({', '.join(changed)})" if changed else ""
 
