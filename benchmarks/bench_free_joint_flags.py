@@ -23,18 +23,7 @@ from derive.codegen import free_joint as cfree
 from derive.codegen.loader import _compile
 from derive.ik import free_joint
 
-
-def _wrapped(d):
-    return np.abs((np.asarray(d) + math.pi) % (2 * math.pi) - math.pi)
-
-
-def _same(a, b, tol=1e-6):
-    if len(a) != len(b):
-        return False
-    if not len(a):
-        return True
-    d = _wrapped(a[:, None] - b[None]).max(-1)
-    return bool(np.all(d.min(1) < tol) and np.all(d.min(0) < tol))
+from bench_free_joint import _same      # the set comparison of the timing benchmark (same folder)
 
 
 def main() -> None:
