@@ -285,6 +285,15 @@ def _q3_q2_q4(hb, p, v, theta):
         arms.append((q2, q3, theta - q2 - q3))
     return _ok(s3), arms
 
+def _pose_terms(geo: P3Geometry, poses: np.ndarray):
+    """Step 0 of both layouts: the axes broadcast over the n poses, R_06 = R R_6T^T and the point
+    p_16 = t - p_0 - R_06 p_6 of axis 6 (the wrist point where axes 5 and 6 meet)."""
+    n = poses.shape[0]
+    r06 = quat._to_matrix(poses[:, :4]) @ geo.r6t.T
+    p16 = dq._translation(poses) - geo.p[0] - np.einsum("nij,j->ni", r06, geo.p[6])
+    return [np.broadcast_to(v, (n, 3)) for v in geo.h], r06, p16
+
+
 def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = None,
                 keep_unreachable: bool = False):
     """All 8 candidate branches for n poses of the robot's end frame: (q (n, 8, 6) in the
@@ -300,11 +309,7 @@ def solve_batch(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None = N
         return solve_batch_sp6(geo, poses, q_ref, keep_unreachable)
     n = poses.shape[0]
     h, p = geo.h, geo.p
-    hb = [np.broadcast_to(v, (n, 3)) for v in h]
-    r = quat._to_matrix(poses[:, :4])
-    t = dq._translation(poses)
-    r06 = r @ geo.r6t.T
-    p16 = t - p[0] - np.einsum("nij,j->ni", r06, p[6])
+    hb, r06, p16 = _pose_terms(geo, poses)
     free1 = np.zeros(n) if q_ref is None else q_ref[:, geo.order[0]]
     free6 = np.zeros(n) if q_ref is None else q_ref[:, geo.order[5]]
     x = np.cross(h[1], h[0])
@@ -379,11 +384,7 @@ def solve_batch_sp6(geo: P3Geometry, poses: np.ndarray, q_ref: np.ndarray | None
     roots of the slots it solved."""
     n = poses.shape[0]
     h, p = geo.h, geo.p
-    hb = [np.broadcast_to(v, (n, 3)) for v in h]
-    r = quat._to_matrix(poses[:, :4])
-    t = dq._translation(poses)
-    r06 = r @ geo.r6t.T
-    p16 = t - p[0] - np.einsum("nij,j->ni", r06, p[6])               # a point of axis 6
+    hb, r06, p16 = _pose_terms(geo, poses)
     free6 = np.zeros(n) if q_ref is None else q_ref[:, geo.order[5]]
     x = np.cross(h[1], h[0])
     x = np.broadcast_to(x / np.linalg.norm(x), (n, 3))
