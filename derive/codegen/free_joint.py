@@ -54,12 +54,101 @@ class _Context(dict):
         return None
 
 
+#: Held values at which a baked deflation is checked (:func:`_fixed_deflation`).
+_DEFLATION_VALUES = (0.0, -2.6, -1.1, 0.4, 1.9, 2.8)
+
+
+def _held_on_pair_side(pl: free_joint.Plan) -> bool:
+    """Whether the held joint's merged link C_K Rz(v) C_{K+1} of the locked 6R (its link K - 1,
+    7 - K in the reversed chain) lies outside the loop cut's triple side: the base or tool link
+    (in the pose link K6 = C7 T^-1 C1) or a link of the pair side (links e + 4 and e + 5 mod 6,
+    6 the pose link). The triple side Y is then the same for every value."""
+    link = 7 - pl.joint if pl.reverse else pl.joint - 1
+    return link in (0, 6) or link in {(pl.e + 3) % 6 + 1, (pl.e + 4) % 6 + 1}
+
+
+def _fixed_deflation(pl: free_joint.Plan):
+    """:func:`derive.ik.general6r._deflation` of the locked 6R where it holds for every held
+    value: the held link off the triple side (:func:`_held_on_pair_side`; the pencil's
+    eigenvectors at x = +-i come from the triple side alone), computed at each of
+    :data:`_DEFLATION_VALUES`; the one that removes the fewest eigenvectors (the first such,
+    the value 0 where it is one of them) where its removed subspace V lies in every other value's
+    (some values add pose-independent roots of their own, left to the eigen-solver) with the same
+    spurious real roots. (bases, keep, spurious) or None."""
+    from types import SimpleNamespace
+
+    if not _held_on_pair_side(pl):
+        return None
+    found = []
+    for v in _DEFLATION_VALUES:
+        d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+        if pl.reverse:
+            d = g6._reverse(d)
+        f = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
+                                          offsets=pl.offsets, d3=pl.d3))
+        if f is None:
+            return None
+        found.append(f)
+    best = max(found, key=lambda f: f[1])
+    keep, spurious = best[1], np.asarray(best[2], dtype=float)
+    for f in found:
+        if f[1] == keep and (len(f[2]) != len(spurious)
+                             or np.abs(np.asarray(f[2], dtype=float) - spurious).max(initial=0.0) > 1e-9):
+            return None
+        for k in range(len(pl.d3)):
+            # V (this value's removed subspace) has no component off the other value's
+            v0, vk = best[0][k][:, keep:], f[0][k][:, f[1]:]
+            if np.abs(v0 - vk @ (vk.T @ v0)).max() > 1e-7:
+                return None
+    return best
+
+
+def c_plans(robot, joint: int) -> list:
+    """The plans of the C kernel (:func:`derive.ik.free_joint.plan` and its rescue), the plan
+    first, the rescue second. With joint 2 (or 6) held the forward (reversed) locked 6R cut at its
+    joint 2 has the held link on the pair side, so its deflation is baked
+    (:func:`_fixed_deflation`: 16 x 16 eigenproblems instead of 24 x 24): where that cut works at
+    every value checked, with one eigen-variable, and the reference's plan has no such deflation,
+    it is the C kernel's plan and the reference's plan its rescue. Else the reference's plan and
+    rescue."""
+    import dataclasses
+    from collections import Counter
+
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    pl = free_joint.plan(robot, joint)
+    plans = [pl, pl.alt if pl.alt is not None else pl]
+    if joint not in (2, 6) or _fixed_deflation(pl) is not None:
+        return plans
+    reverse = joint == 6
+    evs = []
+    for v in _DEFLATION_VALUES:
+        d = free_joint.locked_chain(pl.c, joint, [v])[0]
+        ok, _, extra = g6._check_cut(g6._reverse(d) if reverse else d, 2)
+        if not ok:
+            return plans
+        evs.append(int(extra["ev"]))
+    ev = Counter(evs).most_common(1)[0][0]
+    cand = dataclasses.replace(pl, reverse=reverse, e=2, ev=ev, alt=pl,
+                               notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint 2 (the held link on "
+                                     f"the pair side: the deflation baked), eigen-variable q{_cut_triple(2)[ev]} of the 6R")
+    if _fixed_deflation(cand) is None:
+        return plans
+    return [cand, pl]
+
+
+def _cut_triple(e):
+    return g6._cut_joints(e)[0]
+
+
 def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
-    :func:`derive.ik.general6r._deflation`) where it holds for every value: joint 1 or 7 held
-    (the held link is the first or last, so the locked 6R's loop links 1-5 are the same for every
-    value and the value moves only the pose link); with a middle joint held the eigenvectors at
-    x = +-i change with the value (and the pose), so there is none. As the general 6R kernels'
+    :func:`derive.ik.general6r._deflation`) where it holds for every value
+    (:func:`_fixed_deflation`): joint 1 or 7 held (the held link is the first or last, so the
+    locked 6R's loop links 1-5 are the same for every value and the value moves only the pose
+    link), or the held link on the pair side of the cut (joint 2 or 6, :func:`c_plans`); with the
+    held link on the triple side the pose-independent eigenvalues and eigenvectors change with
+    the value, so there is none. As the general 6R kernels'
     template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
     given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
     module has no such context (a template without the deflation)."""
@@ -69,13 +158,7 @@ def _deflation(pl: free_joint.Plan):
     make = getattr(cg6, "_deflation_context", None) or getattr(cg6, "deflation_context", None)
     if make is None:
         return None
-    found = None
-    if pl.joint in (1, 7):
-        d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
-        if pl.reverse:
-            d = g6._reverse(d)
-        found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
-                                              offsets=pl.offsets, d3=pl.d3))
+    found = _fixed_deflation(pl)
     if found is None:
         return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
     b, keep, spurious = found
@@ -154,8 +237,8 @@ def c_source(robot, joint: int) -> str:
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     free_joint.route(robot, joint)            # InputError for a joint that cannot be given (SRS q4)
-    pl = free_joint.plan(robot, joint)
-    plans = [pl, pl.alt if pl.alt is not None else pl]
+    plans = c_plans(robot, joint)
+    pl = plans[0]
     env = template_environment()
     core = env.get_template("general6r.c.j2")
     cores = []
