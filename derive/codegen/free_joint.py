@@ -11,7 +11,9 @@ python backends run the class's closed form and C does not; the sets agree but o
 near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
-through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
+through its pose argument (one copy per plan: the plan and its rescue, :func:`c_plans`: where a cut
+with the held link off the triple side has a deflation that holds for every value, that cut and
+the reference's plan as its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
 folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
 IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
@@ -69,8 +71,9 @@ def _held_on_pair_side(pl: free_joint.Plan) -> bool:
 
 def _fixed_deflation(pl: free_joint.Plan):
     """:func:`derive.ik.general6r._deflation` of the locked 6R where it holds for every held
-    value: the held link off the triple side (:func:`_held_on_pair_side`; the pencil's
-    eigenvectors at x = +-i come from the triple side alone), computed at each of
+    value: the held link off the triple side (:func:`_held_on_pair_side`; there the pencil's
+    pose-independent eigenvectors, at x = +-i and at complex roots every pose shares, need not
+    change with the value, and on the arms shipped they do not), computed at each of
     :data:`_DEFLATION_VALUES`; the one that removes the fewest eigenvectors (the first such,
     the value 0 where it is one of them) where its removed subspace V lies in every other value's
     (some values add pose-independent roots of their own, left to the eigen-solver) with the same
@@ -104,13 +107,14 @@ def _fixed_deflation(pl: free_joint.Plan):
 
 
 def c_plans(robot, joint: int) -> list:
-    """The plans of the C kernel (:func:`derive.ik.free_joint.plan` and its rescue), the plan
-    first, the rescue second. With joint 2 (or 6) held the forward (reversed) locked 6R cut at its
-    joint 2 has the held link on the pair side, so its deflation is baked
-    (:func:`_fixed_deflation`: 16 x 16 eigenproblems instead of 24 x 24): where that cut works at
-    every value checked, with one eigen-variable, and the reference's plan has no such deflation,
-    it is the C kernel's plan and the reference's plan its rescue. Else the reference's plan and
-    rescue."""
+    """The plans of the C kernel, the plan first and its rescue second: the reference's
+    (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
+    triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
+    reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
+    deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
+    value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`, its eigen-variable
+    the one chosen most often), is then the C kernel's plan and the reference's plan its rescue
+    (each pose solves a 16 x 16 or 20 x 20 eigenproblem instead of 24 x 24)."""
     import dataclasses
     from collections import Counter
 
@@ -118,27 +122,30 @@ def c_plans(robot, joint: int) -> list:
     robot = load_robot(robot)
     pl = free_joint.plan(robot, joint)
     plans = [pl, pl.alt if pl.alt is not None else pl]
-    if joint not in (2, 6) or _fixed_deflation(pl) is not None:
-        return plans
-    reverse = joint == 6
-    evs = []
-    for v in _DEFLATION_VALUES:
-        d = free_joint.locked_chain(pl.c, joint, [v])[0]
-        ok, _, extra = g6._check_cut(g6._reverse(d) if reverse else d, 2)
-        if not ok:
-            return plans
-        evs.append(int(extra["ev"]))
-    ev = Counter(evs).most_common(1)[0][0]
-    cand = dataclasses.replace(pl, reverse=reverse, e=2, ev=ev, alt=pl,
-                               notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint 2 (the held link on "
-                                     f"the pair side: the deflation baked), eigen-variable q{_cut_triple(2)[ev]} of the 6R")
-    if _fixed_deflation(cand) is None:
-        return plans
-    return [cand, pl]
-
-
-def _cut_triple(e):
-    return g6._cut_joints(e)[0]
+    own = _fixed_deflation(pl)
+    best, best_keep = None, 24 if own is None else own[1]
+    for reverse in (False, True):
+        for e in (1, 2):
+            if (reverse, e) == (pl.reverse, pl.e) or not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
+                continue
+            evs = []
+            for v in _DEFLATION_VALUES:
+                d = free_joint.locked_chain(pl.c, joint, [v])[0]
+                ok, _, extra = g6._check_cut(g6._reverse(d) if reverse else d, e)
+                if not ok:
+                    break
+                evs.append(int(extra["ev"]))
+            else:
+                ev = Counter(evs).most_common(1)[0][0]
+                cand = dataclasses.replace(
+                    pl, reverse=reverse, e=e, ev=ev, alt=pl,
+                    notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
+                          f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the deflation "
+                          f"baked; the reference's plan is the rescue)")
+                found = _fixed_deflation(cand)
+                if found is not None and found[1] < best_keep:
+                    best, best_keep = cand, found[1]
+    return plans if best is None else [best, pl]
 
 
 def _deflation(pl: free_joint.Plan):
