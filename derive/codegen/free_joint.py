@@ -114,12 +114,16 @@ def c_plans(robot, joint: int) -> list:
     deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`, its eigen-variable
     the one chosen most often), is then the C kernel's plan and the reference's plan its rescue
-    (each pose solves a 16 x 16 or 20 x 20 eigenproblem instead of 24 x 24)."""
+    (each pose solves a 12 x 12 to 20 x 20 eigenproblem instead of 24 x 24). Once per process."""
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
+
+
+def _c_plans(robot, joint: int) -> list:
     import dataclasses
     from collections import Counter
 
-    from derive.model.robot import load_robot
-    robot = load_robot(robot)
     pl = free_joint.plan(robot, joint)
     plans = [pl, pl.alt if pl.alt is not None else pl]
     own = _fixed_deflation(pl)
