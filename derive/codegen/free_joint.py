@@ -112,8 +112,9 @@ def c_plans(robot, joint: int) -> list:
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
     deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
-    value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`, its eigen-variable
-    the one chosen most often), is then the C kernel's plan and the reference's plan its rescue
+    value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
+    eigen-variable that check chose most often or another one regular there without shared real
+    roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
     (each pose solves a 12 x 12 to 20 x 20 eigenproblem instead of 24 x 24). Once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
@@ -130,7 +131,7 @@ def _c_plans(robot, joint: int) -> list:
     best, best_keep = None, 24 if own is None else own[1]
     for reverse in (False, True):
         for e in (1, 2):
-            if (reverse, e) == (pl.reverse, pl.e) or not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
+            if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
                 continue
             evs = []
             for v in _DEFLATION_VALUES:
@@ -140,16 +141,60 @@ def _c_plans(robot, joint: int) -> list:
                     break
                 evs.append(int(extra["ev"]))
             else:
-                ev = Counter(evs).most_common(1)[0][0]
-                cand = dataclasses.replace(
-                    pl, reverse=reverse, e=e, ev=ev, alt=pl,
-                    notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
-                          f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the deflation "
-                          f"baked; the reference's plan is the rescue)")
-                found = _fixed_deflation(cand)
-                if found is not None and found[1] < best_keep:
-                    best, best_keep = cand, found[1]
+                # the eigen-variable chosen most often first, then the others whose pencil is regular
+                # at every value (a smaller deflated block wins)
+                order = [ev for ev, _ in Counter(evs).most_common()]
+                order += [ev for ev in range(3) if ev not in order and _regular(pl, reverse, e, ev)]
+                for ev in order:
+                    if (reverse, e, ev) == (pl.reverse, pl.e, pl.ev):
+                        continue
+                    cand = dataclasses.replace(
+                        pl, reverse=reverse, e=e, ev=ev, alt=pl,
+                        notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
+                              f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
+                              f"deflation baked; the reference's plan is the rescue)")
+                    found = _fixed_deflation(cand)
+                    if found is not None and found[1] < best_keep:
+                        best, best_keep = cand, found[1]
     return plans if best is None else [best, pl]
+
+
+def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
+    """Whether the locked 6R's pencil for the cut at e with eigen-variable ev is regular at every
+    value of :data:`_DEFLATION_VALUES`, with simple real roots: the 12 x 12 matrix at random q of
+    the eigen-variable on 6 random configurations' poses has a smallest relative singular value
+    above G6_RANK_TOL and no two real eigenvalues within CLUSTER_TOL (the tests
+    :func:`derive.ik.general6r._check_cut` applies to each eigen-variable)."""
+    rng = np.random.default_rng(11)
+    for v in _DEFLATION_VALUES:
+        d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+        c = g6._reverse(d) if reverse else d
+        q = rng.uniform(-np.pi, np.pi, (6, 6))
+        _, target = g6._chain_frames(c, q)
+        y = g6._triple_coefs(c, e)
+        x = g6._pair_coefs(c, e, target)
+        qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+        yy = np.broadcast_to(y, (6, 14, 27)).copy()
+        yy[:, :, 26] -= x[:, :, 8]
+        t = np.moveaxis((np.swapaxes(qq[:, :, 8:], 1, 2) @ yy).reshape(6, 6, 3, 3, 3), 2 + ev, 2)
+        th = rng.uniform(-np.pi, np.pi, 6)
+        sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
+        sv = np.linalg.svd(g6._twelve(sig @ g6._t45(0.3, -0.7)), compute_uv=False)
+        if not np.min(sv[:, -1] / sv[:, 0]) > G6_RANK_TOL:
+            return False
+        # and no real root shared by two solutions (the slower multiple-root path)
+        mats = g6._twelve(t.reshape(6, 6, 3, 9).transpose(0, 2, 1, 3) @ g6._t45(0.3, -0.7))
+        mk = np.einsum("ak,naij->nkij", g6._half(0.5), mats)
+        inv = g6._inv_safe(mk[:, 2])
+        comp = np.zeros((6, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        for row in np.linalg.eigvals(np.where(np.isfinite(comp), comp, 0.0)):
+            xr = np.sort(row[np.abs(row.imag) < G6_REAL_TOL * (1 + np.abs(row) ** 2)].real)
+            if np.any(np.abs(np.diff(xr)) <= g6.CLUSTER_TOL * (1 + np.abs(xr[1:]))):
+                return False
+    return True
 
 
 def _deflation(pl: free_joint.Plan):
