@@ -140,11 +140,13 @@ def test_baked_deflation_holds_at_random_values_and_poses(name, k):
 
 
 @needs_gcc
-def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path):
-    """The emitted source (two copies of the general 6R solver core, the plan and its rescue),
-    warnings as errors, -Wpedantic, as C99 and C++17."""
-    src = tmp_path / "xarm7_q5.c"
-    src.write_text(cfree.c_source("xarm7", 5))
+@pytest.mark.parametrize("k", [5, 2])
+def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path, k):
+    """The emitted source (two copies of the general 6R solver core, the plan and its rescue;
+    with q2 given the plan's deflation baked, the rescue's not), warnings as errors, -Wpedantic,
+    as C99 and C++17."""
+    src = tmp_path / f"xarm7_q{k}.c"
+    src.write_text(cfree.c_source("xarm7", k))
     for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
                 ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
         if shutil.which(cmd[0]) is None:
@@ -183,8 +185,9 @@ def test_c_free_joint_kernels_api():
 
 
 @needs_gcc
-def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path):
-    """xarm7 with q4 given, built with -fsanitize=address,undefined, on axis-aligned
+@pytest.mark.parametrize("k", [4, 2])
+def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path, k):
+    """xarm7 with q4 given (and q2: the deflated plan), built with -fsanitize=address,undefined, on axis-aligned
     configurations (singular: shared roots, degenerate pencils) and random ones: no invalid
     access, no undefined behaviour, counts within 0..16, no NaN before the padding and only NaN
     after it."""
@@ -196,9 +199,9 @@ def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path):
     poses = reference.fk(robot, q)
     n = len(q)
     rows = ",\n".join("{" + ", ".join(repr(float(v)) for v in p) + "}" for p in poses)
-    vals = ", ".join(repr(float(v)) for v in q[:, 3])
-    ident = cfree._identifier(robot, 4)
-    (tmp_path / "t.c").write_text(cfree.c_source(robot, 4) + f"""
+    vals = ", ".join(repr(float(v)) for v in q[:, k - 1])
+    ident = cfree._identifier(robot, k)
+    (tmp_path / "t.c").write_text(cfree.c_source(robot, k) + f"""
 #include <stdio.h>
 static const double poses[{n}][8] = {{{rows}}};
 static const double vals[{n}] = {{{vals}}};
