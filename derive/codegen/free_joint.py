@@ -157,11 +157,27 @@ def program_source(robot, joint: int) -> str:
     subproblems) printed as the generated kernels print every class's program
     (templates/kinematics.c.j2 with its header inlined; the functions are named
     ``<robot>_free_q<K>_*``: ``..._ik_batch_ex(n, poses, fv, sols (n x 8 x 7), counts, branch,
-    singular)``, with the class's branch ids and singular flags)."""
-    from derive.codegen.emit import _context
-    from derive.codegen.templates import template_environment
+    singular)``, with the class's branch ids and singular flags). Rendered once per code version
+    (about 15 s, with progress on stderr) and kept in the user cache
+    (:func:`derive.cache.store_artifacts`, under "<identity>-free-q<K>-L<limits>")."""
+    from derive.cache import find_artifact, step, store_artifacts, task
     from derive.model.robot import load_robot
     robot = load_robot(robot)
+    key = f"{robot.id}-free-q{joint}-L{robot.limits_id}"
+    found = find_artifact(key, "c_source")
+    if found is not None:
+        return found.read_text(encoding="utf-8")
+    with task(f"{robot.name} q{joint}"):
+        step("rendering the C of the class's IK program with the joint given")
+        text = _render_program(robot, joint)
+    store_artifacts(key, {"c_source": (f"{_identifier(robot, joint)}.c", text)},
+                    {"robot": robot.name, "free": f"q{joint}"})
+    return text
+
+
+def _render_program(robot, joint: int) -> str:
+    from derive.codegen.emit import _context
+    from derive.codegen.templates import template_environment
     ident = _identifier(robot, joint)
     ctx = _context(robot, f"derive.kernels({robot.name!r}, 'c', free='q{joint}')", f"q{joint}")
     if ctx["ik"] is None or ctx["ik"].get("free") != f"q{joint}":
