@@ -4,17 +4,19 @@ The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding
 one, else the general 6R with a numeric per-value construction of the elimination). The "python"
 and "numpy" backends run that numpy solver for ``ik``, ``ik_sweep`` and ``nearest``, and the
 backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, ``jacobian``, ...).
-The "c" backend runs emitted C99, the general elimination, wherever it has a plan
-(:func:`derive.ik.free_joint.plan`): on the general route (:func:`derive.ik.free_joint.route`)
-and on the class routes too (the SRS class with q1, q2, q5, q6 or q7 given, where the numpy and
-python backends run the class's closed form and C does not; the sets agree but on poses very
-near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+The "c" backend runs emitted C99. On the SRS class routes (q1, q2, q5, q6 or q7 given,
+:func:`derive.ik.free_joint.route`) it is the class's IK program
+(:func:`derive.ik.program7.srs_joint_program`, the numpy closed form as a composition of
+subproblems) printed by the generated kernels' template (:func:`program_source`): the same
+solution sets, branch ids and singular flags as the numpy closed form. On the general route it is
+the general elimination, wherever it has a plan (:func:`derive.ik.free_joint.plan`)
+(templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
 through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
-folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
-IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
+folder and loaded with ctypes. Where the general elimination has no plan the "c" backend has no such
+IK kernel (the plan's DeriveError). The calling convention is that
 of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P, free=values)``
 -> (solutions (n, 16, 7) NaN-padded, counts (n,)), ``ik_sweep(P, n)`` over joint K's range,
 ``nearest(P, q_seed)`` with joint K chosen for the path.
@@ -422,8 +424,8 @@ class FreeJointKernels:
         """(n,) or a bool: the general elimination's degenerate flag of each pose at its value (the
         elimination degenerates for both plans or is unreliable there, or more than 16 solutions:
         those returned are checked, some may be missing; templates/free_joint.c.j2, fj_solve, and
-        :func:`derive.ik.free_joint._general`): the C kernel's on the "c" backend (any route), the numpy
-        reference's on the general route; False for the class's closed forms (numpy, python)."""
+        :func:`derive.ik.free_joint._general`): the C kernel's and the numpy reference's on the
+        general route; False for the class's closed forms (every backend)."""
         self._need(free)
         poses, single = self._poses(P)
         f = redundant.free_values(free, len(poses))
@@ -452,8 +454,8 @@ class FreeJointKernels:
 
 
 def free_joint_kernels(robot, backend: str, joint: int, fk_kernels, compile_fn=None) -> FreeJointKernels:
-    """:class:`FreeJointKernels`; the "c" backend wherever the general elimination has a plan
-    (:func:`derive.ik.free_joint.plan`), on a class route too; DeriveError where it has none
-    (``derive.kernels`` turns it into an InputError naming the numpy kernels).
+    """:class:`FreeJointKernels`; the "c" backend on the SRS class routes (the class's IK
+    program) and on the general route wherever the general elimination has a plan
+    (:func:`derive.ik.free_joint.plan`; DeriveError where it has none).
     ``compile_fn``: the C backend's compile step (:func:`derive.codegen.loader._compile`)."""
     return FreeJointKernels(robot, backend, joint, fk_kernels, compile_fn)
