@@ -1,6 +1,13 @@
-"""C (class program) on 10^4 poses per (arm, K), the bench_free_joint configurations (seed 1): C's own
-generating-configuration count (1e-6), largest matrix-FK error, equality with numpy (counts, branch ids,
-singular flags, values within 1e-6)."""
+"""The C kernels of the SRS class routes (joint K in {1, 2, 5, 6, 7} given: the class's IK program,
+derive.codegen.free_joint.program_source) on 10^4 configurations per arm within the limits, the
+configurations of bench_free_joint.py (seed 1), the generating value of joint K given: how often
+the C solutions hold the generating configuration (every joint within 1e-6 rad; the worst
+distance and its q4), the largest 4x4 matrix-FK error of a C solution, on how many poses the
+counts, branch ids and singular flags equal the numpy closed form's (free_joint.solve) and the
+values are within 1e-6 rad (the largest difference).
+
+    .venv/bin/python benchmarks/bench_free_joint_srs_c.py iiwa14,iiwa7
+"""
 import math, sys
 import numpy as np
 import derive
