@@ -190,3 +190,31 @@ def test_programs_are_compositions_of_named_subproblems_and_q3_is_unchanged():
     for bad in (4, 8):
         with pytest.raises(derive.DeriveError, match="cannot be given"):
             program7.srs_joint_program("iiwa14", bad)
+
+
+def test_c_program_sweep_nearest_and_tool_equal_the_numpy_kernels():
+    """iiwa14 with q6 given: ik_sweep over q6's range, nearest (q6 chosen for the path) and the IK
+    of a tool frame through the C program equal the numpy kernels' (the closed form): the same
+    counts, branch ids and values (nearest: the same branches, values within 1e-6, on the pose)."""
+    robot = derive.load_robot("iiwa14")
+    kc, kn = derive.kernels("iiwa14", "c", free="q6"), derive.kernels("iiwa14", "numpy", free="q6")
+    q = np.random.default_rng(340).uniform(robot.limits[:, 0], robot.limits[:, 1], (4, 7))
+    poses = kn.fk(q)
+    sc, sn = kc.ik_sweep(poses, 6), kn.ik_sweep(poses, 6)
+    np.testing.assert_array_equal(sc.counts, sn.counts)
+    np.testing.assert_array_equal(sc.branch[..., :8], sn.branch[..., :sc.branch[..., :8].shape[-1]])
+    assert sc.counts.sum() > 20 and np.nanmax(_wrapped(sc.q[..., :8, :] - sn.q[..., :8, :])) < 1e-9
+    nc, nn = kc.nearest(poses, q + 0.01), kn.nearest(poses, q + 0.01)
+    assert np.all(nc.found) and np.all(nc.max_move <= 0.015 + 1e-9)
+    np.testing.assert_array_equal(nc.branch, nn.branch)
+    # the 1-D search's refinement stops at a tolerance: the q6 chosen agree to about 1e-8
+    assert np.abs(nc.q - nn.q).max() < 1e-6
+    np.testing.assert_allclose(kc.fk(nc.q), poses, atol=1e-9)
+    tool = reference.fk("iiwa14", np.full(7, 0.2))         # any unit pose as a tool
+    tc, tn = kc.with_tool(tool), kn.with_tool(tool)
+    pt = tn.fk(q)
+    s1, c1, b1, _ = tc.ik(pt, free=q[:, 5], details=True)
+    s2, c2, b2, _ = tn.ik(pt, free=q[:, 5], details=True)
+    np.testing.assert_array_equal(c1, c2)
+    np.testing.assert_array_equal(b1[:, :8], b2[:, :8])
+    assert np.nanmax(_wrapped(s1[:, :8] - s2[:, :8])) < 1e-9
