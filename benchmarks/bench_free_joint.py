@@ -4,9 +4,9 @@ the solution counts, how often the generating configuration is found, the larges
 (4x4 matrix FK, m / entry), the degenerate flags, and the CPU time per pose (numpy, batched).
 With ``--ssik M``: on the first M poses of xarm7 and gen3, ssik's joint-lock solver
 (ssik.solvers.jointlock.seven_r, same held value) and whether its solutions are all ours.
-With ``--c``: wherever the general elimination has a plan (the general route, and the class
-routes, where the numpy column is the class's closed form), the C kernel (derive.codegen.free_joint.c_library, batched,
-one thread; compiled before timing) on the same poses and values: its CPU time per pose and value
+With ``--c``: the C kernel (derive.codegen.free_joint.c_library, batched, one thread; compiled
+before timing: on the SRS class routes the class's IK program, where the numpy column is the same
+closed form; on the general route the general elimination, wherever it has a plan) on the same poses and values: its CPU time per pose and value
 (best of ``--repeats``), and on how many poses its solution set equals the numpy reference's.
 
     .venv/bin/python benchmarks/bench_free_joint.py [--poses N] [--arms a,b] [--joints 1,2] [--ssik M]
@@ -102,7 +102,8 @@ def main():
             if args.c:
                 ctext = " | | |"
                 try:
-                    free_joint.plan(robot, k)          # the C runs the general elimination, class routes too
+                    if how == "general":
+                        free_joint.plan(robot, k)      # the general elimination; the class routes: their program
                 except DeriveError:
                     pass
                 else:
@@ -116,7 +117,7 @@ def main():
                         times.append(time.process_time() - t0)
                     us = min(times) / args.poses * 1e6
                     same = sum(_same(cq[i, :cc[i]], r.q[i, :r.counts[i]]) for i in range(args.poses))
-                    ctext = f" {us:.1f} | {same}/{args.poses} | {dt * 1e3 / us:.2g}x |"
+                    ctext = f" {us:.3g} | {same}/{args.poses} | {dt * 1e3 / us:.2g}x |"
             print(f"| {name} | {k} | {how} | {found}/{args.poses} | {err:.1e} | {dist} | "
                   f"{int(r.degenerate.sum())} | {dt:.2f} | {extra} |" + ctext, flush=True)
 

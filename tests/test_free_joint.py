@@ -250,9 +250,10 @@ def test_nearest_follows_a_path():
 
 def test_kernels_with_any_joint(monkeypatch):
     """derive.kernels(robot, backend, free="qK"): numpy and python give the reference's
-    solutions; fk is the backend's; free= is required; C refuses the SRS class's q4 and, where
-    the general elimination has no plan, says so naming the numpy kernels; q3 of the SRS class
-    and q7 of the Panda class stay the generated kernels."""
+    solutions; fk is the backend's; free= is required; C refuses the SRS class's q4, solves an
+    SRS class route by the class's program without a general-6R plan, and where the general route
+    has no plan raises its error; q3 of the SRS class and q7 of the Panda class stay the
+    generated kernels."""
     robot = derive.load_robot("xarm7")
     q = _inside(robot, 8, np.random.default_rng(4))
     kn = derive.kernels("xarm7", "numpy", free="q5")
@@ -275,8 +276,8 @@ def test_kernels_with_any_joint(monkeypatch):
     # the free="qK" kernels (whose solutions above hold the pose's configuration)
     with pytest.raises(DeriveError, match=r"derive.kernels\('xarm7', 'numpy', free='qK'\)"):
         derive.kernels("xarm7", "numpy").ik(poses[0])
-    # C on a class route runs the general elimination (test_free_joint_c); the SRS q4 stays refused,
-    # and where the elimination has no plan the error names the numpy kernels (the class's closed form)
+    # C on a class route runs the class's IK program (test_free_joint_srs_c), with no general-6R
+    # plan; the SRS q4 stays refused
     with pytest.raises(InputError, match="joint 4 alone sets the shoulder-wrist distance"):
         derive.kernels("iiwa14", "c", free="q4")
 
@@ -284,11 +285,13 @@ def test_kernels_with_any_joint(monkeypatch):
         raise DeriveError(f"{robot.name} with q{joint} given: the general 6R elimination degenerates")
 
     monkeypatch.setattr(free_joint, "plan", no_plan)
-    with pytest.raises(InputError, match=r"no C kernels with 'q2'.*degenerates.*"
-                                         r"derive.kernels\('iiwa14', 'numpy', free='q2'\)"):
-        derive.kernels("iiwa14", "c", free="q2")
-    with pytest.raises(DeriveError, match=r"no C kernel for the IK with q2 given on the srs-2 route"):
-        free_joint_kernels(derive.load_robot("iiwa14"), "c", 2, None)
+    from derive.codegen.loader import _compile
+    kc = free_joint_kernels(derive.load_robot("iiwa14"), "c", 2, derive.kernels("iiwa14", "c"), _compile)
+    qi = np.array([0.3, 0.5, -0.4, 1.1, 0.2, -0.7, 0.4])
+    s2, c2 = kc.ik(reference.fk("iiwa14", qi), free=0.5)
+    assert c2 == 8 and _wrapped(s2[:c2] - qi).max(-1).min() < 1e-9
+    with pytest.raises(DeriveError, match="the general 6R elimination degenerates"):
+        free_joint_kernels(derive.load_robot("xarm7"), "c", 2, None)
     monkeypatch.undo()
     assert type(derive.kernels("iiwa14", "numpy", free="q3")).__name__ == "Kernels"
     assert type(derive.kernels("panda", "numpy", free="q7")).__name__ == "Kernels"

@@ -1,7 +1,8 @@
 """The C kernels of a seven-joint arm with a joint given on the general route (issue 31, item 4):
 ``derive.kernels(robot, "c", free="qK")`` (templates/free_joint.c.j2, derive.codegen.free_joint)
 against the numpy reference :func:`derive.ik.free_joint.solve`, the plain 4x4-matrix FK
-(``reference.fk_matrix``) and the generating configuration."""
+(``reference.fk_matrix``) and the generating configuration. The SRS class routes (the class's
+IK program in C): tests/test_free_joint_srs_c.py."""
 
 import math
 import shutil
@@ -225,59 +226,6 @@ int main(void) {{
     run = subprocess.run([str(tmp_path / "t")], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr[-3000:]
     assert run.stdout.split() == ["0"]
-
-
-@pytest.mark.parametrize("k", [1, 2, 6, 7])
-def test_c_free_joint_on_the_srs_class_routes_matches_the_closed_form(k):
-    """iiwa14 with joint k given (a class route: the SRS closed form in numpy, srs.ik_joint or
-    _srs_joint2): ``derive.kernels("iiwa14", "c", free="qk")`` runs the general elimination in C.
-    100 configurations inside the limits and 50 within 0.005 rad of the SRS elbow singularity
-    (q4 = 0: the axes of joints 3 and 5 nearly collinear, where the elimination's eigenvalues
-    cluster and solutions can be lost), joint k held at its generating value and at one other
-    value in its range: every C solution reproduces the pose within 1e-10 by the plain matrix
-    FK and holds joint k; on an unflagged pose each is one of the closed form's solutions (within
-    1e-6 rad; on a flagged one, within about 4e-5 rad of q4 = 0, joints 3 and 5 are only fixed
-    to about 0.03 rad by the FK check's 1e-10: C and the closed form may differ there); every pose
-    whose C set is not the closed form's (or lacks the generating configuration) is flagged by
-    ``ik_degenerate`` (never silently incomplete); at most 2 % of the random poses are flagged
-    (those near the singularity; measured 0.4-1.2 % on 1000), and most of the near ones at the
-    generating value."""
-    robot = derive.load_robot("iiwa14")
-    assert free_joint.route(robot, k) in ("srs", "srs-2")
-    kc = derive.kernels("iiwa14", "c", free=f"q{k}")
-    assert kc.route == free_joint.route(robot, k) and kc._c is not None
-    rng = np.random.default_rng(31 + k)
-    q = _inside(robot, 150, rng)
-    q[100:, 3] = rng.uniform(-0.005, 0.005, 50)
-    lo, hi = free_joint.joint_range(robot, k)
-    v = np.stack([q[:, k - 1], rng.uniform(lo, hi, 150)], 1).reshape(-1)      # (300,)
-    poses = np.repeat(reference.fk(robot, q), 2, axis=0)
-    target = np.repeat(reference.fk_matrix(robot, q), 2, axis=0)
-    cq, cc = kc.ik(poses, free=v)
-    flag = kc.ik_degenerate(poses, free=v)
-    ref = free_joint.solve(robot, poses, k, v)
-    assert cc.sum() > 1000 and ref.counts.max() == 8
-    differ = []
-    for i in range(len(v)):
-        c, r = cq[i, :cc[i]], ref.q[i, :ref.counts[i]]
-        if len(c) and not flag[i]:
-            assert _wrapped(c[:, None] - r[None]).max(-1).min(1).max() < 1e-6, i     # no spurious solution
-        if not _same_set(c, r):
-            differ.append(i)
-    differ = np.array(differ, dtype=int)
-    assert np.all(flag[differ]), differ[~flag[differ]]                               # never silently incomplete
-    assert flag[:200].mean() <= 0.02, np.nonzero(flag[:200])[0]
-    # the near poses exercise the rule: some C sets there differ (17 of 100 per joint after the
-    # general 6R core's speed-ups, about 40 before) and most near poses at their values are flagged
-    assert len(differ[differ >= 200]) >= 10 and flag[200::2].mean() >= 0.5
-    valid = np.arange(16)[None] < cc[:, None]
-    assert not np.isnan(cq[valid]).any() and np.isnan(cq[~valid]).all()
-    rows = np.nonzero(valid)[0]
-    assert np.abs(reference.fk_matrix(robot, cq[valid]) - target[rows]).max() < 1e-10
-    np.testing.assert_array_equal(cq[valid][:, k - 1], v[rows])
-    gen = np.nanmin(np.where(valid, _wrapped(cq - np.repeat(q, 2, axis=0)[:, None]).max(-1), np.inf), axis=1)
-    missed = [i for i in range(0, len(v), 2) if not gen[i] < 1e-6]
-    assert set(missed) <= set(differ.tolist()), (missed, differ)
 
 
 @pytest.mark.parametrize("name,k", [("xarm7", 4), ("gen3", 2)])

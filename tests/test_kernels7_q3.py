@@ -123,9 +123,9 @@ def test_q3_kernels_input_contract():
     for call, text in cases:
         with pytest.raises(InputError, match=text):
             call()
-    # any other joint of a 7R arm: the free-joint kernels (in C the general elimination, on the
-    # SRS class's routes too: tests/test_free_joint_c.py), not the class's generated kernels
-    assert derive.kernels("iiwa14", "c", free="q2").free == "q2"      # built by test_free_joint_c too
+    # any other joint of a 7R arm: the free-joint kernels (in C the class's program on the SRS
+    # class's routes: tests/test_free_joint_srs_c.py), not the class's generated kernels
+    assert derive.kernels("iiwa14", "c", free="q2").free == "q2"      # built by test_free_joint_srs_c too
     from derive.codegen.loader import _any_joint
     assert _any_joint(derive.load_robot("panda"), "q3") and not _any_joint(derive.load_robot("iiwa14"), "q3")
     # the class's default parameter by name is the default kernels

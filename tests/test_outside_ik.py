@@ -324,6 +324,39 @@ def test_srs_solution_sets_with_q3_given_equal_ssik(name):
         assert _contains(ours, q[i]) and _contains(theirs, q[i])
 
 
+@pytest.mark.parametrize("name,joint", [("iiwa14", 1), ("iiwa14", 2), ("iiwa14", 5), ("iiwa7", 2)])
+def test_srs_c_class_routes_with_a_joint_given_equal_ssik(name, joint):
+    """The C kernels of the SRS class routes (``free="qK"``: the class's IK program,
+    tests/test_free_joint_srs_c.py) on 40 configurations inside the limits with joint K given as
+    the generating value, against ssik's 6R arm with joint K locked at that value: equal sets
+    (counts, each solution within 2e-6 modulo 2 pi, the median within 1e-9), the generating
+    configuration in both. Joint 5 is locked on the reversed chain (FK^-1: axes and offsets read
+    backwards, offsets negated, q' = -q reversed), where ssik takes its fast path (locked on the
+    forward chain, joints 5-7 take it 40-70 s a pose; EAIK compares every K,
+    tests/test_free_joint_srs_c.py)."""
+    H, P, r0 = _hp(name, 7)
+    q = _configs(name, 40, seed=3200 + joint)
+    mats = reference.fk_matrix(name, q)
+    sols, counts = derive.kernels(name, "c", free=f"q{joint}").ik(reference.fk(name, q), free=q[:, joint - 1])
+    rev = joint > 4
+    for i in range(len(q)):
+        v = float(q[i, joint - 1])
+        if rev:
+            man = _ssik_locked(H[::-1].copy(), -P[::-1].copy(), 7 - joint, -v)
+            theirs = _ssik_set(man, r0 @ np.linalg.inv(mats[i]), 6)
+            theirs = -np.insert(theirs, 7 - joint, -v, axis=1)[:, ::-1]
+        else:
+            man = _ssik_locked(H, P, joint - 1, v)
+            theirs = np.insert(_ssik_set(man, mats[i] @ np.linalg.inv(r0), 6), joint - 1, v, axis=1)
+        theirs = _distinct_within(theirs, 7, 1e-6)
+        ours = sols[i, :counts[i]]
+        assert len(ours) == len(theirs), (name, joint, i, ours, theirs)
+        d = np.abs(_wrap(ours[:, None] - theirs[None])).max(-1)
+        assert d.min(axis=0).max() < 2e-6 and d.min(axis=1).max() < 2e-6, (name, joint, i)
+        assert np.median(d.min(axis=1)) < SAME
+        assert _contains(ours, q[i]) and _contains(theirs, q[i])
+
+
 @pytest.mark.parametrize("name", SRS)
 def test_srs_arm_angle_solutions_are_in_ssik_sets(name):
     """The arm-angle kernels (the default, psi given): on 25 poses at the generating psi, every

@@ -4,19 +4,21 @@ The solver is :mod:`derive.ik.free_joint` (the class's closed form where holding
 one, else the general 6R with a numeric per-value construction of the elimination). The "python"
 and "numpy" backends run that numpy solver for ``ik``, ``ik_sweep`` and ``nearest``, and the
 backend's generated kernels for ``fk`` (and every other kernel: ``with_tool``, ``jacobian``, ...).
-The "c" backend runs emitted C99, the general elimination, wherever it has a plan
-(:func:`derive.ik.free_joint.plan`): on the general route (:func:`derive.ik.free_joint.route`)
-and on the class routes too (the SRS class with q1, q2, q5, q6 or q7 given, where the numpy and
-python backends run the class's closed form and C does not; the sets agree but on poses very
-near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
+The "c" backend runs emitted C99. On the SRS class routes (q1, q2, q5, q6 or q7 given,
+:func:`derive.ik.free_joint.route`) it is the class's IK program
+(:func:`derive.ik.program7.srs_joint_program`, the numpy closed form as a composition of
+subproblems) printed by the generated kernels' template (:func:`program_source`): the same
+solution sets, branch ids and singular flags as the numpy closed form. On the general route it is
+the general elimination, wherever it has a plan (:func:`derive.ik.free_joint.plan`)
+(templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
 through its pose argument (one copy per plan: the plan and its rescue, :func:`c_plans`: where a cut
 with the held link off the triple side has a deflation that holds for every value, that cut and
 the reference's plan as its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
-folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
-IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
+folder and loaded with ctypes. Where the general elimination has no plan the "c" backend has no such
+IK kernel (the plan's DeriveError). The calling convention is that
 of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P, free=values)``
 -> (solutions (n, 16, 7) NaN-padded, counts (n,)), ``ik_sweep(P, n)`` over joint K's range,
 ``nearest(P, q_seed)`` with joint K chosen for the path.
@@ -292,16 +294,62 @@ def triple_harmonics(pl: free_joint.Plan, samples: int = 16) -> np.ndarray:
     return coef
 
 
+#: The routes of :func:`derive.ik.free_joint.route` whose C is the class's IK program
+#: (:func:`program_source`), not the general elimination
+PROGRAM_ROUTES = ("srs", "srs-2")
+
+
+def program_source(robot, joint: int) -> str:
+    """The C99 source of the IK of an SRS arm with joint ``joint`` given, on the class routes of
+    :func:`derive.ik.free_joint.route`: the class's IK program
+    (:func:`derive.ik.program7.srs_joint_program`, the numpy closed form of
+    :func:`derive.ik.srs.ik_joint` / :func:`derive.ik.free_joint._srs_joint2` as a composition of
+    subproblems) printed as the generated kernels print every class's program
+    (templates/kinematics.c.j2 with its header inlined; the functions are named
+    ``<robot>_free_q<K>_*``: ``..._ik_batch_ex(n, poses, fv, sols (n x 8 x 7), counts, branch,
+    singular)``, with the class's branch ids and singular flags). Rendered once per code version
+    (about 15 s, with progress on stderr) and kept in the user cache
+    (:func:`derive.cache.store_artifacts`, under "<identity>-free-q<K>-L<limits>")."""
+    from derive.cache import find_artifact, step, store_artifacts, task
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    key = f"{robot.id}-free-q{joint}-L{robot.limits_id}"
+    found = find_artifact(key, "c_source")
+    if found is not None:
+        return found.read_text(encoding="utf-8")
+    with task(f"{robot.name} q{joint}"):
+        step("rendering the C of the class's IK program with the joint given")
+        text = _render_program(robot, joint)
+    store_artifacts(key, {"c_source": (f"{_identifier(robot, joint)}.c", text)},
+                    {"robot": robot.name, "free": f"q{joint}"})
+    return text
+
+
+def _render_program(robot, joint: int) -> str:
+    from derive.codegen.emit import _context
+    from derive.codegen.templates import template_environment
+    ident = _identifier(robot, joint)
+    ctx = _context(robot, f"derive.kernels({robot.name!r}, 'c', free='q{joint}')", f"q{joint}")
+    if ctx["ik"] is None or ctx["ik"].get("free") != f"q{joint}":
+        raise DeriveError(f"{robot.name} with q{joint} given: no IK program ({ctx.get('ik_missing')})")
+    ctx["id"] = ident
+    env = template_environment()
+    header = env.get_template("kinematics.h.j2").render(ctx)
+    source = env.get_template("kinematics.c.j2").render(ctx).replace(f'#include "{ident}_kinematics.h"\n', "")
+    return header + "\n" + source
+
+
 def c_source(robot, joint: int) -> str:
-    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given by the general
-    elimination (templates/free_joint.c.j2; see the module docstring), on a class route too
-    (the class's closed form is not emitted here). DeriveError when the arm has no plan,
+    """The C99 source of the IK of a seven-joint arm with joint ``joint`` given: on the SRS class
+    routes the class's IK program (:func:`program_source`), else the general elimination
+    (templates/free_joint.c.j2; see the module docstring). DeriveError when the arm has no plan,
     InputError for a joint that cannot be given (the SRS class's q4)."""
     from derive.codegen.general6r import _arr, _lit
     from derive.codegen.templates import template_environment
     from derive.model.robot import load_robot
     robot = load_robot(robot)
-    free_joint.route(robot, joint)            # InputError for a joint that cannot be given (SRS q4)
+    if free_joint.route(robot, joint) in PROGRAM_ROUTES:     # InputError for SRS q4
+        return program_source(robot, joint)
     plans = c_plans(robot, joint)
     pl = plans[0]
     env = template_environment()
@@ -369,12 +417,65 @@ class _CLibrary:
         return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
 
 
-def c_library(robot, joint: int, compile_fn) -> _CLibrary:
+class _CProgram:
+    """The compiled IK program of an SRS class route (:func:`program_source`), through ctypes; the
+    calls of :class:`_CLibrary`, and :meth:`details` with the branch ids."""
+
+    def __init__(self, robot, joint: int, compile_fn):
+        from derive.cache import build_folder, writable_root, write_atomic
+        import hashlib
+        ident = _identifier(robot, joint)
+        text = program_source(robot, joint)
+        folder = build_folder(writable_root()) / "free-joint"
+        folder.mkdir(parents=True, exist_ok=True)
+        src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
+        if not src.exists() or src.read_text(encoding="utf-8") != text:
+            write_atomic(src, text)
+        self.path = compile_fn(src, ident)
+        try:
+            lib = ctypes.CDLL(str(self.path))
+        except OSError as exc:
+            self.path = compile_fn(src, ident, again=f"the C library {self.path} did not load ({exc})")
+            lib = ctypes.CDLL(str(self.path))
+        f = getattr(lib, f"{ident}_ik_batch_ex")
+        f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
+        f.restype = None
+        self.width = int(re.search(rf"#define {ident.upper()}_IK_MAX (\d+)", text).group(1))
+        self._lib, self._f = lib, f
+
+    def details(self, poses, values):
+        """(q (n, 16, 7) NaN-padded, counts (n,), branch (n, 16) the class's branch ids (-1 in the
+        padding), singular (n, 16)) of poses (n, 8) with the joint at values (n,)."""
+        poses = np.ascontiguousarray(poses, dtype=np.float64)
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        n, w = len(poses), self.width
+        q = np.full((n, MAX_SOLUTIONS, 7), np.nan)
+        branch = np.full((n, MAX_SOLUTIONS), -1, dtype=np.int64)
+        sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
+        qw = np.empty((n, w, 7))
+        counts = np.empty(n, dtype=np.intc)
+        bw, sw = np.empty((n, w), dtype=np.intc), np.empty((n, w), dtype=np.intc)
+        if n:
+            self._f(n, poses.ctypes.data, values.ctypes.data, qw.ctypes.data, counts.ctypes.data,
+                    bw.ctypes.data, sw.ctypes.data)
+        q[:, :w], branch[:, :w], sing[:, :w] = qw, bw, sw.astype(bool)
+        return q, counts.astype(np.int64), branch, sing
+
+    def solve(self, poses, values):
+        """As :meth:`_CLibrary.solve`: (q, counts, singular, degenerate (n,) False: the closed form)."""
+        q, counts, _, sing = self.details(poses, values)
+        return q, counts, sing, np.zeros(len(q), dtype=bool)
+
+
+def c_library(robot, joint: int, compile_fn) -> _CLibrary | _CProgram:
     """The compiled C IK of ``robot`` with ``joint`` given (once per process; the library is
-    cached by source digest and compiler flags in the user cache's build folder). ``compile_fn``:
-    :func:`derive.codegen.loader._compile`."""
+    cached by source digest and compiler flags in the user cache's build folder): the class's IK
+    program on the SRS class routes (:class:`_CProgram`), else the general elimination.
+    ``compile_fn``: :func:`derive.codegen.loader._compile`."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
+    if free_joint.route(robot, joint) in PROGRAM_ROUTES:
+        return memo("free-joint-c-program", (robot.id, joint, compile_fn), lambda: _CProgram(robot, joint, compile_fn))
     return memo("free-joint-c", (robot.id, joint, compile_fn), lambda: _CLibrary(robot, joint, compile_fn))
 
 
@@ -391,13 +492,13 @@ class FreeJointKernels:
         #: which solver holds the joint: "srs", "panda" or "general" (:func:`derive.ik.free_joint.route`)
         self.route = free_joint.route(robot, joint)
         self._c = None
-        if self.route == "general" or backend == "c":
+        if self.route == "general":
             free_joint.plan(robot, joint)            # DeriveError now for a geometry it cannot solve
-            if backend == "c":       # the general elimination in C, on a class route too (module docstring)
-                if compile_fn is None:
-                    raise DeriveError("the C free-joint kernels need the C backend's compile step "
-                                      "(derive.kernels passes it)")
-                self._c = c_library(robot, joint, compile_fn)    # compiled on first use
+        if backend == "c":       # the class's IK program on the SRS class routes, else the general elimination
+            if compile_fn is None:
+                raise DeriveError("the C free-joint kernels need the C backend's compile step "
+                                  "(derive.kernels passes it)")
+            self._c = c_library(robot, joint, compile_fn)    # compiled on first use
         self._fk = fk_kernels
         self._tool = None
 
@@ -458,6 +559,8 @@ class FreeJointKernels:
     def _solver(self, poses, f):
         """(q, counts, branch, singular) of poses (m, 8) of the end frame at values f (m,): the C
         kernel on the "c" backend, else :func:`derive.ik.free_joint.solve`."""
+        if isinstance(self._c, _CProgram):          # the class's program: its branch ids
+            return self._c.details(poses, f)
         if self._c is not None:
             q, counts, sing, _ = self._c.solve(poses, f)
             branch = np.full((len(q), MAX_SOLUTIONS), -1, dtype=np.int64)     # no branch structure
@@ -469,8 +572,8 @@ class FreeJointKernels:
         """(n,) or a bool: the general elimination's degenerate flag of each pose at its value (the
         elimination degenerates for both plans or is unreliable there, or more than 16 solutions:
         those returned are checked, some may be missing; templates/free_joint.c.j2, fj_solve, and
-        :func:`derive.ik.free_joint._general`): the C kernel's on the "c" backend (any route), the numpy
-        reference's on the general route; False for the class's closed forms (numpy, python)."""
+        :func:`derive.ik.free_joint._general`): the C kernel's and the numpy reference's on the
+        general route; False for the class's closed forms (every backend)."""
         self._need(free)
         poses, single = self._poses(P)
         f = redundant.free_values(free, len(poses))
@@ -499,15 +602,8 @@ class FreeJointKernels:
 
 
 def free_joint_kernels(robot, backend: str, joint: int, fk_kernels, compile_fn=None) -> FreeJointKernels:
-    """:class:`FreeJointKernels`; the "c" backend wherever the general elimination has a plan
-    (:func:`derive.ik.free_joint.plan`), on a class route too; DeriveError where it has none
-    (``derive.kernels`` turns it into an InputError naming the numpy kernels).
+    """:class:`FreeJointKernels`; the "c" backend on the SRS class routes (the class's IK
+    program) and on the general route wherever the general elimination has a plan
+    (:func:`derive.ik.free_joint.plan`; DeriveError where it has none).
     ``compile_fn``: the C backend's compile step (:func:`derive.codegen.loader._compile`)."""
-    if backend == "c" and free_joint.route(robot, joint) != "general":
-        try:
-            free_joint.plan(robot, joint)
-        except DeriveError as exc:
-            raise DeriveError(f"{robot.name}: no C kernel for the IK with q{joint} given on the "
-                              f"{free_joint.route(robot, joint)} route ({exc}); it is solved by the class's "
-                              f"closed form in numpy: derive.kernels({robot.name!r}, 'numpy', free='q{joint}')") from None
     return FreeJointKernels(robot, backend, joint, fk_kernels, compile_fn)

@@ -872,10 +872,10 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     7-joint arm: :class:`derive.codegen.free_joint.FreeJointKernels`, the IK with joint K given
     by :mod:`derive.ik.free_joint` (numpy; "python" and "numpy" backends: the class's closed form
     where :func:`derive.ik.free_joint.route` names one, else the general 6R). The "c" backend runs
-    templates/free_joint.c.j2, the general 6R elimination, for every K that has a plan
-    (:func:`derive.ik.free_joint.plan`): on the general route and on the class routes too (SRS
-    q1, q2, q5, q6, q7, where C does not use the class's closed form); InputError naming the
-    numpy kernels where there is no plan; the SRS class's q4 is refused for every backend.
+    the class's IK program on the SRS class routes (q1, q2, q5, q6, q7:
+    :func:`derive.ik.program7.srs_joint_program`, printed as the generated kernels print it), else
+    templates/free_joint.c.j2, the general 6R elimination, where it has a plan
+    (:func:`derive.ik.free_joint.plan`); the SRS class's q4 is refused for every backend.
 
     ``nominal``: a near-class arm's :class:`derive.ik.nearclass.Nominal` (its exact nominal robot
     and the relation FK(q) ~= B FK_nominal(s q + o) T): the IK runs the nominal's closed form and
@@ -888,18 +888,7 @@ def kernels(robot, backend: str = "numpy", free: str | None = None, nominal=None
     if nominal is None and _any_joint(r, free):
         # any joint K of a 7R arm outside its class's own choices: derive.ik.free_joint (numpy)
         k = int(free[1:])
-        from derive.ik.free_joint import plan, route
-        if backend == "c" and route(r, k) != "general":
-            # a class route (SRS q1, q2, q5, q6, q7): the C runs the general elimination where it has a plan
-            try:
-                plan(r, k)
-            except DeriveError as exc:
-                choices = redundant.FREE_CHOICES.get(redundant.redundant_kind(r), ())
-                raise InputError(f"free: {r.name} has no C kernels with {free!r} as the free parameter (the "
-                                 f"general 6R elimination has no plan: {exc}); its choices: "
-                                 f"{', '.join(choices) or 'none'}; any joint K is solved by "
-                                 f"derive.kernels({r.name!r}, 'numpy', free='q{k}') (derive.ik.free_joint, "
-                                 f"the class's closed form)") from None
+        # a class route (SRS q1, q2, q5, q6, q7): the C is the class's IK program (no plan needed)
         from derive.codegen.free_joint import free_joint_kernels
         return memo("kernels-free-joint", (r.id, r.limits_id, backend, k),
                     lambda: free_joint_kernels(r, backend, k, kernels(r, backend), _compile))

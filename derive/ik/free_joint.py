@@ -26,7 +26,8 @@ choice of the cut and the eigen-variable, checked on random configurations with 
 (:func:`derive.ik.general6r._check_cut`); it takes milliseconds. The numbers (docs/ik.md,
 "Seven-joint arms with any joint given"): the per-value fit costs about as much as the
 eigenproblem itself. The same elimination in C: :mod:`derive.codegen.free_joint`
-(``derive.kernels(robot, "c", free="qK")``, on the class routes too).
+(``derive.kernels(robot, "c", free="qK")``; on the SRS class routes that C is the class's IK
+program, :func:`derive.ik.program7.srs_joint_program`).
 
 Every candidate is polished by damped Newton steps on the 6R product form, checked on the 7R's
 exact FK (:func:`derive.kinematics.fk.fk`, G6_ACCEPT), and near-duplicates merged (MERGE_TOL);

@@ -41,7 +41,7 @@ from derive.errors import DeriveError, InputError
 from derive.ik import class_programs
 from derive.ik.closed_form import URGeometry, closed_form_relation, parallel3_class, spherical_class, ur_geometry
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
-from derive.ik.program7 import seven_joint_program
+from derive.ik.program7 import SRS_JOINTS_GIVEN, seven_joint_program
 from derive.ik.program_parallel3 import parallel3_program
 from derive.ik.redundant import free_choice, redundant_kind
 from derive.ik.extract import R_SYMS, _as_linear_in, _linear_form, _rot, extract
@@ -50,6 +50,10 @@ from derive.ik.tolerances import REACH_TOL, WRIST_SINGULAR
 from derive.model.robot import load_robot, robot_from_dict
 from derive.symbolic.chain import runs_quaternion
 from derive.symbolic.equations import POSES, derive_equations
+
+#: The free parameters of the SRS programs with a joint given besides the class's own choices
+SRS_JOINT_FREE = tuple(f"q{j}" for j in SRS_JOINTS_GIVEN)
+
 
 def _chain_pose(builder: Builder, g):
     """Lines for the chain pose (pose * G^-1) from the input p0..p7: w a b c, r_ij, x y z."""
@@ -101,9 +105,13 @@ def _half_factor(d, u):
 def ik_program(robot, free: str | None = None) -> IKProgram:
     """The IK program of a robot (raises DeriveError for chains whose extraction it cannot use);
     cached per robot identity. ``free``: a 7-joint arm's free parameter where its class offers a
-    choice (:func:`derive.ik.redundant.free_choice`: "q3" instead of psi for the SRS class)."""
+    choice (:func:`derive.ik.redundant.free_choice`: "q3" instead of psi for the SRS class), or
+    for the SRS class one of q1, q2, q5, q6, q7 (:func:`derive.ik.program7.srs_joint_program`: the
+    programs of the class routes of :mod:`derive.ik.free_joint`, whose C the free-joint kernels
+    run, :mod:`derive.codegen.free_joint`)."""
     robot = load_robot(robot)
-    free = free_choice(robot, free)
+    if not (free in SRS_JOINT_FREE and redundant_kind(robot) == "srs"):
+        free = free_choice(robot, free)
     return memo("ik-program", (robot.id, free), lambda: _ik_program(robot, free))
 
 

@@ -34,6 +34,7 @@ from derive.algebra.quaternion import dual_hamilton, hamilton
 from derive.ik import panda, srs
 from derive.ik.euler import zyz_plus, zyz_signed
 from derive.ik.extract import _rot
+from derive.errors import DeriveError
 from derive.ik.ir import Builder, IKProgram, Op, pos, sgn
 from derive.ik.tolerances import (AXIS_TOL, CLASS_DISTANCE, DOUBLE_ROOT, FREE_JOINT_DISTANCE,
                                   PROGRAM_SNAP, REACH_TOL, STRETCH_TOL, W4_NOISE, WRIST_SINGULAR)
@@ -217,13 +218,19 @@ def srs_program(robot) -> IKProgram:
                  "wrist centre) about the shoulder-wrist line, 0 in the reference plane")
 
 
-def _srs_end(bld: Builder, geo, wr, shoulder: tuple, shoulder_steps: list, **doc) -> IKProgram:
+def _srs_end(bld: Builder, geo, wr, shoulder: tuple, shoulder_steps: list, reverse: bool = False,
+             **doc) -> IKProgram:
     """The last steps of the SRS programs and the program itself: branch GC6 and t5, t6, t7 from
     the wrist decomposition ``wr``, the solution q = s theta from the shoulder and elbow angles
-    ``shoulder`` (t1, t2, t3, t4), and the step list with the programs' own shoulder steps."""
+    ``shoulder`` (t1, t2, t3, t4), and the step list with the programs' own shoulder steps.
+    ``reverse``: the angles are those of the reversed chain (:func:`_reverse_frame`), mapped back."""
     g6 = bld.branch("sg3", "wrist GC6 = sign of sin q6 (+ / -)")
     t5, t6, t7 = zyz_signed(bld, wr, g6, ("t5", "t6", "t7"))
     thetas = (*shoulder, t5, t6, t7)
+    if reverse:
+        # the reversed chain's angles phi (derive.ik.srs._reverse): theta = (phi7, -phi6, phi5,
+        # -phi4, phi3, -phi2, phi1)
+        thetas = tuple(s * t for s, t in zip(_REVERSE_SIGNS, thetas[::-1]))
     bld.ops.append(Op("solution", args=tuple(int(s) * t for s, t in zip(geo.signs, thetas)), depth=bld.depth))
     steps = [
         ("pose in the canonical frame, wrist centre W", "R_c = F^T R T_R^T, W = F^T (t - S) - R_c t_T",
@@ -236,6 +243,23 @@ def _srs_end(bld: Builder, geo, wr, shoulder: tuple, shoulder_steps: list, **doc
                      parameters={"d_se": geo.d_se, "d_ew": geo.d_ew, "d_wf": geo.d_wf},
                      branch_labels=[bld.labels[1], bld.labels[0], bld.labels[2]], bit_weights=(2, 4, 1),
                      **doc)
+
+
+#: The joints of an SRS arm that a program takes as its input ``fv`` besides the arm angle and q3
+#: (the class routes of :func:`derive.ik.free_joint.route`; q4 fixes the shoulder-wrist distance).
+SRS_JOINTS_GIVEN = (1, 2, 5, 6, 7)
+#: theta = _REVERSE_SIGNS * phi reversed: the angles of the reversed chain (derive.ik.srs._reverse)
+_REVERSE_SIGNS = (1, -1, 1, -1, 1, -1, 1)
+
+
+def _reverse_frame(bld: Builder, rc, w):
+    """The pose of the chain read from the wrist to the shoulder (:func:`derive.ik.srs._reverse`):
+    R' = Ry(pi) R_c^T Ry(pi), W' = -Ry(pi) R_c^T W (Ry(pi) = diag(-1, 1, -1)); its angles are
+    phi = (t7, -t6, t5, -t4, t3, -t2, t1), with d_se and d_ew swapped."""
+    d = (-1, 1, -1)
+    rr = _let_matrix(bld, "rr", [[d[i] * d[j] * rc[j][i] for j in range(3)] for i in range(3)])
+    rv = [bld.let(f"rv{i}", -d[i] * sum(rc[k][i] * w[k] for k in range(3))) for i in range(3)]
+    return rr, rv
 
 
 def srs_joint3_program(robot) -> IKProgram:
@@ -253,20 +277,85 @@ def srs_joint3_program(robot) -> IKProgram:
     4. q = s theta (s the axis signs; the given q3 is returned as given, wrapped).
 
     Branch k = 4 i + 2 i4 + i6 as :func:`derive.ik.srs.ik_joint` (i the root of step 2)."""
+    return srs_joint_program(robot, 3)
+
+
+def srs_joint_program(robot, joint: int) -> IKProgram:
+    """The IK program of an SRS arm with joint ``joint`` (1, 2, 3, 5, 6 or 7) given as input
+    ``fv``: the closed forms of :func:`derive.ik.srs.ik_joint` (joints 1, 3, 5, 7) and
+    :func:`derive.ik.free_joint._srs_joint2` (joints 2, 6) step by step, with their branch ids
+    and singular flags. Joints 5, 6, 7 are joints 3, 2, 1 of the reversed chain
+    (:func:`_reverse_frame`); each program is then a composition of named subproblems:
+
+    0, 1. as :func:`srs_program`: R_c, W (reversed: R', W'), the elbow t4 = +-acos (branch
+       GC4: the sign of t4 of the arm, so of -phi4 on the reversed chain);
+    2. the shoulder carries the forearm v(t4) onto W with one of its joints given:
+       - t1 given (:func:`_shoulder_t1`): subproblem 4 for t3 (e_y^T Rz(t3) v = (Rz(t1)^T W)_y,
+         the roots asin and pi - asin; t3 free, set to 0, where the elbow is stretched: flag
+         ``singular_st``), subproblem 1 about axis 2 for t2;
+       - t2 given (:func:`_shoulder_t2`): subproblem 4 for t3 (the z row, cos t3 = (cos t2 v_z -
+         W_z) / (sin t2 v_x), the roots +-acos; t3 free where sin t2 v_x = 0: flag ``singular_fl``),
+         subproblem 1 about axis 1 for t1 (free where W is on axis 1: flag ``singular_ax``);
+       - t3 given (:func:`_shoulder_t3`): subproblem 4 for t2 about axis 2, subproblem 1 about
+         axis 1 for t1 (IK-Geo's subproblem 2 about axes z and y; flag ``singular_sh``);
+    3. the wrist rotation R_w = (Rz(t1) Ry(t2) Rz(t3) Ry(t4))^T R_c; branch GC6: t5, t6, t7 (ZYZ,
+       flag ``singular_wr``);
+    4. q = s theta (reversed: theta = (phi7, -phi6, phi5, -phi4, phi3, -phi2, phi1)); the given
+       joint is returned as given, wrapped.
+
+    Branch k = 4 i + 2 i4 + i6 as the numpy closed forms number them (i the root of step 2, i4
+    the sign of t4, i6 the sign of the Euler decomposition solved last)."""
+    if joint not in (3, *SRS_JOINTS_GIVEN):
+        raise DeriveError(f"SRS joint-given program: joint {joint} cannot be given (1, 2, 3, 5, 6 or 7)")
     geo = srs.srs_geometry(robot)
     bld = Builder({})
     rc, w, ww, c4, s4a, t4a = _srs_elbow(bld, geo)
     dse, dew = _number(geo.d_se), _number(geo.d_ew)
-    t3 = bld.let("t3", int(geo.signs[2]) * FV)
+    reverse = joint > 4
+    j = 8 - joint if reverse else joint
+    if reverse:
+        rc, w = _reverse_frame(bld, rc, w)
+        dse, dew = dew, dse
+    # the given canonical angle (of the reversed chain: phi_j = +-t_joint)
+    sign = int(geo.signs[joint - 1]) * (_REVERSE_SIGNS[j - 1] if reverse else 1)
+    tg = bld.let(f"t{j}", sign * FV)
+    elbow = (-1 if reverse else 1, c4, s4a, t4a, dse, dew)
+    steps = {1: _shoulder_t1, 2: _shoulder_t2, 3: _shoulder_t3}[j](bld, w, tg, elbow)
+    angles, flags, step_doc, free_rule = steps
+    (t1, c1, s1), (t2, c2, s2), (t3, c3, s3), (t4, c4_, s4) = angles
+    wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4_, s4)))
+    bld.flag("singular", sp.Or(*flags, bld.known_symbol("singular_wr")))
+    if joint == 3:
+        return _srs_end(bld, geo, wr, (t1, t2, t3, t4), step_doc, free_rule=free_rule,
+                        free="q3", free_doc="q3, the value of joint 3 (rad), returned as given in (-pi, pi]")
+    prog = _srs_end(bld, geo, wr, (t1, t2, t3, t4), step_doc, reverse=reverse, free_rule=free_rule,
+                    free=f"q{joint}",
+                    free_doc=f"q{joint}, the value of joint {joint} (rad), returned as given in (-pi, pi]",
+                    steps_source=("the numpy closed form " + ("derive.ik.srs.ik_joint" if joint in (1, 7)
+                                                              else "derive.ik.free_joint._srs_joint2")
+                                  + (" on the reversed chain (wrist to shoulder)" if reverse else "")))
+    return prog
+
+
+def _elbow_root(bld: Builder, elbow):
+    """Branch GC4 (the sign of the arm's t4) and the forearm v(t4) = (v_x, 0, v_z) of the chain
+    solved (reversed: phi4 = -t4). Returns (t4, cos t4, sin t4, v_x, v_z)."""
+    rs, c4, s4a, t4a, dse, dew = elbow
+    g4 = bld.branch("sg1", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
+    s4 = bld.let("st4", rs * g4 * s4a)
+    t4 = bld.let("t4", rs * g4 * t4a)
+    vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)
+    return t4, c4, s4, vx, vz
+
+
+def _shoulder_t3(bld: Builder, w, t3, elbow):
+    """t3 given: subproblem 4 for t2, subproblem 1 for t1 (:func:`srs_joint3_program`)."""
     c3, s3 = sp.cos(t3), sp.sin(t3)
     rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
     on_axis = bld.flag("singular_sh", rho < AXIS_TOL)
     aw = bld.select("aw", on_axis, 0, sp.atan2(w[1], w[0]))
     # 1. the elbow root
-    g4 = bld.branch("sg1", "elbow GC4 = sign of theta4 = s4 q4 (+ / -)")
-    s4 = bld.let("st4", g4 * s4a)
-    t4 = bld.let("t4", g4 * t4a)
-    vx, vz = bld.let("vx", dew * s4), bld.let("vz", dse + dew * c4)
+    t4, c4, s4, vx, vz = _elbow_root(bld, elbow)
     ux, uy = bld.let("ux", c3 * vx), bld.let("uy", s3 * vx)
     r = bld.let("ru", sp.sqrt(ux * ux + vz * vz))
     bld.require(r > 0)
@@ -282,14 +371,73 @@ def srs_joint3_program(robot) -> IKProgram:
     upx = bld.let("upx", c2 * ux + s2 * vz)
     t1 = bld.select("t1", on_axis, 0, aw - sp.atan2(uy, upx))
     c1, s1 = sp.cos(t1), sp.sin(t1)
-    # 3. the wrist
-    wr = _srs_wrist(bld, rc, ((c1, s1), (c2, s2), (c3, s3), (c4, s4)))
-    bld.flag("singular", sp.Or(on_axis, bld.known_symbol("singular_wr")))
-    return _srs_end(bld, geo, wr, (t1, t2, t3, t4), [
-        ("theta1, theta2", "subproblem 2 (axes z, y)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W, t3 given"])],
-        free_rule=("set to 0 (q1 where the wrist centre is on axis 1; q5 at the "
-                   "wrist's alignment, sin q6 = 0), the next joint taking the rest"),
-        free="q3", free_doc="q3, the value of joint 3 (rad), returned as given in (-pi, pi]")
+    return (((t1, c1, s1), (t2, c2, s2), (t3, c3, s3), (t4, c4, s4)), (on_axis,),
+            [("theta1, theta2", "subproblem 2 (axes z, y)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W, t3 given"])],
+            ("set to 0 (q1 where the wrist centre is on axis 1; q5 at the "
+             "wrist's alignment, sin q6 = 0), the next joint taking the rest"))
+
+
+def _shoulder_t1(bld: Builder, w, t1, elbow):
+    """t1 given (:func:`derive.ik.srs.joint_given_steps`, joint 1): y = Rz(t1)^T W; subproblem 4,
+    e_y^T Rz(t3) v = y_y, so sin t3 = y_y / v_x: the roots atan2(s, +c) first, atan2(s, -c)
+    (c = sqrt(1 - s^2); within STRETCH_TOL of |s| = 1 the double root t3 = +-pi/2; unreachable
+    beyond 1 + REACH_TOL; t3 free, set to 0, where the elbow is stretched, |v_x| below
+    WRIST_SINGULAR max(d_ew, 1), reachable there when |y_y| <= REACH_TOL); subproblem 1 about axis
+    2, Ry(t2) Rz(t3) v = y: t2 = atan2(a_z y_x - a_x y_z, a_x y_x + a_z y_z), a = Rz(t3) v."""
+    c1, s1 = sp.cos(t1), sp.sin(t1)
+    y0 = bld.let("y0", c1 * w[0] + s1 * w[1])
+    y1 = bld.let("y1", c1 * w[1] - s1 * w[0])
+    t4, c4, s4, vx, vz = _elbow_root(bld, elbow)
+    rs, _, _, _, _, dew = elbow
+    st = bld.flag("singular_st", sp.Abs(vx) < WRIST_SINGULAR * max(float(dew), 1.0))
+    s3r = bld.let("s3r", y1 / bld.select("vx_d", st, 1, vx))
+    bld.require(sp.Or(sp.And(st, sp.Abs(y1) <= REACH_TOL), sp.And(sp.Not(st), sp.Abs(s3r) <= 1 + REACH_TOL)))
+    s3s = _snap_select(bld, "s3s", s3r, STRETCH_TOL)
+    c3a = bld.let("c3a", sp.sqrt(pos((1 - s3s) * (1 + s3s))))
+    g2 = bld.branch("sg2", "shoulder root: t3 = asin(s) (+) or pi - asin(s) (-), s = (Rz(t1)^T W)_y / v_x")
+    t3 = bld.select("t3", st, 0, sp.atan2(s3s, g2 * c3a))
+    c3, s3 = sp.cos(t3), sp.sin(t3)
+    ax = bld.let("ax3", c3 * vx)
+    t2 = bld.let("t2", sp.atan2(vz * y0 - ax * w[2], ax * y0 + vz * w[2]))
+    c2, s2 = sp.cos(t2), sp.sin(t2)
+    return (((t1, c1, s1), (t2, c2, s2), (t3, c3, s3), (t4, c4, s4)), (st,),
+            [("theta3", "subproblem 4 (axis z)", ["e_y^T Rz(t3) v(t4) = (Rz(t1)^T W)_y, t1 given"]),
+             ("theta2", "subproblem 1 (axis y)", ["Ry(t2) Rz(t3) v(t4) = Rz(t1)^T W"])],
+            ("set to 0 (t3 where the elbow is stretched; the wrist's first joint at its alignment), "
+             "the next joint taking the rest"))
+
+
+def _shoulder_t2(bld: Builder, w, t2, elbow):
+    """t2 given (:func:`derive.ik.free_joint._joint2_steps`): subproblem 4, the z row of
+    Rz(t1) Ry(t2) Rz(t3) v = W, cos t3 = (cos t2 v_z - W_z) / (sin t2 v_x), clipped to [-1, 1]:
+    the roots +acos first, -acos (unreachable beyond 1 + REACH_TOL; t3 free, set to 0, where
+    |sin t2 v_x| is below WRIST_SINGULAR max(d_ew, 1), reachable there when |cos t2 v_z - W_z| <=
+    REACH_TOL); subproblem 1 about axis 1: t1 = atan2(W_y, W_x) - atan2(u_y, u_x), u = Ry(t2)
+    Rz(t3) v (t1 free, set to 0, where W lies on axis 1)."""
+    c2, s2 = sp.cos(t2), sp.sin(t2)
+    rho = bld.let("rho", sp.sqrt(w[0] ** 2 + w[1] ** 2))
+    on_axis = bld.flag("singular_ax", rho < AXIS_TOL)
+    aw = bld.select("aw", on_axis, 0, sp.atan2(w[1], w[0]))
+    t4, c4, s4, vx, vz = _elbow_root(bld, elbow)
+    _, _, _, _, _, dew = elbow
+    den = bld.let("den3", s2 * vx)
+    num = bld.let("num3", c2 * vz - w[2])
+    flat = bld.flag("singular_fl", sp.Abs(den) < WRIST_SINGULAR * max(float(dew), 1.0))
+    c3r = bld.let("c3r", num / bld.select("den3_d", flat, 1, den))
+    bld.require(sp.Or(sp.And(flat, sp.Abs(num) <= REACH_TOL), sp.And(sp.Not(flat), sp.Abs(c3r) <= 1 + REACH_TOL)))
+    c3c = bld.select("c3c", c3r >= 1, 1, bld.select("c3c_lo", c3r <= -1, -1, c3r))
+    a3 = bld.let("a3", sp.atan2(sp.sqrt(pos((1 - c3c) * (1 + c3c))), c3c))
+    g2 = bld.branch("sg2", "shoulder root: t3 = +acos (+) or -acos (-) of the z row")
+    t3 = bld.select("t3", flat, 0, g2 * a3)
+    c3, s3 = sp.cos(t3), sp.sin(t3)
+    ux = bld.let("ux2", c2 * c3 * vx + s2 * vz)
+    t1 = bld.select("t1", on_axis, 0, aw - sp.atan2(s3 * vx, ux))
+    c1, s1 = sp.cos(t1), sp.sin(t1)
+    return (((t1, c1, s1), (t2, c2, s2), (t3, c3, s3), (t4, c4, s4)), (flat, on_axis),
+            [("theta3", "subproblem 4 (axis z)", ["e_z^T Rz(t1) Ry(t2) Rz(t3) v(t4) = W_z, t2 given"]),
+             ("theta1", "subproblem 1 (axis z)", ["Rz(t1) Ry(t2) Rz(t3) v(t4) = W"])],
+            ("set to 0 (t3 where sin t2 v_x = 0, t1 where the wrist centre is on the first axis; the "
+             "wrist's first joint at its alignment), the next joint taking the rest"))
 
 
 # --------------------------------------------------------------------------- #
@@ -412,5 +560,7 @@ def seven_joint_program(robot, kind: str, free: str | None = None) -> IKProgram:
     the class's :data:`derive.ik.redundant.FREE_CHOICES`; default the class's first: psi, q7)."""
     if kind == "panda":
         return panda_program(robot)
-    return srs_joint3_program(robot) if free == "q3" else srs_program(robot)
+    if free is not None and free != "psi":
+        return srs_joint_program(robot, int(free[1:]))
+    return srs_program(robot)
 
