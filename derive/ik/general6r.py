@@ -58,6 +58,7 @@ import dataclasses
 import itertools
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -498,7 +499,8 @@ def kernels_cover(rank_q: int) -> bool:
 
 def _decision(robot):
     """The derivation's decision for a robot without deriving: this process's plan (or its
-    DeriveError), else the stored artifact's JSON; None when neither exists yet."""
+    DeriveError), else the stored artifact's JSON, else the decision shipped for a library arm
+    of the same identity (:data:`DECISIONS`); None when none exists yet."""
     out = peek("general6r-plan", robot.id)
     if isinstance(out, Plan):
         return {"rank_q": out.rank_q, "cut": out.cut, "reverse": out.reverse, "notes": list(out.notes)}
@@ -506,7 +508,71 @@ def _decision(robot):
         return {"degenerate": str(out)}
     found = find_artifact(robot.id, "general6r")
     data = json.loads(found.read_text()) if found is not None else None
-    return data if data is not None and data.get("format") == FORMAT else None
+    if data is not None and data.get("format") == FORMAT:
+        return data
+    return shipped_decisions().get(robot.id)
+
+
+# --------------------------------------------------------------------------- #
+# The decisions shipped for the library's general arms
+# --------------------------------------------------------------------------- #
+#: The shipped file: {"format": FORMAT, "robots": {identity: decision}} for the library's arms of
+#: no special class, written by ``dq-derive generate`` (:func:`write_decisions`), so that
+#: :func:`status` and :func:`describe` know them on a fresh install and after any code change
+#: (the user cache's artifacts are keyed by a digest of the code, the shipped decision by the
+#: robot's identity alone, :mod:`derive.model.identity`). An arm of another identity (a user's
+#: own file, or a library file with one number changed) is not in it: "unchecked" until derived.
+DECISIONS = Path(__file__).resolve().parent.parent / "data" / "general6r.json"
+
+
+def decision(robot) -> dict:
+    """The derivation's decision for one robot, derived now if it is not known (:func:`plan`),
+    in the compact form shipped in :data:`DECISIONS`: {"robot", "rank_q", "reverse", "cut" (the
+    joint the loop is cut at, or None), "notes"}, or {"robot", "degenerate" (the DeriveError's
+    message), "notes"} for an arm whose elimination degenerates everywhere."""
+    robot = load_robot(robot)
+    try:
+        pl = plan(robot, progress=False)
+    except DeriveError as exc:
+        if isinstance(exc, BudgetError):
+            raise
+        return {"robot": robot.name, "degenerate": str(exc), "notes": []}
+    return {"robot": robot.name, "rank_q": int(pl.rank_q), "reverse": bool(pl.reverse),
+            "cut": int(pl.cut["e"]) if pl.cut else None, "notes": list(pl.notes)}
+
+
+def render_decisions(robots) -> str:
+    """The text of :data:`DECISIONS` for the given robots (names or Robot objects): their
+    decisions (:func:`decision`) keyed by identity, sorted keys, so the bytes are stable."""
+    out = {}
+    for r in robots:
+        r = load_robot(r)
+        out[r.id] = decision(r)
+    return json.dumps({"format": FORMAT, "robots": out}, indent=1, sort_keys=True) + "\n"
+
+
+def write_decisions(robots, path=None) -> str:
+    """Derive the decisions of ``robots`` (:func:`render_decisions`) and write them to ``path``
+    (default: the shipped file, :data:`DECISIONS`); returns the path."""
+    path = DECISIONS if path is None else Path(path)
+    text = render_decisions(robots)
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
+    return str(path)
+
+
+def shipped_decisions() -> dict:
+    """{identity: decision} of the shipped file (read once; empty when it is missing or of
+    another format)."""
+    return memo("general6r-shipped", None, _read_decisions)
+
+
+def _read_decisions() -> dict:
+    try:
+        data = json.loads(DECISIONS.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data.get("robots", {}) if data.get("format") == FORMAT else {}
 
 
 def status(robot) -> str:
