@@ -70,6 +70,7 @@ from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
                                   G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -1478,12 +1479,8 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
-#: Newton stops after a step below this (rad, every joint) taken where the error was below it
-#: too (scaled lengths and rad) and the linear model's residual |e - J dq| is below 1e-13: the
-#: error the step leaves is that residual plus the order of the step's square (the second
-#: derivatives of the scaled FK are of order one), so below the 1e-13 the loop asks for, and the
-#: exact FK check decides; no evaluation only to confirm it.
-NEWTON_DONE = 1e-7
+#: Newton stops after a step below this (rad, every joint): derive.ik.tolerances.G6_NEWTON_DONE.
+NEWTON_DONE = G6_NEWTON_DONE
 
 
 def _newton(c, q, target, steps=None, with_error=False, first=None):
@@ -1507,7 +1504,7 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         last[idx] = size
         if with_error:
             last_jt[idx] = jt
-        todo = size > 1e-13
+        todo = size > G6_NEWTON_STOP
         if not np.all(todo):
             idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
@@ -1523,7 +1520,7 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         # done: a small step that the linear model says leaves an error below 1e-13 (not so
         # at a singular Jacobian, where the damped step misses part of the error)
         left = np.max(np.abs(err - np.einsum("mji,mj->mi", jt, dq_)), axis=1) + big ** 2
-        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < 1e-13)
+        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < G6_NEWTON_STOP)
         last[idx[done]] = left[done]
         idx = idx[~done]
         if len(idx) == 0:
