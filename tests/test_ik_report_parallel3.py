@@ -7,6 +7,7 @@ numbers the report prints are read back from its table and checked on plain 4x4 
 them at the generating configuration; the robot file's own lengths appear where the UR5's DH
 table puts them."""
 
+import json
 import math
 import re
 import shutil
@@ -150,3 +151,20 @@ def test_latex_report_compiles(reports, name, tmp_path):
     res = subprocess.run(["pdflatex", "-interaction=nonstopmode", "-halt-on-error", "ik.tex"],
                          cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0, res.stdout[-2000:]
+
+
+@pytest.mark.parametrize("name", ["crx10ia", "general-6r"])
+def test_general_6r_arm_says_why_there_is_nothing_to_typeset(name, tmp_path, capsys):
+    """A general 6R arm has no closed-form steps to typeset (its IK is the elimination solved per
+    pose): one line naming that and how to solve a pose instead, exit 2, no files; a pose given
+    solves it (the generating configuration among the solutions)."""
+    assert main(["ik", name, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no closed form to typeset" in err[0] and "general 6R elimination" in err[0]
+    assert f"dq-derive ik {name} --q" in err[0]
+    assert not (tmp_path / name).exists()
+    q = [0.3, -0.5, 0.7, 1.1, -0.4, 0.9]
+    assert main(["ik", name, "--q", *map(str, q), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    sols = np.array([s["q"] for s in out["solutions"]])
+    assert np.abs(sols - np.array(q)).max(axis=1).min() < 1e-9

@@ -18,12 +18,13 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
-from derive.errors import InputError
+from derive.errors import DeriveError, InputError
 from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.extract import R_SYMS, check_numerically, extract
 from derive.ik import panda as panda_ik
 from derive.ik import srs as srs_ik
 from derive.ik.program import spherical_forms
+from derive.ik.nearclass import classify as nearclass_classify
 from derive.ik.redundant import LABELS, free_parameter, redundant_kind, solve
 from derive.ik.spherical import canonical_robot
 from derive.ik.tolerances import ACCEPT_POSITION, DOUBLE_ROOT, REACH_TOL, STRETCH_TOL, WRIST_SINGULAR
@@ -150,7 +151,10 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
         if p3 is not None:
             ctx, stem = build_parallel3_ik_context(robot, p3, command), "ik_parallel3"
         elif geo is None:
-            ctx, stem = build_ik_context(robot, command), "ik"
+            try:
+                ctx, stem = build_ik_context(robot, command), "ik"
+            except DeriveError as exc:
+                raise DeriveError(_no_typeset_form(robot, exc)) from None
         else:
             ctx, stem = build_sw_ik_context(robot, geo, command), "ik_spherical"
     env = template_environment()
@@ -166,6 +170,22 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
     if progress:
         print(f"[{robot_name}] IK extracted and typeset ({time.perf_counter() - t0:.2f} s)", file=sys.stderr)
     return written
+
+
+def _no_typeset_form(robot, exc) -> str:
+    """The message of a robot whose IK cannot be typeset: the extraction's reason, and for an arm
+    that the general 6R elimination solves (:func:`derive.ik.nearclass.classify`'s ``general6r``,
+    not a near-class arm) why there is nothing to typeset and how its IK is computed instead."""
+    text = str(exc)
+    c = nearclass_classify(robot) if robot.dof == 6 else None
+    if c is None or not c.general6r or c.closed_form:        # (a near-class arm: its nominal's closed form)
+        return text
+    why = text.split(": ", 1)[-1] if text.startswith(robot.name + ": ") else text
+    return (f"{robot.name}: no closed form to typeset: the arm is of no special class (UR, spherical "
+            "wrist, three parallel), and its IK is the general 6R elimination (derive.ik.general6r: "
+            "up to 16 solutions, the roots of an eigenproblem solved per pose in numbers), not a "
+            f"sequence of closed-form steps; solve a pose with `dq-derive ik {robot.name} --q ...` (or "
+            f"--xyz/--rpy, --dq) or derive.kernels(robot). (The equations' extraction: {why})")
 
 
 # --------------------------------------------------------------------------- #
