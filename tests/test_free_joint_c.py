@@ -91,12 +91,62 @@ def test_triple_side_harmonics_equal_the_per_value_fit(name, k):
         np.testing.assert_allclose((cfree._harmonics(q[:, k - 1]) @ h).reshape(6, 14, 27), y, atol=1e-12)
 
 
+@pytest.mark.parametrize("name,k", [("xarm7", 2), ("xarm7", 7), ("gen3", 6)])
+def test_baked_deflation_holds_at_random_values_and_poses(name, k):
+    """Where the C plan bakes the deflation (the held link off the cut's triple side,
+    cfree.c_plans), the removed subspace V is invariant under every pose's companion matrix at
+    values other than those it was checked at: |W^T C V| (the block the C kernel drops) is
+    zero to rounding on the pencils built by the reference's per-value fit (free_joint._coefs),
+    and the eigenvalues it removes are the same at every pose and value and none is real."""
+    robot = derive.load_robot(name)
+    pl = cfree.c_plans(robot, k)[0]
+    found = cfree._fixed_deflation(pl)
+    assert found is not None and found[1] <= 20
+    bases, keep = np.asarray(found[0]), found[1]
+    g6 = free_joint.g6
+    rng = np.random.default_rng(21)
+    q = _inside(robot, 8, rng)
+    target = g6._to_matrix(reference.fk(robot, q))
+    target[:, :3, 3] /= pl.scale
+    d = free_joint.locked_chain(pl.c, k, q[:, k - 1])
+    if pl.reverse:
+        d = np.stack([g6._reverse(x) for x in d])
+        target = np.linalg.inv(target)
+    y, x = free_joint._coefs(d, pl.e, target)
+    qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+    yy = y.copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    order = [pl.ev] + [i for i in range(3) if i != pl.ev]
+    ten = np.moveaxis((np.swapaxes(qq[:, :, 8:], 1, 2) @ yy).reshape(8, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
+    sig = (ten.reshape(8, 6, 3, 9) @ g6._t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
+    mats = g6._twelve(sig)
+    for o, d3 in enumerate(pl.d3):
+        mk = np.einsum("ak,naij->nkij", g6._half(d3), mats)
+        inv = np.linalg.inv(mk[:, 2])
+        comp = np.zeros((8, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        t = np.swapaxes(bases[o], 0, 1) @ comp @ bases[o]
+        leak = np.abs(t[:, :keep, keep:]).max(axis=(1, 2)) / np.maximum(1.0, np.abs(comp).max(axis=(1, 2)))
+        assert leak.max() < 1e-9, (o, leak)
+        # the removed block's eigenvalues: the same at every pose and value, none real (no
+        # solution is removed; these arms have no spurious real root)
+        assert not found[2]
+        lam = np.linalg.eigvals(t[:, keep:, keep:])
+        for row in lam[1:]:
+            assert np.abs(row[:, None] - lam[0][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(lam[0]).max())
+        assert np.all(np.abs(lam.imag) > 1e-2 * (1 + np.abs(lam) ** 2))
+
+
 @needs_gcc
-def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path):
-    """The emitted source (two copies of the general 6R solver core, the plan and its rescue),
-    warnings as errors, -Wpedantic, as C99 and C++17."""
-    src = tmp_path / "xarm7_q5.c"
-    src.write_text(cfree.c_source("xarm7", 5))
+@pytest.mark.parametrize("k", [5, 2])
+def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path, k):
+    """The emitted source (two copies of the general 6R solver core, the plan and its rescue;
+    with q2 given the plan's deflation baked, the rescue's not), warnings as errors, -Wpedantic,
+    as C99 and C++17."""
+    src = tmp_path / f"xarm7_q{k}.c"
+    src.write_text(cfree.c_source("xarm7", k))
     for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
                 ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
         if shutil.which(cmd[0]) is None:
@@ -135,8 +185,9 @@ def test_c_free_joint_kernels_api():
 
 
 @needs_gcc
-def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path):
-    """xarm7 with q4 given, built with -fsanitize=address,undefined, on axis-aligned
+@pytest.mark.parametrize("k", [4, 2])
+def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path, k):
+    """xarm7 with q4 given (and q2: the deflated plan), built with -fsanitize=address,undefined, on axis-aligned
     configurations (singular: shared roots, degenerate pencils) and random ones: no invalid
     access, no undefined behaviour, counts within 0..16, no NaN before the padding and only NaN
     after it."""
@@ -148,9 +199,9 @@ def test_c_free_joint_is_clean_under_address_and_undefined_sanitizers(tmp_path):
     poses = reference.fk(robot, q)
     n = len(q)
     rows = ",\n".join("{" + ", ".join(repr(float(v)) for v in p) + "}" for p in poses)
-    vals = ", ".join(repr(float(v)) for v in q[:, 3])
-    ident = cfree._identifier(robot, 4)
-    (tmp_path / "t.c").write_text(cfree.c_source(robot, 4) + f"""
+    vals = ", ".join(repr(float(v)) for v in q[:, k - 1])
+    ident = cfree._identifier(robot, k)
+    (tmp_path / "t.c").write_text(cfree.c_source(robot, k) + f"""
 #include <stdio.h>
 static const double poses[{n}][8] = {{{rows}}};
 static const double vals[{n}] = {{{vals}}};

@@ -133,6 +133,37 @@ def test_degenerate_and_singular_poses_give_no_nan(quick_c):
 
 
 @needs_gcc
+def test_crx_home_pose_keeps_every_regular_solution(quick_c):
+    """`dq-derive ik crx10ia --q 0 0 0 0 0 0`: the numpy reference lists 10 solutions, four regular
+    ones and two singular clusters of near-duplicates (within 1.5e-6 rad, which the C merges). The
+    C kernels return each regular one (compared modulo 2 pi: the kernels wrap into (-pi, pi], so
+    the reference's J1 = J4 = -pi is the kernels' +pi) and a member of each cluster, every one
+    within 1e-10 of the pose."""
+    k = derive.kernels("crx10ia", "c")
+    q = np.zeros((1, 6))
+    P = reference.fk("crx10ia", q)
+    sols, counts = k.ik(P)
+    s = sols[0, :counts[0]]
+    ref = general6r.solve("crx10ia", P)
+    r = ref.q[0, :ref.counts[0]]
+    pl = general6r.plan("crx10ia")
+    frames, end = general6r._chain_frames(pl.c, r)
+    axes = frames[:, :, :3, 2]
+    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
+                       compute_uv=False)
+    regular = sv[:, -1] > 1e-6 * sv[:, 0]
+    assert regular.sum() == 4 and len(r) >= 8
+    for i in np.flatnonzero(regular):
+        assert _contains(s, r[i], 1e-9), r[i]
+    for i in np.flatnonzero(~regular):
+        assert _contains(s, r[i], 1e-5), r[i]
+    assert _contains(s, q[0], 1e-5)
+    assert any(abs(abs(x[0]) - math.pi) < 1e-9 and abs(x[1] + math.pi / 2) < 1e-9 for x in s)
+    dp, dr = pose_error(reference.fk("crx10ia", s), np.broadcast_to(P[0], (len(s), 8)))
+    assert dp.max() < 1e-10 and dr.max() < 1e-10
+
+
+@needs_gcc
 def test_bad_input_raises_input_error_and_unreachable_is_empty(quick_c):
     k = derive.kernels("general-6r", "c")
     with pytest.raises(InputError):

@@ -11,7 +11,9 @@ python backends run the class's closed form and C does not; the sets agree but o
 near the SRS elbow singularity, where the C kernel flags the pose degenerate, docs/ik.md) (templates/free_joint.c.j2, :func:`c_source`): per pose and value the loop-cut coefficients of
 both sides fitted from 27 + 9 sample angles, then the general 6R solver core of
 templates/general6r.c.j2 in its runtime mode, the locked chain and those coefficients passed
-through its pose argument (one copy per plan: the plan and its rescue), the check on the 7R's FK, merge and the singular flag,
+through its pose argument (one copy per plan: the plan and its rescue, :func:`c_plans`: where a cut
+with the held link off the triple side has a deflation that holds for every value, that cut and
+the reference's plan as its rescue), the check on the 7R's FK, merge and the singular flag,
 as :func:`derive.ik.free_joint._general` does; compiled on first use into the user cache's build
 folder and loaded with ctypes. Where the elimination has no plan the "c" backend has no such
 IK kernel (``derive.kernels`` raises InputError naming the numpy kernels). The calling convention is that
@@ -54,12 +56,162 @@ class _Context(dict):
         return None
 
 
+#: Held values at which a baked deflation is checked (:func:`_fixed_deflation`).
+_DEFLATION_VALUES = (0.0, -2.6, -1.1, 0.4, 1.9, 2.8)
+
+
+def _held_on_pair_side(pl: free_joint.Plan) -> bool:
+    """Whether the held joint's merged link C_K Rz(v) C_{K+1} of the locked 6R (its link K - 1,
+    7 - K in the reversed chain) lies outside the loop cut's triple side: the base or tool link
+    (in the pose link K6 = C7 T^-1 C1) or a link of the pair side (links e + 4 and e + 5 mod 6,
+    6 the pose link). The triple side Y is then the same for every value."""
+    link = 7 - pl.joint if pl.reverse else pl.joint - 1
+    return link in (0, 6) or link in {(pl.e + 3) % 6 + 1, (pl.e + 4) % 6 + 1}
+
+
+def _fixed_deflation(pl: free_joint.Plan):
+    """:func:`derive.ik.general6r._deflation` of the locked 6R where it holds for every held
+    value: the held link off the triple side (:func:`_held_on_pair_side`; there the pencil's
+    pose-independent eigenvectors, at x = +-i and at complex roots every pose shares, need not
+    change with the value, and on the arms shipped they do not), computed at each of
+    :data:`_DEFLATION_VALUES`; the one that removes the fewest eigenvectors (the first such,
+    the value 0 where it is one of them) where its removed subspace V lies in every other value's
+    (some values add pose-independent roots of their own, left to the eigen-solver) with the same
+    spurious real roots. (bases, keep, spurious) or None."""
+    from types import SimpleNamespace
+
+    if not _held_on_pair_side(pl):
+        return None
+    found = []
+    for v in _DEFLATION_VALUES:
+        d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+        if pl.reverse:
+            d = g6._reverse(d)
+        f = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
+                                          offsets=pl.offsets, d3=pl.d3))
+        if f is None:
+            return None
+        found.append(f)
+    best = max(found, key=lambda f: f[1])
+    keep, spurious = best[1], np.asarray(best[2], dtype=float)
+    for f in found:
+        if f[1] == keep and (len(f[2]) != len(spurious)
+                             or np.abs(np.asarray(f[2], dtype=float) - spurious).max(initial=0.0) > 1e-9):
+            return None
+        for k in range(len(pl.d3)):
+            # V (this value's removed subspace) has no component off the other value's
+            v0, vk = best[0][k][:, keep:], f[0][k][:, f[1]:]
+            if np.abs(v0 - vk @ (vk.T @ v0)).max() > 1e-7:
+                return None
+    return best
+
+
+def c_plans(robot, joint: int) -> list:
+    """The plans of the C kernel, the plan first and its rescue second: the reference's
+    (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
+    triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
+    reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
+    deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
+    value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
+    eigen-variable that check chose most often or another one regular there without shared real
+    roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
+    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). On the general route
+    only; once per process."""
+    from derive.model.robot import load_robot
+    robot = load_robot(robot)
+    return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
+
+
+def _c_plans(robot, joint: int) -> list:
+    import dataclasses
+    from collections import Counter
+
+    pl = free_joint.plan(robot, joint)
+    plans = [pl, pl.alt if pl.alt is not None else pl]
+    if free_joint.route(robot, joint) != "general":
+        # a class route (the SRS class with q2 or q6 given): the cut with the held link on the pair
+        # side makes fewer C sets differ from the closed form near the elbow singularity (iiwa14 q2:
+        # 305 instead of 788 of 1000) but flags more random poses (1.8-1.9 % instead of 1.2 %, the
+        # test allows 2 %); the reference's plans stay
+        return plans
+    own = _fixed_deflation(pl)
+    best, best_keep = None, 24 if own is None else own[1]
+    for reverse in (False, True):
+        for e in (1, 2):
+            if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
+                continue
+            evs = []
+            for v in _DEFLATION_VALUES:
+                d = free_joint.locked_chain(pl.c, joint, [v])[0]
+                ok, _, extra = g6._check_cut(g6._reverse(d) if reverse else d, e)
+                if not ok:
+                    break
+                evs.append(int(extra["ev"]))
+            else:
+                # the eigen-variable chosen most often first, then the others whose pencil is regular
+                # at every value (a smaller deflated block wins)
+                order = [ev for ev, _ in Counter(evs).most_common()]
+                order += [ev for ev in range(3) if ev not in order and _regular(pl, reverse, e, ev)]
+                for ev in order:
+                    if (reverse, e, ev) == (pl.reverse, pl.e, pl.ev):
+                        continue
+                    cand = dataclasses.replace(
+                        pl, reverse=reverse, e=e, ev=ev, alt=pl,
+                        notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
+                              f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
+                              f"deflation baked; the reference's plan is the rescue)")
+                    found = _fixed_deflation(cand)
+                    if found is not None and found[1] < best_keep:
+                        best, best_keep = cand, found[1]
+    return plans if best is None else [best, pl]
+
+
+def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
+    """Whether the locked 6R's pencil for the cut at e with eigen-variable ev is regular at every
+    value of :data:`_DEFLATION_VALUES`, with simple real roots: the 12 x 12 matrix at random q of
+    the eigen-variable on 6 random configurations' poses has a smallest relative singular value
+    above G6_RANK_TOL and no two real eigenvalues within CLUSTER_TOL (the tests
+    :func:`derive.ik.general6r._check_cut` applies to each eigen-variable)."""
+    rng = np.random.default_rng(11)
+    for v in _DEFLATION_VALUES:
+        d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+        c = g6._reverse(d) if reverse else d
+        q = rng.uniform(-np.pi, np.pi, (6, 6))
+        _, target = g6._chain_frames(c, q)
+        y = g6._triple_coefs(c, e)
+        x = g6._pair_coefs(c, e, target)
+        qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+        yy = np.broadcast_to(y, (6, 14, 27)).copy()
+        yy[:, :, 26] -= x[:, :, 8]
+        t = np.moveaxis((np.swapaxes(qq[:, :, 8:], 1, 2) @ yy).reshape(6, 6, 3, 3, 3), 2 + ev, 2)
+        th = rng.uniform(-np.pi, np.pi, 6)
+        sig = np.einsum("nieab,ne->niab", t, np.stack([np.sin(th), np.cos(th), np.ones(6)], 1)).reshape(6, 6, 9)
+        sv = np.linalg.svd(g6._twelve(sig @ g6._t45(0.3, -0.7)), compute_uv=False)
+        if not np.min(sv[:, -1] / sv[:, 0]) > G6_RANK_TOL:
+            return False
+        # and no real root shared by two solutions (the slower multiple-root path)
+        mats = g6._twelve(t.reshape(6, 6, 3, 9).transpose(0, 2, 1, 3) @ g6._t45(0.3, -0.7))
+        mk = np.einsum("ak,naij->nkij", g6._half(0.5), mats)
+        inv = g6._inv_safe(mk[:, 2])
+        comp = np.zeros((6, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        for row in np.linalg.eigvals(np.where(np.isfinite(comp), comp, 0.0)):
+            xr = np.sort(row[np.abs(row.imag) < G6_REAL_TOL * (1 + np.abs(row) ** 2)].real)
+            if np.any(np.abs(np.diff(xr)) <= g6.CLUSTER_TOL * (1 + np.abs(xr[1:]))):
+                return False
+    return True
+
+
 def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
-    :func:`derive.ik.general6r._deflation`) where it holds for every value: joint 1 or 7 held
-    (the held link is the first or last, so the locked 6R's loop links 1-5 are the same for every
-    value and the value moves only the pose link); with a middle joint held the eigenvectors at
-    x = +-i change with the value (and the pose), so there is none. As the general 6R kernels'
+    :func:`derive.ik.general6r._deflation`) where it holds for every value
+    (:func:`_fixed_deflation`): joint 1 or 7 held (the held link is the first or last, so the
+    locked 6R's loop links 1-5 are the same for every value and the value moves only the pose
+    link), or the held link on the pair side of the cut (joint 2 or 6, :func:`c_plans`); with the
+    held link on the triple side the pose-independent eigenvalues and eigenvectors change with
+    the value, so there is none. As the general 6R kernels'
     template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
     given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
     module has no such context (a template without the deflation)."""
@@ -69,13 +221,9 @@ def _deflation(pl: free_joint.Plan):
     make = getattr(cg6, "_deflation_context", None) or getattr(cg6, "deflation_context", None)
     if make is None:
         return None
-    found = None
-    if pl.joint in (1, 7):
-        d = free_joint.locked_chain(pl.c, pl.joint, [0.0])[0]
-        if pl.reverse:
-            d = g6._reverse(d)
-        found = g6._deflation(SimpleNamespace(c=d, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(d, pl.e)},
-                                              offsets=pl.offsets, d3=pl.d3))
+    # on a class route only joints 1 and 7 (as before c_plans: see there)
+    general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
+    found = _fixed_deflation(pl) if general else None
     if found is None:
         return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
     b, keep, spurious = found
@@ -154,8 +302,8 @@ def c_source(robot, joint: int) -> str:
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     free_joint.route(robot, joint)            # InputError for a joint that cannot be given (SRS q4)
-    pl = free_joint.plan(robot, joint)
-    plans = [pl, pl.alt if pl.alt is not None else pl]
+    plans = c_plans(robot, joint)
+    pl = plans[0]
     env = template_environment()
     core = env.get_template("general6r.c.j2")
     cores = []

@@ -14,11 +14,13 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    pose monomials; for the loop cut at joint e (the CRX, the Jaco2) the pair's coefficients are
    fitted per pose from 3 sample angles per joint (the fit's 9 x 9 inverse baked in).
 2. **Left null space of Q** by a Householder QR of the 14 x 8 matrix (the last 6 columns of the
-   complete Q); its first 8 columns and R give q1, q2 (or the pair) by least squares later.
+   complete Q); its first 8 columns and R give q1, q2 (or the pair) by least squares later. The
+   reflectors are applied to Y directly (Q^T Y; the complete Q is not formed).
 3. **The 12 x 12 quadratic pencil** M(x) = M0 + x M1 + x^2 M2 (x the half-angle tangent of the
    eigen-variable moved by an offset d3, the Moebius substitution: the first of three offsets
    whose leading matrix has a 1-norm condition below G6_GOOD_COND, else the best), and the
-   24 x 24 companion matrix C = [[0, I], [-M2^-1 M0, -M2^-1 M1]]. Its eigenvectors every pose
+   24 x 24 companion matrix C = [[0, I], [-M2^-1 M0, -M2^-1 M1]] (M2^-1 [M0 M1] and M2^-1, for
+   the condition, by one Gauss-Jordan elimination with partial pivoting of [M2 | M0 M1 | I]). Its eigenvectors every pose
    shares (x = +-i and a cut's constant real roots: the plan's deflation,
    :func:`derive.ik.general6r._deflation`) are deflated as the reference does
    (:func:`derive.ik.general6r._eigvals`): with the baked orthonormal basis [W V]
@@ -31,8 +33,9 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    converge in 30 sweeps per eigenvalue is flagged degenerate.
 5. **Eigenvectors**: for each (nearly) real eigenvalue x the null vector of M(x) (the monomials
    x4^i x5^j) from M's block structure (M(x) = [[S, 0], [0, S]], S 6 x 9 shifted by three
-   columns: S's null space N by an LU with complete pivoting, then one step of inverse iteration
-   on the 6 x 6 [N[3:9], -N[0:6]]); where its residual |M(x) v| is above 1e-6, one step of
+   columns: S's null space N = [-F; I] from its reduced row echelon form [I F] by Gauss-Jordan
+   elimination with column pivoting (the pivots of an LU with partial pivoting of S^T), then one
+   step of inverse iteration on the 6 x 6 [N[3:9], -N[0:6]], solved the same way); where its residual |M(x) v| is above 1e-6, one step of
    inverse iteration on the whole M(x) (an LU solve with partial pivoting of M(x) + 1e-11 I),
    or, where that residual is large too, the last column of the Q of a Householder QR with
    column pivoting of M(x)^T. Eigenvalues shared by several solutions (a
@@ -41,7 +44,8 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    the monomials (Stetter's method: V[shift] c = x V[base] c), a small eigenproblem solved by the
    same Hessenberg QR.
 6. **Back-substitution**: the triple's joints from x and the vector's ratios, the pair from the
-   least squares of Q X2 = Y X1, the last joint from the rest of the chain.
+   least squares of Q X2 = Y X1, the last joint from the rotations of the rest of the chain
+   (two columns of the part before it, one row of the part after it).
 7. **Newton polish** on the product-form FK (damped Gauss-Newton with the geometric Jacobian, at
    most G6_NEWTON_MAX steps), the **check** on the kernels' own dual-quaternion FK (position and
    rotation angle within G6_ACCEPT), the **singular** flag (Jacobian's smallest over largest
