@@ -360,7 +360,8 @@ def cmd_robots(args) -> int:
           "a near-class arm solved by its nominal robot's closed form and Newton steps on its own FK; "
           "any joint given = a seven-revolute arm solved with any joint J held (ik --free V --free-joint J; "
           "kernels with free='qJ', numpy and C); "
-          "(elimination unchecked) = a general 6R arm not derived yet: its kernels have IK when its "
+          "(elimination unchecked) = a general 6R arm not derived yet (the library's general arms ship "
+          "their derivation's decision): its kernels have IK when its "
           "elimination is regular, checked on first use (dq-derive kernels or ik); kernels and CasADi "
           "functions: shipped in the package, cached (derived earlier), or derived on first use and cached")
     return EXIT_OK
@@ -863,6 +864,13 @@ def cmd_generate(args) -> int:
         written.append(write_class_data(args.class_data))
         print(f"the UR and spherical-wrist classes' IK with symbolic lengths derived and written in "
               f"{time.perf_counter() - t:.2f} s")
+        # the general 6R derivation's decision of every library arm on that route (shipped, keyed
+        # by identity, so a fresh install's `robots` needs no derivation to label them)
+        t = time.perf_counter()
+        g6_arms = [n for n in list_robots() if "general 6R elimination" in _robot_row(n)["ik"]]
+        written.append(general6r.write_decisions(g6_arms, args.general6r_data))
+        print(f"the general 6R elimination's decision of {', '.join(g6_arms)} derived and written in "
+              f"{time.perf_counter() - t:.2f} s")
         t = time.perf_counter()
         sw = SW_ROBOTS
         name = sw[0]
@@ -1223,6 +1231,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--class-data", default=None, metavar="FILE",
                    help="where the 6R classes' symbolic IK goes (default: the package's "
                         "derive/data/ik_classes.json; written when no robots are named)")
+    s.add_argument("--general6r-data", default=None, metavar="FILE", dest="general6r_data",
+                   help="where the library's general 6R arms' derivation decisions go (default: the "
+                        "package's derive/data/general6r.json; written when no robots are named)")
 
     s = command("bench", "speed measurements (see docs/benchmarks.md)", cmd_bench)
     s.add_argument("what", nargs="?", default="derivation", choices=BENCHES,

@@ -113,3 +113,73 @@ def test_library_general_arms_label_is_the_kernels_decision(name):
     c = derive.classify(robot)
     assert c.general6r and "not checked yet" not in c.general6r
     assert ("loop is cut at joint" in c.general6r) == bool(pl.cut)
+
+
+# --------------------------------------------------------------------------- #
+# The decisions shipped for the library's general arms (derive/data/general6r.json)
+# --------------------------------------------------------------------------- #
+LIBRARY_GENERAL = {"crx10ia": 2, "xarm6": None, "jaco2-6dof": 2, "general-6r": None}   # the cut joint
+
+
+def _masked(decision: dict) -> dict:
+    """A decision with the floating-point figures of its notes (singular values, round-off of
+    the genericity check) replaced, so two machines' derivations compare equal."""
+    import re
+    return {**decision, "notes": [re.sub(r"\d\.\de[-+]\d+", "#", n) for n in decision.get("notes", [])]}
+
+
+def test_shipped_decisions_are_the_derivations():
+    """The shipped file holds exactly the library's general arms, each under its identity, with
+    the decision the derivation makes now (derived or read from this code's cache)."""
+    shipped = general6r.shipped_decisions()
+    assert sorted(d["robot"] for d in shipped.values()) == sorted(LIBRARY_GENERAL)
+    for key, d in shipped.items():
+        robot = derive.load_robot(d["robot"])
+        assert key == robot.id
+        fresh = general6r.decision(robot)
+        assert _masked(fresh) == _masked(d), d["robot"]
+        assert d["rank_q"] == 8 and d["cut"] == LIBRARY_GENERAL[d["robot"]]
+    # the xArm6's forward pencil is singular for every q3 (docs/ik.md): solved as the reversed chain
+    assert shipped[derive.load_robot("xarm6").id]["reverse"] is True
+
+
+def test_fresh_install_labels_the_library_arms_without_deriving(fresh_cache, monkeypatch):
+    """An empty user cache (a fresh install, or any change of the code, which changes the cache
+    folder): `robots` and `classify` give every library arm its derivation's label from the
+    shipped decision, and nothing is derived or stored to do so."""
+    def no_derivation(*args, **kwargs):
+        raise AssertionError("derived while labelling")
+    monkeypatch.setattr(general6r, "_plan", no_derivation)
+    monkeypatch.setattr(general6r, "derive_elimination", no_derivation)
+    rows = {name: cli._robot_row(name) for name in cli.list_robots()}
+    assert not any("unchecked" in row["kernels"] for row in rows.values())
+    for name, cut in LIBRARY_GENERAL.items():
+        assert general6r.status(name) == "kernels"
+        assert rows[name]["ik"] == "general 6R elimination"
+        assert rows[name]["kernels"].startswith("FK+IK, ")
+        c = derive.classify(name)
+        assert c.general6r and "not checked yet" not in c.general6r
+        assert ("loop is cut at joint 2" in c.general6r) == (cut == 2)
+    assert "solved as the reversed chain" in derive.classify("xarm6").general6r
+    assert not (fresh_cache / "cache").exists() or not any((fresh_cache / "cache").rglob("general6r.json"))
+
+
+def test_a_changed_copy_of_a_library_arm_is_unchecked(fresh_cache):
+    """The shipped decision is keyed by the robot's identity (its kinematics), not its name: a
+    copy of crx10ia.yaml under another name is the CRX (the decision applies), a copy with one
+    length changed by 1 mm is another arm, unchecked until it is derived."""
+    from importlib import resources
+    text = (resources.files("derive.robots") / "crx10ia.yaml").read_text()
+    same = fresh_cache / "my-crx.yaml"
+    same.write_text(text.replace("name: crx10ia", "name: my-crx"))
+    assert derive.load_robot(str(same)).id == derive.load_robot("crx10ia").id
+    assert general6r.status(str(same)) == "kernels"
+    assert cli._robot_row(str(same))["kernels"].startswith("FK+IK, ")
+
+    changed = fresh_cache / "my-crx-changed.yaml"
+    assert "l_5: 0.150," in text
+    changed.write_text(text.replace("l_5: 0.150,", "l_5: 0.151,").replace("name: crx10ia", "name: my-crx-changed"))
+    robot = derive.load_robot(str(changed))
+    assert robot.id != derive.load_robot("crx10ia").id and derive.classify(robot).cls == "general"
+    assert general6r.status(robot) == "unchecked"
+    assert cli._robot_row(str(changed))["kernels"].startswith("FK+IK (elimination unchecked)")

@@ -141,9 +141,9 @@ def test_robots_command_lists_their_ik(capsys):
         robot = derive.load_robot(name)
         # six revolute joints: the general 6R elimination, kernels with IK; seven: one joint given
         # (the near-class polish with q3 given for the gen3, the free_joint route for the xArm7)
-        # (a 6R arm not derived yet under this code's cache folder says "FK+IK (elimination
-        # unchecked)": the row reads the cache, so a fresh clone sees that until it is derived)
-        expected = {6: ("general 6R elimination", "FK+IK"), 7: ("any joint given", "FK (+IK: free=qK), ")}
+        # (the library's 6R arms ship their derivation's decision, derive/data/general6r.json, so
+        # a fresh clone's row says "FK+IK" too, never "(elimination unchecked)")
+        expected = {6: ("general 6R elimination", "FK+IK, "), 7: ("any joint given", "FK (+IK: free=qK), ")}
         if name == "gen3":
             expected[7] = ("nominal SRS + Newton polish", "FK+IK (q3 given)")
         for text in expected[robot.dof]:

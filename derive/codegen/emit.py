@@ -26,6 +26,8 @@ from derive.errors import DeriveError
 from derive.ik.closed_form import MERGE_TOL
 from derive.ik.select import LIMIT_SLACK
 from derive.ik.tolerances import SP_ROOT_MODULUS
+from derive.ik.tolerances import (ROOTS4_BIQUADRATIC, ROOTS4_DK_STOP, ROOTS4_LEAD, ROOTS4_NEWTON_DF,
+                                  ROOTS4_NEWTON_STEP)
 from derive.ik.ir import leaf_of, leaf_weights, roots4_names
 from derive.ik.program import ik_program
 from derive.ik.redundant import FREE_CHOICES, redundant_kind
@@ -339,7 +341,19 @@ def _roots4_context(prog, flat_raw):
     if len(at) == 1 and sum(op.kind == "roots4" and op.depth == 0 for op in prog.ops) == 1:
         pre = [d for d in flat_raw[:at[0]] if not d["kind"].startswith("ok_")]
         prefix = _live(pre + [{**flat_raw[at[0]], "kind": "roots4_store"}])
-    return {"root_modulus": repr(SP_ROOT_MODULUS), "prefix": prefix}
+    return {"root_modulus": repr(SP_ROOT_MODULUS), "prefix": prefix, "lead": _power_literal(ROOTS4_LEAD),
+            "dk_stop": _power_literal(ROOTS4_DK_STOP), "biquadratic": _power_literal(ROOTS4_BIQUADRATIC),
+            "newton_df": _power_literal(ROOTS4_NEWTON_DF), "newton_step": _power_literal(ROOTS4_NEWTON_STEP)}
+
+
+def _power_literal(x: float) -> str:
+    """A tolerance of one significant digit (a power of ten) as a C and Python literal without
+    padding (1e-8, not 1e-08): the form the roots4 templates had written in; ValueError for
+    another value."""
+    text = f"{x:.0e}".replace("e-0", "e-").replace("e+0", "e+")
+    if float(text) != x:
+        raise ValueError(f"{x!r} has more than one significant digit")
+    return text
 
 
 def _general_ik_context(robot, free=None):

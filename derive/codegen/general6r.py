@@ -72,6 +72,7 @@ from derive.ik import general6r as g6
 from derive.algebra import quaternion as quat
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_PERTURB,
                                   G6_PERTURB_TRIALS, G6_RANK_TOL, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+from derive.ik.tolerances import G6_NEAR_SINGULAR
 
 #: The solutions a general 6R kernel returns at most (the degree of the eliminant).
 MAX_SOLUTIONS = g6.MAX_SOLUTIONS
@@ -155,6 +156,7 @@ def general_context(robot) -> dict:
         "n_d3": len(pl.d3), "start": _arr(start), "nudge": _lit(g6._NUDGE),
         "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
+        "near_singular": _lit(G6_NEAR_SINGULAR), "near_pair_tol": _lit(g6.NEAR_PAIR_TOL),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": int(G6_PERTURB_TRIALS),
         "tables": tables_context(pl),

@@ -42,24 +42,17 @@ from derive.errors import DeriveError
 from derive.ik.ir import IKProgram, Op, pos
 from derive.ik.nearclass import Nominal
 from derive.ik.program import ik_program
-from derive.ik.tolerances import REACH_TOL, SEED_REACH, SEED_SINGULAR
+from derive.ik.tolerances import (POLISH_ACCEPT, POLISH_LAST_STEP, POLISH_STOP, REACH_TOL, SEED_KEEP,
+                                  SEED_REACH, SEED_SINGULAR)
 from derive.kinematics.fk import fk_matrix
 from derive.model.geometry import numeric_chain
 from derive.model.robot import load_robot
 
-#: The most Newton steps per candidate.
+#: The most Newton steps per candidate. (The tolerances POLISH_STOP, POLISH_ACCEPT,
+#: POLISH_LAST_STEP and SEED_KEEP are in derive.ik.tolerances.)
 POLISH_MAX_ITER = 30
-#: Newton stops when every component of its error e (m and rad) is at most this.
-POLISH_STOP = 1e-14
-#: A polished candidate is a solution when its residual (:data:`RESIDUAL_METRIC`) is at most
-#: this (the larger of metres and radians).
-POLISH_ACCEPT = 1e-11
 #: The largest change of one joint in one Newton step (rad or m); longer steps are scaled down.
 POLISH_MAX_STEP = 0.5
-#: A step whose largest joint move is at most this (rad or m) ends the polish without another
-#: FK and Jacobian (quadratic convergence leaves an error of the order of its square); the
-#: residual of the kernels' own FK checks it, and where it fails the steps go on.
-POLISH_LAST_STEP = 1e-9
 #: Newton steps the C kernels take for every candidate of a block at once, vectorised over the
 #: block's poses (no early exit), before the residual decides which candidates go on one at a
 #: time: two steps take a mismatch of 1e-5 (decimal DH, a URDF's printed constants) to rounding.
@@ -70,12 +63,6 @@ POLISH_VEC_STEPS = 2
 SEED_FOLD = (1.0, -1.0, 3.0, -3.0)
 #: ... and the offsets (rad) that do not scale with it (a joint pair that is nearly free).
 SEED_TURN = (math.pi / 4, -math.pi / 4, math.pi / 2, -math.pi / 2, 3 * math.pi / 4, -3 * math.pi / 4, math.pi)
-#: A candidate of the nominal closed form (its reach checks dropped, :func:`_reach_check`) is
-#: polished only when its start misses the pose by at most this many deviations (+ 1e-9; m, and
-#: sin of the rotation angle, each compared; the rotation less than pi/2) or lies near a singular
-#: set: the nominal's miss within SEED_REACH deviations, as derive.ik.nearclass._near_reach, and
-#: the arm's own mismatch on top.
-SEED_KEEP = SEED_REACH + 1.0
 #: The most Newton steps of a seed near a singular set (a seed that leads to a root gets there in a
 #: few; most lead nowhere, and their steps were most of the seeds' cost).
 SEED_MAX_ITER = 20

@@ -58,6 +58,7 @@ import dataclasses
 import itertools
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -69,6 +70,7 @@ from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
                                   G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
+from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -498,7 +500,8 @@ def kernels_cover(rank_q: int) -> bool:
 
 def _decision(robot):
     """The derivation's decision for a robot without deriving: this process's plan (or its
-    DeriveError), else the stored artifact's JSON; None when neither exists yet."""
+    DeriveError), else the stored artifact's JSON, else the decision shipped for a library arm
+    of the same identity (:data:`DECISIONS`); None when none exists yet."""
     out = peek("general6r-plan", robot.id)
     if isinstance(out, Plan):
         return {"rank_q": out.rank_q, "cut": out.cut, "reverse": out.reverse, "notes": list(out.notes)}
@@ -506,7 +509,71 @@ def _decision(robot):
         return {"degenerate": str(out)}
     found = find_artifact(robot.id, "general6r")
     data = json.loads(found.read_text()) if found is not None else None
-    return data if data is not None and data.get("format") == FORMAT else None
+    if data is not None and data.get("format") == FORMAT:
+        return data
+    return shipped_decisions().get(robot.id)
+
+
+# --------------------------------------------------------------------------- #
+# The decisions shipped for the library's general arms
+# --------------------------------------------------------------------------- #
+#: The shipped file: {"format": FORMAT, "robots": {identity: decision}} for the library's arms of
+#: no special class, written by ``dq-derive generate`` (:func:`write_decisions`), so that
+#: :func:`status` and :func:`describe` know them on a fresh install and after any code change
+#: (the user cache's artifacts are keyed by a digest of the code, the shipped decision by the
+#: robot's identity alone, :mod:`derive.model.identity`). An arm of another identity (a user's
+#: own file, or a library file with one number changed) is not in it: "unchecked" until derived.
+DECISIONS = Path(__file__).resolve().parent.parent / "data" / "general6r.json"
+
+
+def decision(robot) -> dict:
+    """The derivation's decision for one robot, derived now if it is not known (:func:`plan`),
+    in the compact form shipped in :data:`DECISIONS`: {"robot", "rank_q", "reverse", "cut" (the
+    joint the loop is cut at, or None), "notes"}, or {"robot", "degenerate" (the DeriveError's
+    message), "notes"} for an arm whose elimination degenerates everywhere."""
+    robot = load_robot(robot)
+    try:
+        pl = plan(robot, progress=False)
+    except DeriveError as exc:
+        if isinstance(exc, BudgetError):
+            raise
+        return {"robot": robot.name, "degenerate": str(exc), "notes": []}
+    return {"robot": robot.name, "rank_q": int(pl.rank_q), "reverse": bool(pl.reverse),
+            "cut": int(pl.cut["e"]) if pl.cut else None, "notes": list(pl.notes)}
+
+
+def render_decisions(robots) -> str:
+    """The text of :data:`DECISIONS` for the given robots (names or Robot objects): their
+    decisions (:func:`decision`) keyed by identity, sorted keys, so the bytes are stable."""
+    out = {}
+    for r in robots:
+        r = load_robot(r)
+        out[r.id] = decision(r)
+    return json.dumps({"format": FORMAT, "robots": out}, indent=1, sort_keys=True) + "\n"
+
+
+def write_decisions(robots, path=None) -> str:
+    """Derive the decisions of ``robots`` (:func:`render_decisions`) and write them to ``path``
+    (default: the shipped file, :data:`DECISIONS`); returns the path."""
+    path = DECISIONS if path is None else Path(path)
+    text = render_decisions(robots)
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        f.write(text)
+    return str(path)
+
+
+def shipped_decisions() -> dict:
+    """{identity: decision} of the shipped file (read once; empty when it is missing or of
+    another format)."""
+    return memo("general6r-shipped", None, _read_decisions)
+
+
+def _read_decisions() -> dict:
+    try:
+        data = json.loads(DECISIONS.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data.get("robots", {}) if data.get("format") == FORMAT else {}
 
 
 def status(robot) -> str:
@@ -1412,12 +1479,8 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
-#: Newton stops after a step below this (rad, every joint) taken where the error was below it
-#: too (scaled lengths and rad) and the linear model's residual |e - J dq| is below 1e-13: the
-#: error the step leaves is that residual plus the order of the step's square (the second
-#: derivatives of the scaled FK are of order one), so below the 1e-13 the loop asks for, and the
-#: exact FK check decides; no evaluation only to confirm it.
-NEWTON_DONE = 1e-7
+#: Newton stops after a step below this (rad, every joint): derive.ik.tolerances.G6_NEWTON_DONE.
+NEWTON_DONE = G6_NEWTON_DONE
 
 
 def _newton(c, q, target, steps=None, with_error=False, first=None):
@@ -1441,7 +1504,7 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         last[idx] = size
         if with_error:
             last_jt[idx] = jt
-        todo = size > 1e-13
+        todo = size > G6_NEWTON_STOP
         if not np.all(todo):
             idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
@@ -1457,7 +1520,7 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         # done: a small step that the linear model says leaves an error below 1e-13 (not so
         # at a singular Jacobian, where the damped step misses part of the error)
         left = np.max(np.abs(err - np.einsum("mji,mj->mi", jt, dq_)), axis=1) + big ** 2
-        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < 1e-13)
+        done = (big < NEWTON_DONE) & (size < NEWTON_DONE) & (left < G6_NEWTON_STOP)
         last[idx[done]] = left[done]
         idx = idx[~done]
         if len(idx) == 0:

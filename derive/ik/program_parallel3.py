@@ -38,6 +38,7 @@ from derive.ik.extract import _rot
 from derive.ik.ir import Builder, IKProgram, Op, pos
 from derive.ik.parallel3 import P3Geometry
 from derive.ik.tolerances import REACH_TOL, SP6_DOUBLE_ROOT, SP_EXACT_TOL, SP_FREE_ANGLE, SP_RANK_TOL, WRIST_SINGULAR
+from derive.ik.tolerances import SP6_BLOCK_MIN
 
 #: Numbers of the geometry within this of an integer are that integer.
 SNAP = 1e-12
@@ -237,9 +238,6 @@ def parallel3_program(robot, geo: P3Geometry) -> IKProgram:
                      steps=steps, parameters={}, branch_labels=list(bld.labels))
 
 
-#: The q5 block of subproblem 6 (a constant of the arm) must have |det| / (squared Frobenius
-#: norm) at least this (dimensionless; 1/2 for a scaled rotation) for the program to eliminate it.
-SP6_BLOCK_MIN = 1e-6
 
 
 def _coef_row(h, k, v) -> tuple:

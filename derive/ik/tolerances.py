@@ -229,3 +229,59 @@ SP6_DOUBLE_ROOT = 1e-4
 #: pose where the C kernel's set differs from the closed form's is flagged (1e-3: one of 3200
 #: poses near q4 = 0 not; 3e-3: none; random poses flagged 0.3-0.6 %, 1e-2: about 1 %).
 FREE_JOINT_NEAR_ROOTS = 3e-3
+
+# --- Moved here from their modules (issue 31's leftovers); the values, and so the emitted
+# --- kernels' bytes, are unchanged.
+
+#: General 6R Newton (derive.ik.general6r._newton): a candidate is done when its error (scaled
+#: lengths and rad, largest component) is below this, and the step is accepted as the last when
+#: the linear model's residual |e - J dq| (same unit) is below it (the error the step leaves is
+#: that residual plus the order of the step's square).
+G6_NEWTON_STOP = 1e-13
+#: ... and the last step is one below this (rad, every joint) taken where the error was below it
+#: too (scaled lengths and rad): the second derivatives of the scaled FK are of order one, so
+#: such a step leaves an error of the order of its square, below G6_NEWTON_STOP; no evaluation
+#: only to confirm it. (derive.ik.general6r.NEWTON_DONE.)
+G6_NEWTON_DONE = 1e-7
+#: The sp6 layout's IK program (derive.ik.program_parallel3): the q5 block of subproblem 6 (a
+#: constant 2 x 2 matrix of the arm) must have |det| / (squared Frobenius norm) at least this
+#: (dimensionless; 1/2 for a scaled rotation, 0 for a singular block) for the program to
+#: eliminate x_5 by its adjugate; below it the program is refused (DeriveError).
+SP6_BLOCK_MIN = 1e-6
+#: The "roots4" line of the IK programs (templates roots4.c.j2, roots4.py.j2, roots4_numpy.py.j2:
+#: the real roots of F(t) = a0 + a1 cos t + b1 sin t + a2 cos 2t + b2 sin 2t): the quartic's
+#: leading coefficient F(t0 + pi), the largest of eight samples of |F|, at most this times the
+#: largest |coefficient| (dimensionless) means F vanishes to rounding: no roots (every t solves
+#: it, or none can be told apart).
+ROOTS4_LEAD = 1e-12
+#: ... Durand-Kerner (C, pure Python) stops when no root moves by more than this relative to
+#: 1 + |root| (dimensionless, |Re| + |Im|): rounding of the monic quartic's roots.
+ROOTS4_DK_STOP = 1e-14
+#: ... Ferrari (C) takes the quartic as biquadratic (the depressed cubic term Q dropped) when
+#: |Q| is at most this times 1 + |P|^(3/2) + |R| (dimensionless, the depressed quartic's
+#: coefficients in their own scale): there the resolvent's root would be 0 to rounding.
+ROOTS4_BIQUADRATIC = 1e-14
+#: ... each root gets two Newton steps on F (on its cosine and sine), but only where |F'(t)| is
+#: above this times the largest |coefficient| (dimensionless): at a (near-)double root F' vanishes
+#: and a step would throw the root away ...
+ROOTS4_NEWTON_DF = 1e-8
+#: ... and only a step below this (rad) is taken (a larger one means the quartic's root was not
+#: near F's; the sixth-order Taylor turn of the C and Python kernels is exact to rounding below it).
+ROOTS4_NEWTON_STEP = 1e-3
+#: The near-class kernels' Newton polish (derive.codegen.polish, templates polish*.j2; the numpy
+#: reference's is POLISH_TOL): it stops when every component of its error e (m and rad) is at
+#: most this (rounding of the kernels' own FK) ...
+POLISH_STOP = 1e-14
+#: ... a polished candidate is a solution when its residual (derive.codegen.polish.RESIDUAL_METRIC,
+#: the larger of metres and radians) is at most this ...
+POLISH_ACCEPT = 1e-11
+#: ... and a step whose largest joint move is at most this (rad or m) ends the polish without
+#: another FK and Jacobian (quadratic convergence leaves an error of the order of its square);
+#: the residual of the kernels' own FK checks it, and where it fails the steps go on.
+POLISH_LAST_STEP = 1e-9
+#: A candidate of the nominal closed form in the near-class kernels (its reach checks dropped,
+#: derive.codegen.polish._reach_check) is polished only when its start misses the pose by at most
+#: this many deviations of the nominal (dimensionless; + 1e-9, then m, and sin of the rotation
+#: angle, each compared): the nominal's miss within SEED_REACH deviations
+#: (derive.ik.nearclass._near_reach) and the arm's own mismatch on top.
+SEED_KEEP = SEED_REACH + 1.0

@@ -18,12 +18,13 @@ from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
 from derive.cache import claim_folder, write_manifest
 from derive.codegen.templates import template_environment
-from derive.errors import InputError
-from derive.ik.closed_form import spherical_class
+from derive.errors import DeriveError, InputError
+from derive.ik.closed_form import parallel3_class, spherical_class
 from derive.ik.extract import R_SYMS, check_numerically, extract
 from derive.ik import panda as panda_ik
 from derive.ik import srs as srs_ik
 from derive.ik.program import spherical_forms
+from derive.ik.nearclass import classify as nearclass_classify
 from derive.ik.redundant import LABELS, free_parameter, redundant_kind, solve
 from derive.ik.spherical import canonical_robot
 from derive.ik.tolerances import ACCEPT_POSITION, DOUBLE_ROOT, REACH_TOL, STRETCH_TOL, WRIST_SINGULAR
@@ -146,8 +147,14 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
         ctx, stem = build_redundant_ik_context(robot, command), "ik_redundant"
     else:
         geo = spherical_class(robot)
-        if geo is None:
-            ctx, stem = build_ik_context(robot, command), "ik"
+        p3 = parallel3_class(robot) if geo is None and robot.dof == 6 else None
+        if p3 is not None:
+            ctx, stem = build_parallel3_ik_context(robot, p3, command), "ik_parallel3"
+        elif geo is None:
+            try:
+                ctx, stem = build_ik_context(robot, command), "ik"
+            except DeriveError as exc:
+                raise DeriveError(_no_typeset_form(robot, exc)) from None
         else:
             ctx, stem = build_sw_ik_context(robot, geo, command), "ik_spherical"
     env = template_environment()
@@ -163,6 +170,22 @@ def write_ik(robot, out_dir, progress: bool = False, command: str | None = None,
     if progress:
         print(f"[{robot_name}] IK extracted and typeset ({time.perf_counter() - t0:.2f} s)", file=sys.stderr)
     return written
+
+
+def _no_typeset_form(robot, exc) -> str:
+    """The message of a robot whose IK cannot be typeset: the extraction's reason, and for an arm
+    that the general 6R elimination solves (:func:`derive.ik.nearclass.classify`'s ``general6r``,
+    not a near-class arm) why there is nothing to typeset and how its IK is computed instead."""
+    text = str(exc)
+    c = nearclass_classify(robot) if robot.dof == 6 else None
+    if c is None or not c.general6r or c.closed_form:        # (a near-class arm: its nominal's closed form)
+        return text
+    why = text.split(": ", 1)[-1] if text.startswith(robot.name + ": ") else text
+    return (f"{robot.name}: no closed form to typeset: the arm is of no special class (UR, spherical "
+            "wrist, three parallel), and its IK is the general 6R elimination (derive.ik.general6r: "
+            "up to 16 solutions, the roots of an eigenproblem solved per pose in numbers), not a "
+            f"sequence of closed-form steps; solve a pose with `dq-derive ik {robot.name} --q ...` (or "
+            f"--xyz/--rpy, --dq) or derive.kernels(robot). (The equations' extraction: {why})")
 
 
 # --------------------------------------------------------------------------- #
@@ -729,3 +752,139 @@ def build_redundant_ik_context(robot, command: str) -> dict:
         "sources": SOURCES[kind], "check": _redundant_check(robot, kind),
     })
     return ctx
+
+
+# --------------------------------------------------------------------------- #
+# Three-parallel class (IK-Geo's subproblem decomposition)
+# --------------------------------------------------------------------------- #
+P3_SOURCES = [("A. J. Elias, J. T. Wen",
+               "IK-Geo: Unified robot inverse kinematics using subproblem decomposition",
+               "Mechanism and Machine Theory 196, 2024 (arXiv:2211.05737): the solvers "
+               "IK_3_parallel_2_intersecting (subproblems 4, 4, 1, 1, 3, 1) and IK_3_parallel "
+               "(subproblems 6, 1, 1, 3, 1); the steps here are derive.ik.parallel3's form of them")]
+
+
+def _p3_check(robot, geo, samples: int = CHECK7_SAMPLES, seed: int = CHECK7_SEED) -> dict:
+    """The report's numerical check of the three-parallel closed form
+    (:func:`derive.ik.closed_form.solve` with the class's geometry): ``samples`` configurations
+    uniform inside the joint limits (numpy ``default_rng(seed)``; +-pi for a joint without
+    limits), their poses by the reference FK, as :func:`_check_summary` reports them."""
+    from derive.ik.closed_form import solve as closed_solve
+    lim = np.asarray(robot.limits, dtype=float)
+    lo = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -np.pi)
+    hi = np.where(np.isfinite(lim[:, 1]), lim[:, 1], np.pi)
+    q = np.random.default_rng(seed).uniform(lo, hi, size=(samples, robot.dof))
+    poses = fk(robot, q)
+    sols, counts, _, reasons = closed_solve(robot, geo, poses)
+    return _check_summary(robot, q, poses, sols, counts, reasons, samples, seed)
+
+
+def build_parallel3_ik_context(robot, geo, command: str) -> dict:
+    """The closed form of a 6R arm of the three-parallel class (:mod:`derive.ik.parallel3`, after
+    IK-Geo): the product-of-exponentials numbers of the robot, IK-Geo's steps as the module
+    solves them (axes 5 and 6 meeting: subproblems 4, 4, 1, 1, 3, 1; apart: 6, 1, 1, 3, 1), the
+    branch numbering, the singular sets, reachability and a numerical check (:func:`_p3_check`).
+    Typeset from the geometry, not from extracted equations: the class's closed form is a
+    composition of subproblems, which the equation extraction (:mod:`derive.ik.extract`) does
+    not find."""
+    from derive.ik import parallel3
+    robot = load_robot(robot)
+    sp6 = geo.layout == "sp6"
+    joint = [f"q_{{{geo.order[i] + 1}}}" for i in range(6)]          # the robot's joint of chain axis i
+    q1, q2, q3, q4, q5, q6 = joint
+    numbers = [{"name": f"h_{{{i + 1}}}", "value": _vector(h), "text": f"unit axis of joint ${joint[i]}$"}
+               for i, h in enumerate(geo.h)]
+    numbers += [{"name": f"p_{{{i}}}", "value": _vector(v),
+                 "text": ("base origin to a point of axis 1 (m)" if i == 0 else
+                          "a point of axis 6 to the end frame's origin (m)" if i == 6 else
+                          ("point of axis 5 to point of axis 6 (m)" if sp6 else
+                           "0: axes 5 and 6 meet at the wrist point") if i == 5 else
+                          f"point of axis {i} to point of axis {i + 1} (m)")}
+                for i, v in enumerate(geo.p)]
+    numbers.append({"name": "d_1", "value": _num(geo.d1),
+                    "text": "$h_2^T (p_1 + p_2 + p_3 + p_4)$, the arm's offset along the parallel axes (m)"})
+    intro = [
+        "Axes 2, 3 and 4 are parallel" + (", axes 5 and 6 do not meet" if sp6 else
+                                          " and axes 5 and 6 meet at the wrist point")
+        + ": the three-parallel class, solved as IK-Geo's "
+        + ("three parallel solver by subproblems 6, 1, 1, 3 and 1" if sp6 else
+           "three parallel, two intersecting solver by subproblems 4, 4, 1, 1, 3 and 1")
+        + ". The class's closed form is this composition of subproblems (derive.ik.parallel3), "
+          "written from the arm's geometry, not extracted from its derived equations.",
+        "The arm in the product-of-exponentials form (every number from the robot's own chain at "
+        "the zero configuration, base frame; $R(h, q)$ the rotation by $q$ about the unit axis $h$, "
+        "$R_i = R(h_i, q_i)$ for the axis $h_i$ of chain position $i$, whose joint is named in the "
+        "table):",
+    ]
+    relation = [r"R = R_1 R_2 R_3 R_4 R_5 R_6\, R_{6T},\qquad t = p_0 + R_1 p_1 + R_1 R_2 p_2 + "
+                r"R_1 R_2 R_3 p_3 + R_1 R_2 R_3 R_4 p_4 + R_1 \cdots R_5\, p_5 + R_1 \cdots R_6\, p_6",
+                r"R_{6T} = " + _matrix(geo.r6t)]
+    relation_text = (f"The form reproduces the robot's FK with errors {_residual_text(geo.error)} "
+                     "(m, rad; below 1e-10 is required), with")
+    pose = {"title": r"The pose terms",
+            "text": r"From the pose $(R, t)$ of the end frame:",
+            "formulas": [r"R_{06} = R\, R_{6T}^T,\qquad p_{16} = t - p_0 - R_{06}\, p_6"]}
+    q6_theta = [
+        {"title": rf"${q6}$ (subproblem 1)",
+         "text": r"With $R_t = R(h_1, " + q1 + r")^T R_{06} = R(h_2, " + q2 + " + " + q3 + " + " + q4
+                 + r")\, R_5 R_6$, the rotations about $h_2$ fix $h_2$:",
+         "formulas": [rf"R(-h_6, {q6})\, \left(R(h_5, {q5})^T h_2\right) = R_t^T h_2"]},
+        {"title": rf"$\theta = {q2} + {q3} + {q4}$ (subproblem 1)",
+         "text": r"On a unit vector $x$ across $h_2$ (exact also where $" + q6 + r"$ was chosen freely):",
+         "formulas": [rf"R(h_2, \theta)\, x = R_t\, R(h_6, {q6})^T R(h_5, {q5})^T x"]},
+        {"title": rf"${q3}$ (subproblem 3)",
+         "text": "Two roots:",
+         "formulas": [r"v = R(h_1, " + q1 + r")^T p_{16} - p_1 - R(h_2, \theta)\, "
+                      + (r"\left(p_4 + R(h_5, " + q5 + r")\, p_5\right)" if sp6 else "p_4") + ",",
+                      rf"\left\| R(h_2, {q3})\, p_3 + p_2 \right\| = \| v \|"]},
+        {"title": rf"${q2}$ (subproblem 1) and ${q4}$",
+         "text": "",
+         "formulas": [rf"R(h_2, {q2})\, \left(p_2 + R(h_2, {q3})\, p_3\right) = v,\qquad "
+                      rf"{q4} = \theta - {q2} - {q3}"]},
+    ]
+    if sp6:
+        first = [{"title": rf"${q1}$ and ${q5}$ (subproblem 6)",
+                  "text": "Projected on $h_2$ (the rotations about $h_2$ keep it), two equations in "
+                          f"${q1}$ and ${q5}$ with up to 4 solutions, $d_1$ from the table:",
+                  "formulas": [rf"h_2^T R(-h_1, {q1})\, p_{{16}} + h_2^T R(h_5, {q5})\, (-p_5) = d_1",
+                               rf"h_2^T R(-h_1, {q1})\, R_{{06}} h_6 + h_2^T R(h_5, {q5})\, (-h_6) = 0"]}]
+        branch = {"formula": r"k = 2\, i_6 + i_3",
+                  "text": (f"$i_6$ (0 to 3) is the solution of subproblem 6, ascending in ${q1}$ (the "
+                           "solutions first, then the empty slots); $i_3$ is the root of subproblem 3 "
+                           "(0 the first, 1 the second).")}
+        singular = [{"name": "subproblem 6 degenerate",
+                     "text": "an angle of subproblem 6 is free: the candidate is marked singular."}]
+        reasons = [parallel3.REASON_SP6, parallel3.REASON_REACH]
+    else:
+        first = [{"title": rf"${q1}$ (subproblem 4)",
+                  "text": r"The rotations about $h_2$ keep the component along $h_2$; two roots:",
+                  "formulas": [rf"h_2^T R(-h_1, {q1})\, p_{{16}} = d_1"]},
+                 {"title": rf"${q5}$ (subproblem 4)",
+                  "text": r"With $R_t = R(h_1, " + q1 + r")^T R_{06}$; two roots:",
+                  "formulas": [rf"h_2^T R(h_5, {q5})\, h_6 = h_2^T R_t\, h_6"]}]
+        branch = {"formula": r"k = 4\, i_1 + 2\, i_5 + i_3",
+                  "text": (f"$i_1$, $i_5$ and $i_3$ are the roots of the subproblems of ${q1}$, ${q5}$ "
+                           f"and ${q3}$ (0 the first, 1 the second).")}
+        singular = [{"name": "shoulder",
+                     "text": (f"the wrist point (the end of $p_{{16}}$) on axis 1: subproblem 4 of ${q1}$ "
+                              f"degenerates and ${q1}$ is free; it is taken from the reference "
+                              "configuration when one is given, else 0, and the solution is marked "
+                              "singular.")}]
+        reasons = [parallel3.REASON_SHOULDER, parallel3.REASON_REACH]
+    singular.insert(0, {"name": "wrist",
+                        "text": (rf"$R(h_5, {q5})^T h_2$ along $h_6$ (closer than {_sci(WRIST_SINGULAR)}: "
+                                 rf"axis 6 parallel to the parallel axes): ${q6}$ and $\theta$ are one "
+                                 rf"rotation about $h_2$ and ${q6}$ is free, from the reference "
+                                 "configuration when one is given, else 0; the solution is marked singular.")})
+    steps = [pose] + first + q6_theta
+    for k, st in enumerate(steps):
+        st["k"] = k + 1
+    return {
+        "version": __version__, "command": command, "robot": robot.name, "title": robot.title,
+        "layout": geo.layout, "sp6": sp6, "intro": intro, "numbers": numbers,
+        "relation_text": relation_text, "relation": relation, "steps": steps, "branch": branch,
+        "singular": singular,
+        "reach": {"text": "A branch is dropped where a subproblem has no exact solution; where none "
+                          "remains the pose has no solution, with the reason", "reasons": reasons},
+        "check": _p3_check(robot, geo), "sources": P3_SOURCES,
+    }
