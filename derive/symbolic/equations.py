@@ -248,7 +248,9 @@ def derive_equations(robot, progress: bool = False, symbolic: bool = True) -> tu
         raise DeriveError(
             f"{robot.name}: not every fixed angle is a multiple of pi/12 (decimal or "
             "calibrated twists), so the exact equations M_i = N_i are not derived; the FK kernels "
-            "come from the numeric product, and derive.refine solves the IK")
+            "come from the numeric product; solve a pose with its kernels (dq-derive ik ROBOT --q ... "
+            "or derive.kernels(robot).ik: the nearby class's closed form polished, or the general "
+            "6R elimination)")
     if not symbolic:
         hit = peek("equations", (robot.id, True))
         if hit is not None:
