@@ -38,7 +38,6 @@ from derive.errors import DeriveError, InputError
 from derive.ik import free_joint, general6r as g6, redundant, select
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX, G6_RANK_TOL,
                                   G6_NEAR_SINGULAR, G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
-from derive.ik.tolerances import FREE_JOINT_NEAR_ROOTS
 from derive.kinematics.pose import as_pose_batch
 
 #: Solutions per pose and value at most (a 6R has at most 16).
@@ -253,7 +252,7 @@ def _core_context(pl: free_joint.Plan) -> dict:
         "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
         "n_d3": len(pl.d3), "start": _arr(g6._START), "nudge": _lit(g6._NUDGE),
-        "cluster_tol": _lit(g6.CLUSTER_TOL), "near_roots": _lit(FREE_JOINT_NEAR_ROOTS), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
+        "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
         "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": 0, "notes": [" ".join(pl.notes.split())],
@@ -371,8 +370,7 @@ def c_source(robot, joint: int) -> str:
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
-        near_roots=_lit(FREE_JOINT_NEAR_ROOTS), max_solutions=MAX_SOLUTIONS,
-        strict=free_joint.route(robot, joint) != "general")
+        max_solutions=MAX_SOLUTIONS)
 
 
 class _CLibrary:

@@ -218,18 +218,6 @@ G6_NEAR_SINGULAR = 1e-6
 #: polynomial of degree 2). There the root is good to about the square root of the rounding only.
 SP6_DOUBLE_ROOT = 1e-4
 
-# --- A seven-joint arm with a joint given, the general elimination per value
-# --- (derive.ik.free_joint._general, templates/free_joint.c.j2).
-
-#: Two real eigenvalues x = tan(q/2) of the eigen-variable (dimensionless) of one pose and value
-#: whose gap, relative to 1 + |x|, is above the general 6R's CLUSTER_TOL (one multiple root) but at
-#: or below this make the pose's degenerate flag: a near pair whose null vectors are nearly
-#: parallel, where a solution can be lost (near the SRS elbow singularity of iiwa14 with q1, q2,
-#: q6 or q7 given). With it, the FK check's failures, an odd count and G6_NEAR_SINGULAR, every
-#: pose where the C kernel's set differs from the closed form's is flagged (1e-3: one of 3200
-#: poses near q4 = 0 not; 3e-3: none; random poses flagged 0.3-0.6 %, 1e-2: about 1 %).
-FREE_JOINT_NEAR_ROOTS = 3e-3
-
 # --- Moved here from their modules (issue 31's leftovers); the values, and so the emitted
 # --- kernels' bytes, are unchanged.
 
