@@ -6,7 +6,9 @@ With ``--ssik M``: on the first M poses of xarm7 and gen3, ssik's joint-lock sol
 (ssik.solvers.jointlock.seven_r, same held value) and whether its solutions are all ours.
 With ``--c``: the C kernel (derive.codegen.free_joint.c_library, batched, one thread; compiled
 before timing: on the SRS class routes the class's IK program, where the numpy column is the same
-closed form; on the general route the general elimination, wherever it has a plan) on the same poses and values: its CPU time per pose and value
+closed form; on the Panda's q7 the Panda class's kernels, ``derive.kernels(robot, "c")``, which
+``free="q7"`` returns; on the general route the general elimination, wherever it has a plan) on the
+same poses and values: its CPU time per pose and value
 (best of ``--repeats``), and on how many poses its solution set equals the numpy reference's.
 
     .venv/bin/python benchmarks/bench_free_joint.py [--poses N] [--arms a,b] [--joints 1,2] [--ssik M]
@@ -107,13 +109,18 @@ def main():
                 except DeriveError:
                     pass
                 else:
-                    from derive.codegen.free_joint import c_library
-                    from derive.codegen.loader import _compile
-                    lib = c_library(robot, k, _compile)
+                    if how == "panda":     # the user's C with q7 given: the Panda class's kernels
+                        kc = derive.kernels(robot, "c")
+                        solve = lambda p, v: kc.ik(p, free=v)       # noqa: E731
+                    else:
+                        from derive.codegen.free_joint import c_library
+                        from derive.codegen.loader import _compile
+                        lib = c_library(robot, k, _compile)
+                        solve = lambda p, v: lib.solve(p, v)[:2]    # noqa: E731
                     times = []
                     for _ in range(max(args.repeats, 1)):
                         t0 = time.process_time()
-                        cq, cc, _, _ = lib.solve(poses, q[:, k - 1])
+                        cq, cc = solve(poses, q[:, k - 1])
                         times.append(time.process_time() - t0)
                     us = min(times) / args.poses * 1e6
                     same = sum(_same(cq[i, :cc[i]], r.q[i, :r.counts[i]]) for i in range(args.poses))
