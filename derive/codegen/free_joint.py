@@ -130,10 +130,9 @@ def _c_plans(robot, joint: int) -> list:
     pl = free_joint.plan(robot, joint)
     plans = [pl, pl.alt if pl.alt is not None else pl]
     if free_joint.route(robot, joint) != "general":
-        # a class route (the SRS class with q2 or q6 given): the cut with the held link on the pair
-        # side makes fewer C sets differ from the closed form near the elbow singularity (iiwa14 q2:
-        # 305 instead of 788 of 1000) but flags more random poses (1.8-1.9 % instead of 1.2 %, the
-        # test allows 2 %); the reference's plans stay
+        # a class route: the SRS routes' C is their IK program (program_source) and never comes
+        # here; the Panda's q7 (reached only by calling the free-joint kernels directly, as the
+        # benchmarks do) keeps the reference's plans
         return plans
     own = _fixed_deflation(pl)
     best, best_keep = None, 24 if own is None else own[1]
@@ -222,7 +221,7 @@ def _deflation(pl: free_joint.Plan):
     make = getattr(cg6, "_deflation_context", None) or getattr(cg6, "deflation_context", None)
     if make is None:
         return None
-    # on a class route only joints 1 and 7 (as before c_plans: see there)
+    # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
     found = _fixed_deflation(pl) if general else None
     if found is None:
@@ -330,7 +329,8 @@ def _render_program(robot, joint: int) -> str:
     ident = _identifier(robot, joint)
     ctx = _context(robot, f"derive.kernels({robot.name!r}, 'c', free='q{joint}')", f"q{joint}")
     if ctx["ik"] is None or ctx["ik"].get("free") != f"q{joint}":
-        raise DeriveError(f"{robot.name} with q{joint} given: no IK program ({ctx.get('ik_missing')})")
+        why = ctx.get("ik_missing") or f"the IK program's free parameter is {(ctx['ik'] or {}).get('free')}"
+        raise DeriveError(f"{robot.name} with q{joint} given: no IK program ({why})")
     ctx["id"] = ident
     env = template_environment()
     header = env.get_template("kinematics.h.j2").render(ctx)
@@ -438,7 +438,11 @@ class _CProgram:
         f = getattr(lib, f"{ident}_ik_batch_ex")
         f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
         f.restype = None
-        self.width = int(re.search(rf"#define {ident.upper()}_IK_MAX (\d+)", text).group(1))
+        found = re.search(rf"#define {ident.upper()}_IK_MAX (\d+)", text)
+        if found is None:
+            raise DeriveError(f"{robot.name} with q{joint} given: the program's header has no "
+                              f"{ident.upper()}_IK_MAX line (templates/kinematics.h.j2)")
+        self.width = int(found.group(1))
         self._lib, self._f = lib, f
 
     def details(self, poses, values):
@@ -542,7 +546,7 @@ class FreeJointKernels:
         """Every solution with joint K held at ``free`` (rad, a number or one per pose):
         (solutions (n, 16, 7) NaN-padded, valid rows first, counts (n,)); one pose gives
         ((16, 7), count). ``details``: also (branch (n, 16): the class's branch ids, -1 on the
-        general route and from the C kernel; singular (n, 16)). ``within_limits``: every in-limit winding of each
+        general route (numpy and C); singular (n, 16)). ``within_limits``: every in-limit winding of each
         solution (:func:`derive.ik.select.within_limits`)."""
         self._need(free)
         poses, single = self._poses(P)

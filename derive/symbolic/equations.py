@@ -245,12 +245,19 @@ def derive_equations(robot, progress: bool = False, symbolic: bool = True) -> tu
     ``symbolic`` is False); cached per robot identity."""
     robot = load_robot(robot)
     if not robot.exact:
+        if robot.dof == 6:
+            how = (f"solve a pose with its kernels (dq-derive ik {robot.name} --q ... or "
+                   "derive.kernels(robot).ik: the nearby class's closed form polished, or the general "
+                   "6R elimination)")
+        elif robot.dof == 7:
+            how = (f"solve a pose with one joint given (derive.kernels({robot.name!r}, free='qK').ik, "
+                   f"or dq-derive ik {robot.name} --q ... --free-joint K)")
+        else:
+            how = "derive.refine solves a pose"
         raise DeriveError(
             f"{robot.name}: not every fixed angle is a multiple of pi/12 (decimal or "
             "calibrated twists), so the exact equations M_i = N_i are not derived; the FK kernels "
-            "come from the numeric product; solve a pose with its kernels (dq-derive ik ROBOT --q ... "
-            "or derive.kernels(robot).ik: the nearby class's closed form polished, or the general "
-            "6R elimination)")
+            f"come from the numeric product; {how}")
     if not symbolic:
         hit = peek("equations", (robot.id, True))
         if hit is not None:
