@@ -373,27 +373,33 @@ def c_source(robot, joint: int) -> str:
         max_solutions=MAX_SOLUTIONS)
 
 
+def _load(text: str, ident: str, compile_fn):
+    """(library path, ctypes library) of the C source ``text``: written once per source digest into
+    the user cache's build folder ("free-joint"), compiled by ``compile_fn`` and loaded (compiled
+    again once if it does not load)."""
+    import hashlib
+    from derive.cache import build_folder, writable_root, write_atomic
+    folder = build_folder(writable_root()) / "free-joint"
+    folder.mkdir(parents=True, exist_ok=True)
+    src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
+    if not src.exists() or src.read_text(encoding="utf-8") != text:
+        write_atomic(src, text)
+    path = compile_fn(src, ident)
+    try:
+        return path, ctypes.CDLL(str(path))
+    except OSError as exc:
+        path = compile_fn(src, ident, again=f"the C library {path} did not load ({exc})")
+        return path, ctypes.CDLL(str(path))
+
+
 class _CLibrary:
     """The compiled IK of one (arm, joint) on the general route, through ctypes. ``compile_fn``:
     (source path, prefix, again=None) -> shared library path, the C backend's compile step
     (:func:`derive.codegen.loader._compile`, passed in: the loader imports this module)."""
 
     def __init__(self, robot, joint: int, compile_fn):
-        from derive.cache import build_folder, writable_root, write_atomic
         ident = _identifier(robot, joint)
-        text = c_source(robot, joint)
-        folder = build_folder(writable_root()) / "free-joint"
-        folder.mkdir(parents=True, exist_ok=True)
-        import hashlib
-        src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
-        if not src.exists() or src.read_text(encoding="utf-8") != text:
-            write_atomic(src, text)
-        self.path = compile_fn(src, ident)
-        try:
-            lib = ctypes.CDLL(str(self.path))
-        except OSError as exc:
-            self.path = compile_fn(src, ident, again=f"the C library {self.path} did not load ({exc})")
-            lib = ctypes.CDLL(str(self.path))
+        self.path, lib = _load(c_source(robot, joint), ident, compile_fn)
         f = getattr(lib, f"{ident}_ik_batch_free")
         f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
         f.restype = None
@@ -420,21 +426,9 @@ class _CProgram:
     calls of :class:`_CLibrary`, and :meth:`details` with the branch ids."""
 
     def __init__(self, robot, joint: int, compile_fn):
-        from derive.cache import build_folder, writable_root, write_atomic
-        import hashlib
         ident = _identifier(robot, joint)
         text = program_source(robot, joint)
-        folder = build_folder(writable_root()) / "free-joint"
-        folder.mkdir(parents=True, exist_ok=True)
-        src = folder / f"{ident}-{hashlib.sha256(text.encode()).hexdigest()[:16]}.c"
-        if not src.exists() or src.read_text(encoding="utf-8") != text:
-            write_atomic(src, text)
-        self.path = compile_fn(src, ident)
-        try:
-            lib = ctypes.CDLL(str(self.path))
-        except OSError as exc:
-            self.path = compile_fn(src, ident, again=f"the C library {self.path} did not load ({exc})")
-            lib = ctypes.CDLL(str(self.path))
+        self.path, lib = _load(text, ident, compile_fn)
         f = getattr(lib, f"{ident}_ik_batch_ex")
         f.argtypes = [ctypes.c_size_t] + [ctypes.c_void_p] * 6
         f.restype = None
