@@ -38,6 +38,15 @@ def _poses(robot, n, seed):
     return q, reference.fk(robot, q)
 
 
+def _jacobian_singular_values(pl, q):
+    """Singular values (m, 6) of the geometric Jacobian at configurations q (m, 6), from plain 4x4
+    matrices of the plan's chain (independent of the kernels)."""
+    frames, end = general6r._chain_frames(pl.c, q)
+    axes = frames[:, :, :3, 2]
+    return np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
+                         compute_uv=False)
+
+
 def _contains(sols, q, tol=1e-6):
     return len(sols) > 0 and float(np.min(np.max(np.abs(wrap_angle(sols - q)), axis=1))) < tol
 
@@ -111,10 +120,7 @@ def test_degenerate_and_singular_poses_give_no_nan(quick_c):
     assert counts.min() >= 0 and counts.max() <= 16
     ref = general6r.solve("crx10ia", P)
     pl = general6r.plan("crx10ia")
-    frames, end = general6r._chain_frames(pl.c, q)
-    axes = frames[:, :, :3, 2]
-    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                       compute_uv=False)
+    sv = _jacobian_singular_values(pl, q)
     regular = sv[:, -1] > 1e-6 * sv[:, 0]
     assert regular.sum() >= 20
     for i in range(len(q)):
@@ -147,10 +153,7 @@ def test_crx_home_pose_keeps_every_regular_solution(quick_c):
     ref = general6r.solve("crx10ia", P)
     r = ref.q[0, :ref.counts[0]]
     pl = general6r.plan("crx10ia")
-    frames, end = general6r._chain_frames(pl.c, r)
-    axes = frames[:, :, :3, 2]
-    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                       compute_uv=False)
+    sv = _jacobian_singular_values(pl, r)
     regular = sv[:, -1] > 1e-6 * sv[:, 0]
     assert regular.sum() == 4 and len(r) >= 8
     for i in np.flatnonzero(regular):
@@ -323,17 +326,11 @@ def test_numpy_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_p
     sols, counts, sing, degen = derive.kernels(robot, "numpy")._mod.ik_general(P)
     # the singular set, on plain 4x4 matrices: the geometric Jacobian's relative smallest singular value
     pl = general6r.plan(robot, progress=False)
-    frames, end = general6r._chain_frames(pl.c, q)
-    axes = frames[:, :, :3, 2]
-    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                       compute_uv=False)
+    sv = _jacobian_singular_values(pl, q)
     regular = sv[:, -1] > 1e-8 * sv[:, 0]
     assert 30 <= regular.sum() <= 120
     ok = ~np.isnan(sols[..., 0])
-    frames, end = general6r._chain_frames(pl.c, sols[ok])
-    axes = frames[:, :, :3, 2]
-    svs = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                        compute_uv=False)
+    svs = _jacobian_singular_values(pl, sols[ok])
     ratio = svs[:, -1] / svs[:, 0]
     clear = (ratio < 1e-9) | (ratio > 1e-7)
     assert np.array_equal(sing[ok][clear], ratio[clear] < 1e-8) and clear.sum() >= 0.5 * ok.sum()
@@ -423,10 +420,7 @@ def test_c_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_poses
     ref = general6r.solve(robot, P)
     sols, counts, sing, degen = _c_general(robot, P)
     pl = general6r.plan(robot, progress=False)
-    frames, end = general6r._chain_frames(pl.c, q)
-    axes = frames[:, :, :3, 2]
-    sv = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                       compute_uv=False)
+    sv = _jacobian_singular_values(pl, q)
     regular = sv[:, -1] > 1e-8 * sv[:, 0]
     assert 30 <= regular.sum() <= 120
     assert np.array_equal(degen, ref.degenerate) and degen.sum() >= 100
@@ -434,10 +428,7 @@ def test_c_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_poses
     assert same.sum() >= 50 and degen[~same].all()
     ok = ~np.isnan(sols[..., 0])
     assert not np.any(sing[~ok]) and sing.sum() >= 50
-    frames, end = general6r._chain_frames(pl.c, sols[ok])
-    axes = frames[:, :, :3, 2]
-    svs = np.linalg.svd(np.concatenate([np.cross(axes, end[:, None, :3, 3] - frames[:, :, :3, 3]), axes], 2),
-                        compute_uv=False)
+    svs = _jacobian_singular_values(pl, sols[ok])
     assert np.all(svs[sing[ok], -1] < 1e-6 * svs[sing[ok], 0])
     for i in range(len(q)):
         s = sols[i, :counts[i]]
