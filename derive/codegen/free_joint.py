@@ -70,7 +70,7 @@ def _held_on_pair_side(pl: free_joint.Plan) -> bool:
     return link in (0, 6) or link in {(pl.e + 3) % 6 + 1, (pl.e + 4) % 6 + 1}
 
 
-def _fixed_deflation(pl: free_joint.Plan):
+def _fixed_deflation(pl: free_joint.Plan, any_side: bool = False):
     """:func:`derive.ik.general6r._deflation` of the locked 6R where it holds for every held
     value: the held link off the triple side (:func:`_held_on_pair_side`; there the pencil's
     pose-independent eigenvectors, at x = +-i and at complex roots every pose shares, need not
@@ -81,7 +81,7 @@ def _fixed_deflation(pl: free_joint.Plan):
     spurious real roots. (bases, keep, spurious) or None."""
     from types import SimpleNamespace
 
-    if not _held_on_pair_side(pl):
+    if not any_side and not _held_on_pair_side(pl):
         return None
     found = []
     for v in _DEFLATION_VALUES:
@@ -204,6 +204,120 @@ def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
     return True
 
 
+#: Random values and poses per value at which a deflation of a plan with the held link on the
+#: triple side is checked (:func:`_triple_side_deflation`), and the largest leak |(I - V V^T) C V|
+#: allowed there, relative to max(1, the companion's largest entry)
+_TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK = 24, 4, 1e-10
+
+
+def _companions(pl: free_joint.Plan, v: float, q, d: float) -> np.ndarray:
+    """The companion matrices (m, 24, 24) at offset d of the locked 6R's pencil (the reference's
+    loop cut, :func:`derive.ik.general6r._cut_front`) with the joint held at v, at the poses of the
+    6R configurations q (m, 6)."""
+    from types import SimpleNamespace
+
+    dd = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+    if pl.reverse:
+        dd = g6._reverse(dd)
+    p = SimpleNamespace(c=dd, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(dd, pl.e)}, offsets=pl.offsets,
+                        d3=pl.d3)
+    _, target = g6._chain_frames(dd, q)
+    mats = g6._cut_front(p, target)[-1]
+    mk = np.einsum("ak,naij->nkij", g6._half(d), mats)
+    with np.errstate(all="ignore"):
+        low = -g6._inv_safe(mk[:, 2]) @ np.concatenate([mk[:, 0], mk[:, 1]], axis=2)
+    comp = np.zeros((len(q), 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:] = low
+    return comp
+
+
+def _leak(comp, v) -> float:
+    """max over the companion matrices comp (m, 24, 24) of |(I - V V^T) C V| / max(1, |C|) for the
+    orthonormal V (24, r): zero where span V is invariant under each."""
+    out = comp @ v - v @ (np.swapaxes(v, 0, 1) @ comp @ v)
+    with np.errstate(all="ignore"):
+        r = np.abs(out).max(axis=(1, 2)) / np.maximum(1.0, np.abs(comp).max(axis=(1, 2)))
+    return float(np.max(np.where(np.isfinite(r), r, np.inf)))
+
+
+def _shared_subspace(pl: free_joint.Plan, v: float, rng, m: int = 4):
+    """(V (24, r) orthonormal, leak) at offset d3[0] and value v: the span of the companion
+    matrix's eigenvectors (real and imaginary parts) whose eigenvalues m random poses share (the
+    eigenvectors every pose shares: the pencil's spurious eigenpairs of the triple side alone),
+    and its leak (:func:`_leak`) on those poses; (None, inf) where none is shared."""
+    comp = _companions(pl, v, rng.uniform(-np.pi, np.pi, (m, 6)), pl.d3[0])
+    if not np.all(np.isfinite(comp)):
+        return None, np.inf
+    lam, vec = np.linalg.eig(comp[0])
+    others = [np.linalg.eigvals(c) for c in comp[1:]]
+    sel = [i for i, x in enumerate(lam) if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
+    if not sel:
+        return None, np.inf
+    u, s, _ = np.linalg.svd(np.concatenate([vec[:, sel].real, vec[:, sel].imag], 1), full_matrices=False)
+    basis = u[:, :int(np.sum(s > 1e-8 * s[0]))]
+    return basis, _leak(comp, basis)
+
+
+def _offset_rotation(pl: free_joint.Plan, k: int) -> np.ndarray:
+    """R (24, 24) with R V_0 = V_k: the companion's eigenvector [u; x u] at offset d3[0] is,
+    up to a factor, [cos h u; sin h u] with h = (t - d) / 2 (t the eigen-variable's angle), so at
+    offset d3[k] it is the rotation of the two halves by (d3[k] - d3[0]) / 2."""
+    a = 0.5 * (pl.d3[k] - pl.d3[0])
+    c, s = np.cos(a) * np.eye(12), np.sin(a) * np.eye(12)
+    return np.block([[c, s], [-s, c]])
+
+
+def _triple_side_deflation(pl: free_joint.Plan):
+    """A deflation baked once for a plan whose held link lies on the triple side (joints 3-5,
+    :func:`_held_on_pair_side` false), where the subspace of the eigenvectors every pose shares
+    does not move with the value although its eigenvalues do: (bases (n_d3, 24, 24) [W V],
+    keep, ()) or None. Two candidates: :func:`_fixed_deflation`'s (the reference's
+    :func:`derive.ik.general6r._deflation` at each of :data:`_DEFLATION_VALUES`; it finds the
+    eigenvectors at x = +-i, the Panda's q5) and the span of the shared eigenvectors at the
+    value among :data:`_DEFLATION_VALUES` where it is invariant best (:func:`_shared_subspace`;
+    xArm7's q3: 8 eigenvectors whose eigenvalues move with the value but not their span); the
+    one removing more that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every
+    offset on :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    :data:`_TRIPLE_CHECK_VALUES` random values. Where it moves (the other arms' joints 3-5), None:
+    the whole pencil."""
+    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-triple-deflation", key, lambda: _triple_side_deflation_uncached(pl))
+
+
+def _triple_side_deflation_uncached(pl: free_joint.Plan):
+    rng = np.random.default_rng(29)
+    options = []
+    found = _fixed_deflation(pl, any_side=True)
+    if found is not None:
+        options.append(np.asarray(found[0], dtype=float)[0][:, found[1]:])
+    best = min((_shared_subspace(pl, v, rng) for v in _DEFLATION_VALUES), key=lambda f: f[1])
+    if best[0] is not None and best[1] < _TRIPLE_CHECK_LEAK:
+        options.append(best[0])
+    values = np.concatenate([_DEFLATION_VALUES, rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)])
+    for v0 in sorted(options, key=lambda b: -b.shape[1]):
+        if not 2 <= v0.shape[1] <= 12:
+            continue
+        rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+        ok = True
+        for v in values:
+            q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6))
+            for k, d in enumerate(pl.d3):
+                if not _leak(_companions(pl, v, q, d), rots[k] @ v0) <= _TRIPLE_CHECK_LEAK:
+                    ok = False
+                    break
+            if not ok:
+                break
+        if ok:
+            bases = []
+            for k in range(len(pl.d3)):
+                qv = np.linalg.qr(rots[k] @ v0, mode="complete")[0]
+                r = v0.shape[1]
+                bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+            return np.array(bases), 24 - v0.shape[1], ()
+    return None
+
+
 def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value
@@ -224,6 +338,8 @@ def _deflation(pl: free_joint.Plan):
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
     found = _fixed_deflation(pl) if general else None
+    if found is None and general and not _held_on_pair_side(pl):
+        found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
         return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
     b, keep, spurious = found
