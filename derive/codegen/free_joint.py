@@ -318,6 +318,122 @@ def _triple_side_deflation_uncached(pl: free_joint.Plan):
     return None
 
 
+#: The per-value deflation basis (:func:`value_basis`): values sampled, the degrees tried, the
+#: largest fitting leak accepted at a sample and the smallest singular value of the fitted basis
+_VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV = 160, (1, 2, 4, 8, 12, 16, 24, 32), 1e-11, 1e-3
+
+
+def value_basis(pl: free_joint.Plan):
+    """The deflation of a plan whose held link lies on the triple side (joints 3-5) where the
+    subspace V(v) of the eigenvectors every pose shares moves with the value v: a basis of it as
+    a trigonometric polynomial in v, V(v) = sum_k H[k] h_k(v), h = (1, cos v, sin v, ...,
+    cos N v, sin N v), at the offset d3[0] (the other offsets' by :func:`_offset_rotation`).
+    The spurious eigenvectors depend on the value only, never on the pose, and their span is an
+    analytic function of v (where no spurious eigenvalue meets another eigenvalue of the triple
+    side's equations), so its Fourier series converges geometrically. Fitted by least squares to
+    the spans at :data:`_VALUE_SAMPLES` equispaced values (:func:`_shared_subspace`, the best of
+    the three offsets, each projected on a fixed basis V0 so that the fit is linear), the
+    smallest degree of :data:`_VALUE_DEGREES` whose basis holds (:func:`_leak` at most
+    :data:`_TRIPLE_CHECK_LEAK`, its smallest singular value above :data:`_VALUE_MIN_SV`) on
+    :data:`_TRIPLE_CHECK_POSES` random poses at :data:`_TRIPLE_CHECK_VALUES` random values and every
+    offset. (H (2N + 1, 24, r), N) or None (then the whole pencil). Once per process."""
+    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-value-basis", key, lambda: _value_basis_stored(pl))
+
+
+def _value_basis_stored(pl: free_joint.Plan):
+    """:func:`_value_basis`, kept in the user cache (a few seconds per plan; keyed by the robot's
+    identity, the plan and this code's version and constants)."""
+    import hashlib
+    import json
+    from derive.cache import find_artifact, step, store_artifacts, task
+    from derive.model.robot import load_robot
+    robot = load_robot(pl.robot)
+    tag = hashlib.sha256(repr((__version__, pl.joint, pl.reverse, pl.e, pl.ev, np.asarray(pl.offsets).tolist(),
+                               _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV, _TRIPLE_CHECK_VALUES,
+                               _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK)).encode()).hexdigest()[:16]
+    key = f"{robot.id}-free-q{pl.joint}-vb-{tag}"
+    found = find_artifact(key, "value_basis")
+    if found is not None:
+        data = json.loads(found.read_text(encoding="utf-8"))
+        return None if data["h"] is None else (np.array(data["h"], dtype=float), int(data["n"]))
+    with task(f"{robot.name} q{pl.joint}"):
+        step("fitting the deflation basis per value of the plan's loop cut")
+        out = _value_basis(pl)
+    text = json.dumps({"h": None if out is None else out[0].tolist(), "n": None if out is None else out[1]})
+    store_artifacts(key, {"value_basis": ("value_basis.json", text)}, {"robot": robot.name, "free": f"q{pl.joint}"})
+    return out
+
+
+def _value_harmonics(v, n: int) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(v, dtype=float))
+    cols = [np.ones_like(v)]
+    for k in range(1, n + 1):
+        cols += [np.cos(k * v), np.sin(k * v)]
+    return np.stack(cols, -1)
+
+
+def _value_basis(pl: free_joint.Plan):
+    rng = np.random.default_rng(37)
+    vs = 2 * np.pi * np.arange(_VALUE_SAMPLES) / _VALUE_SAMPLES
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    spans = []
+    for v in vs:
+        q = rng.uniform(-np.pi, np.pi, (4, 6))
+        best = (None, np.inf)
+        for k, d in enumerate(pl.d3):
+            comp = _companions(pl, v, q, d)
+            if not np.all(np.isfinite(comp)):
+                continue
+            lam, vec = np.linalg.eig(comp[0])
+            others = [np.linalg.eigvals(c) for c in comp[1:]]
+            sel = [i for i, x in enumerate(lam)
+                   if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
+            if not sel:
+                continue
+            u, sv, _ = np.linalg.svd(np.concatenate([vec[:, sel].real, vec[:, sel].imag], 1), full_matrices=False)
+            b = u[:, :int(np.sum(sv > 1e-8 * sv[0]))]
+            leak = _leak(comp, b)
+            if leak < best[1]:
+                best = (rots[k].T @ b, leak)
+        spans.append(best)
+    dims = [b.shape[1] for b, leak in spans if b is not None and leak < _VALUE_SAMPLE_LEAK]
+    if len(dims) < _VALUE_SAMPLES // 2:
+        return None
+    r = max(set(dims), key=dims.count)
+    good = [i for i, (b, leak) in enumerate(spans) if b is not None and leak < _VALUE_SAMPLE_LEAK and b.shape[1] == r]
+    if not 2 <= r <= 12 or len(good) < _VALUE_SAMPLES // 2:
+        return None
+    # the fixed basis V0: the sample's span that every other sample's span sees best
+    sv_min = [min(np.linalg.svd(spans[j][0].T @ spans[i][0], compute_uv=False).min() for j in good[::4])
+              for i in good[::4]]
+    v0 = spans[good[::4][int(np.argmax(sv_min))]][0]
+    y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good])         # P(v) V0: linear in P
+    test = rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)
+    for n in _VALUE_DEGREES:
+        if 2 * n + 1 > len(good) // 2:
+            break
+        h = np.linalg.lstsq(_value_harmonics(vs[good], n), y.reshape(len(good), -1), rcond=None)[0]
+        h = h.reshape(2 * n + 1, 24, r)
+        ok = True
+        for v in test:
+            b = np.einsum("k,kij->ij", _value_harmonics(v, n)[0], h)
+            sv = np.linalg.svd(b, compute_uv=False)
+            if not sv[-1] > _VALUE_MIN_SV * sv[0]:
+                ok = False
+                break
+            q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6))
+            for k, d in enumerate(pl.d3):
+                if not _leak(_companions(pl, v, q, d), np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK:
+                    ok = False
+                    break
+            if not ok:
+                break
+        if ok:
+            return h, n
+    return None
+
+
 def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value
@@ -341,7 +457,14 @@ def _deflation(pl: free_joint.Plan):
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
-        return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+        off = make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+        vb = value_basis(pl) if general and not _held_on_pair_side(pl) else None
+        if vb is not None:                        # joints 3-5: the basis per value (the caller's)
+            from derive.codegen.general6r import _arr
+            r = vb[0].shape[2]
+            rot = [[np.cos(0.5 * (d - pl.d3[0])), np.sin(0.5 * (d - pl.d3[0]))] for d in pl.d3]
+            off = dict(off, runtime=True, n=r, keep=24 - r, rot=_arr(np.array(rot)))
+        return off
     b, keep, spurious = found
     return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
 
@@ -482,11 +605,22 @@ def c_source(robot, joint: int) -> str:
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
-                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27))} for p in plans],
+                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
         max_solutions=MAX_SOLUTIONS)
+
+
+def _value_basis_context(pl: free_joint.Plan):
+    """The per-value deflation basis of a plan for templates/free_joint.c.j2 (its coefficients,
+    degree and columns), where :func:`_deflation` uses it (the core's ``defl.runtime``), else None."""
+    from derive.codegen.general6r import _arr
+    ctx = _deflation(pl)
+    if not (ctx or {}).get("runtime"):
+        return None
+    h, n = value_basis(pl)
+    return {"h": _arr(h), "n": int(n), "r": int(h.shape[2])}
 
 
 def _load(text: str, ident: str, compile_fn):
