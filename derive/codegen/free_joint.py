@@ -116,8 +116,9 @@ def c_plans(robot, joint: int) -> list:
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
-    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). On the general route
-    only; once per process."""
+    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3-5 held,
+    where the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
+    (:func:`_triple_deflates`), the two swap (gen3 q3). On the general route only; once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
@@ -163,7 +164,19 @@ def _c_plans(robot, joint: int) -> list:
                     found = _fixed_deflation(cand)
                     if found is not None and found[1] < best_keep:
                         best, best_keep = cand, found[1]
+    if best is None and pl.alt is not None and not _held_on_pair_side(pl) and not _triple_deflates(pl) \
+            and _triple_deflates(pl.alt):
+        # joints 3-5: the reference's rescue plan deflates (its span fits, the plan's does not): it
+        # is the C plan and the reference's plan its rescue (gen3 q3)
+        return [dataclasses.replace(pl.alt, alt=pl, notes=pl.alt.notes + " (its shared eigenvectors deflated per "
+                                    "value; the reference's plan is the rescue)"), pl]
     return plans if best is None else [best, pl]
+
+
+def _triple_deflates(pl: free_joint.Plan) -> bool:
+    """Whether a plan with the held link on the triple side has a deflation: baked
+    (:func:`_triple_side_deflation`) or per value (:func:`value_basis`)."""
+    return _triple_side_deflation(pl) is not None or value_basis(pl) is not None
 
 
 def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
