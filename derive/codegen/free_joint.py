@@ -452,6 +452,7 @@ def _value_basis(pl: free_joint.Plan):
     v0 = spans[good[::4][int(np.argmax(sv_min))]][0]
     y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good])         # P(v) V0: linear in P
     test = rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)
+    test_q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, 6))
     found = None
     for n in _VALUE_DEGREES:
         if 2 * n + 1 > len(good) // 2:
@@ -459,12 +460,13 @@ def _value_basis(pl: free_joint.Plan):
         h = np.linalg.lstsq(_value_harmonics(vs[good], n), y.reshape(len(good), -1), rcond=None)[0]
         h = h.reshape(2 * n + 1, 24, r)
         passed = 0
-        for v in test:
+        for j, v in enumerate(test):
+            if j - passed > (1 - _VALUE_MIN_SHARE) * len(test):
+                break                           # this degree cannot reach the share any more
             b = np.einsum("k,kij->ij", _value_harmonics(v, n)[0], h)
             sv = np.linalg.svd(b, compute_uv=False)
-            q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6))
             passed += bool(sv[-1] > _VALUE_MIN_SV * sv[0]) and all(
-                _leak(_companions(pl, v, q, d), np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK
+                _leak(_companions(pl, v, test_q[j], d), np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK
                 for k, d in enumerate(pl.d3))
         if passed == len(test):
             return h, n
