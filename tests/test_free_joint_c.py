@@ -141,10 +141,11 @@ def test_baked_deflation_holds_at_random_values_and_poses(name, k):
 
 
 @needs_gcc
-@pytest.mark.parametrize("k", [5, 2])
+@pytest.mark.parametrize("k", [5, 2, 3])
 def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path, k):
     """The emitted source (two copies of the general 6R solver core, the plan and its rescue;
-    with q2 given the plan's deflation baked, the rescue's not), warnings as errors, -Wpedantic,
+    with q2 given the plan's deflation baked, the rescue's not; with q3 the plan's deflation per
+    value, its basis a trigonometric polynomial in the value), warnings as errors, -Wpedantic,
     as C99 and C++17."""
     src = tmp_path / f"xarm7_q{k}.c"
     src.write_text(cfree.c_source("xarm7", k))
