@@ -117,8 +117,10 @@ def c_plans(robot, joint: int) -> list:
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
-    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). On the general route
-    only; once per process."""
+    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3, 4 or 5
+    held (the held link on the triple side of every cut) the cut and eigen-variable with the fewest
+    poses sent to the rescue (:func:`_quiet_plan`), where it beats the reference's plan, with the
+    reference's plan as its rescue. On the general route only; once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
