@@ -244,9 +244,8 @@ def _fewest_suspects(pl: free_joint.Plan):
     poses = fk(robot, q)
     values = q[:, pl.joint - 1]
     ref = free_joint.solve(robot, poses, pl.joint, values)
-    own = _suspects(pl, poses, values, ref.counts)
-    if own is None:
-        return None
+    # (the reference's plan may find fewer without its rescue: that is what the rescue is for)
+    own = _suspects(pl, poses, values, np.zeros_like(ref.counts))
     best, score = None, own
     for reverse in (False, True):
         for e in (1, 2):
