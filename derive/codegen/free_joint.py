@@ -27,6 +27,7 @@ of :class:`derive.codegen.loader.Kernels` with the 7R ``free=`` argument: ``ik(P
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import re
 
 import numpy as np
@@ -116,16 +117,18 @@ def c_plans(robot, joint: int) -> list:
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
-    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3-5 held,
-    where the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
-    (:func:`_triple_deflates`), the two swap (gen3 q3). On the general route only; once per process."""
+    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3, 4 or 5
+    held (the held link on the triple side of every cut) the cut and eigen-variable with the fewest
+    poses sent to the rescue (:func:`_quiet_plan`), where it beats the reference's plan, with the
+    reference's plan as its rescue; else, where the reference's plan has no deflation of its shared
+    eigenvectors but its rescue plan has (:func:`_triple_deflates`), the two swap
+    (:func:`_deflating_rescue`). On the general route only; once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
 
 
 def _c_plans(robot, joint: int) -> list:
-    import dataclasses
     from collections import Counter
 
     pl = free_joint.plan(robot, joint)
@@ -136,6 +139,14 @@ def _c_plans(robot, joint: int) -> list:
         # benchmarks do) keeps the reference's plans
         return plans
     own = _fixed_deflation(pl)
+    if own is None and not any(_held_on_pair_side(dataclasses.replace(pl, reverse=r, e=e))
+                               for r in (False, True) for e in (1, 2)):
+        # the held link on the triple side of every cut (joints 3-5): no baked deflation; the cut
+        # and eigen-variable whose pencil has the fewest spurious real roots
+        quiet = _quiet_plan(pl)
+        if quiet is not None:
+            return [quiet, pl]
+        return _deflating_rescue(pl) or plans
     best, best_keep = None, 24 if own is None else own[1]
     for reverse in (False, True):
         for e in (1, 2):
@@ -164,19 +175,114 @@ def _c_plans(robot, joint: int) -> list:
                     found = _fixed_deflation(cand)
                     if found is not None and found[1] < best_keep:
                         best, best_keep = cand, found[1]
-    if best is None and pl.alt is not None and not _held_on_pair_side(pl) and not _triple_deflates(pl) \
-            and _triple_deflates(pl.alt):
-        # joints 3-5: the reference's rescue plan deflates (its span fits, the plan's does not): it
-        # is the C plan and the reference's plan its rescue (gen3 q3)
-        return [dataclasses.replace(pl.alt, alt=pl, notes=pl.alt.notes + " (its shared eigenvectors deflated per "
-                                    "value; the reference's plan is the rescue)"), pl]
+    if best is None and not _held_on_pair_side(pl):
+        return _deflating_rescue(pl) or plans
     return plans if best is None else [best, pl]
+
+
+def _deflating_rescue(pl: free_joint.Plan):
+    """[the reference's rescue plan, the reference's plan] where the held link is on the triple
+    side, the reference's plan has no deflation of its shared eigenvectors and its rescue plan
+    has (:func:`_triple_deflates`: its span fits, the plan's does not), else None."""
+    if pl.alt is None or _triple_deflates(pl) or not _triple_deflates(pl.alt):
+        return None
+    return [dataclasses.replace(pl.alt, alt=pl, notes=pl.alt.notes + " (its shared eigenvectors deflated per "
+                                "value; the reference's plan is the rescue)"), pl]
 
 
 def _triple_deflates(pl: free_joint.Plan) -> bool:
     """Whether a plan with the held link on the triple side has a deflation: baked
     (:func:`_triple_side_deflation`) or per value (:func:`value_basis`)."""
     return _triple_side_deflation(pl) is not None or value_basis(pl) is not None
+
+
+#: Configurations (seeded, uniform in [-pi, pi]) on which :func:`_fewest_suspects` counts the
+#: suspect poses of each cut and eigen-variable
+_SUSPECT_POSES = 120
+
+
+def _suspects(pl: free_joint.Plan, poses, values, counts) -> tuple[int, float] | None:
+    """(the poses on which the plan's candidates make :func:`derive.ik.free_joint._general` run its
+    rescue: an odd count, none, the degenerate flag, two candidates merged, a candidate failing
+    the check on the 7R's FK; candidates per pose), or None where the plan finds fewer solutions
+    than ``counts`` (the reference's) on some pose."""
+    from derive.ik import finish
+    n = len(poses)
+    with np.errstate(all="ignore"):
+        ip, q7, degen = free_joint._candidates(dataclasses.replace(pl, alt=None), poses, values)
+    cand = free_joint._grid(ip, q7, n)
+    ok, _ = free_joint._check(pl.robot, poses, cand)
+    dup = finish.duplicates(cand, ok)
+    count = (ok & ~dup).sum(1)
+    if np.any(count < counts):
+        return None
+    fail = np.any(np.all(np.isfinite(cand), -1) & ~ok, 1)
+    suspect = (count % 2 == 1) | (count == 0) | degen | np.any(dup, 1) | fail
+    return int(suspect.sum()), len(ip) / max(n, 1)
+
+
+def _quiet_plan(pl: free_joint.Plan):
+    """:func:`_fewest_suspects`, its choice kept in the user cache (once per code version: it
+    solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan"."""
+    import json
+    from derive.cache import find_artifact, store_artifacts
+    from derive.model.robot import load_robot
+    key = f"{load_robot(pl.robot).id}-free-q{pl.joint}-cplan"
+    found = find_artifact(key, "c_plan")
+    if found is not None:
+        choice = json.loads(found.read_text(encoding="utf-8"))["choice"]
+    else:
+        choice = _fewest_suspects(pl)
+        store_artifacts(key, {"c_plan": ("c_plan.json", json.dumps({"choice": choice}))},
+                        {"robot": pl.robot, "free": f"q{pl.joint}"})
+    if choice is None:
+        return None
+    reverse, e, ev = choice
+    return dataclasses.replace(
+        pl, reverse=reverse, e=e, ev=ev, alt=pl,
+        notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
+              f"q{g6._cut_joints(e)[0][ev]} of the 6R (the fewest spurious real roots: the "
+              f"reference's plan is the rescue)")
+
+
+def _fewest_suspects(pl: free_joint.Plan):
+    """For a held joint whose link lies on the triple side of every cut (joints 3-5: no deflation
+    is baked, the 24 x 24 companion keeps the pencil's 8 pose-independent eigenvalues, and where
+    some of them are real, as the +-theta double roots of the Gen3's q3 with the reference's plan,
+    their candidates fail the check or Newton takes them to a solution found already, so the pose
+    runs the rescue plan: 19 % of the Gen3's q3 poses), the cut and eigen-variable on which the
+    fewest poses run the rescue (:func:`_suspects` on :data:`_SUSPECT_POSES` seeded
+    configurations with their value of the joint), among the cuts that work at three values
+    (:func:`derive.ik.general6r._check_cut`) and find every solution the reference's plan finds
+    there; fewer candidates per pose break ties. The reference's plan where none does better by
+    a margin (a third fewer suspect poses, and 5 % of the poses fewer: the solver core's time
+    depends on the pencil's eigenvalue structure too, and on the Gen3's q4 a plan with 2 % fewer
+    suspect poses runs 6 % slower). [reverse, e, ev] or None."""
+    from derive.kinematics.fk import fk
+    from derive.model.robot import load_robot
+    robot = load_robot(pl.robot)
+    rng = np.random.default_rng(97 + pl.joint)
+    q = rng.uniform(-np.pi, np.pi, (_SUSPECT_POSES, 7))
+    poses = fk(robot, q)
+    values = q[:, pl.joint - 1]
+    ref = free_joint.solve(robot, poses, pl.joint, values)
+    # (the reference's plan may find fewer without its rescue: that is what the rescue is for)
+    own = _suspects(pl, poses, values, np.zeros_like(ref.counts))
+    best, score = None, own
+    for reverse in (False, True):
+        for e in (1, 2):
+            if any(not g6._check_cut(g6._reverse(d) if reverse else d, e)[0]
+                   for d in free_joint.locked_chain(pl.c, pl.joint, list(_DEFLATION_VALUES[:3]))):
+                continue
+            for ev in range(3):
+                if (reverse, e, ev) == (pl.reverse, pl.e, pl.ev):
+                    continue
+                got = _suspects(dataclasses.replace(pl, reverse=reverse, e=e, ev=ev), poses, values, ref.counts)
+                if got is not None and got < score:
+                    best, score = [reverse, e, ev], got
+    if best is None or not (score[0] <= own[0] - 0.05 * len(poses) and 3 * score[0] <= 2 * own[0]):
+        return None
+    return best
 
 
 def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
@@ -647,6 +753,9 @@ def c_source(robot, joint: int) -> str:
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
                 "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
+        # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
+        # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
+        newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
