@@ -1152,16 +1152,8 @@ def _monomial_vectors(mk, ip, x3):
         if d < 2:
             continue
         members = order[st:en + 1]
-        basis = vth[-d:].T                                   # (12, d)
-        with np.errstate(all="ignore"):
-            a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
-                 + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
-            _, cvec = np.linalg.eig(a)
-            vecs = (basis @ cvec).T                          # (d, 12), complex in general
-            # a real monomial vector times a complex scale: rotate each onto the real axis
-            big = vecs[np.arange(d), np.argmax(np.abs(vecs), axis=1)]
-            vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
-        if np.all(np.isfinite(vecs)):
+        vecs = _shift_vectors(vth[-d:].T)                    # the null space basis (12, d)
+        if vecs is not None:
             v[members[:d]] = vecs.reshape(d, 4, 3)
     return v
 
@@ -1215,7 +1207,8 @@ def _shift_vectors(basis):
         a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
              + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
         _, cvec = np.linalg.eig(a)
-        vecs = (basis @ cvec).T
+        vecs = (basis @ cvec).T                              # (d, 12), complex in general
+        # a real monomial vector times a complex scale: rotate each onto the real axis
         big = vecs[np.arange(len(vecs)), np.argmax(np.abs(vecs), axis=1)]
         vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
     return vecs if np.all(np.isfinite(vecs)) else None
