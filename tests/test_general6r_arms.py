@@ -196,3 +196,88 @@ def test_crx_solution_sets_are_closed_under_its_pairing():
         sols = res.q[i, :res.counts[i]]
         for s in sols:
             assert _contains(sols, partner(s)), (i, s)
+
+
+#: The xArm6 at regular axis-aligned configurations (quarter turns), where the reference lost two
+#: solutions with an even count and no flag (24 of the 2304 axis-aligned configurations within
+#: the limits, two families). Counts: a Gauss-Newton multi-start on the plain 4x4-matrix FK (2000
+#: random starts) and the Newton multi-start below both find them; ssik's native solver finds
+#: only 2 distinct solutions at the first. At the first, four solutions lie within 2e-6 rad of
+#: q4 = 0 (the reversed chain's eigen-variable), two pairs of them 5e-12 and 3e-8 apart in the
+#: half-angle tangent: all four within CLUSTER_TOL, a cluster of four with only two null
+#: directions, whose two null vectors lost two solutions (the generating configuration among them).
+XARM6_REGULAR = [([-1, 1, 0, 0, 2, 0], 12), ([1, 1, 0, 0, 2, 1], 12), ([0, 0, -1, 0, 2, 0], 8),
+                 ([2, 0, -1, 0, 2, 2], 8)]
+
+
+def _newton_multistart(robot, pose_matrix, starts=3000, seed=0):
+    """Distinct solutions (within 1e-6 rad) of damped Newton on the product-form chain from
+    ``starts`` random configurations (no elimination), each checked on the 4x4-matrix FK."""
+    pl = general6r.plan(robot, progress=False)
+    t = pose_matrix.copy()
+    t[:3, 3] /= pl.scale
+    q = np.random.default_rng(seed).uniform(-math.pi, math.pi, (starts, 6))
+    targets = np.broadcast_to(t, (starts, 4, 4))
+    for _ in range(4):
+        q, err, _ = general6r._newton(pl.c, q, targets, with_error=True)
+    q = wrap_angle(q[err < 1e-12])
+    q = q[np.abs(reference.fk_matrix(robot, q) - pose_matrix).max(axis=(1, 2)) < 1e-10]
+    out = []
+    for s in q:
+        if not _contains(np.array(out), s):
+            out.append(s)
+    return np.array(out)
+
+
+@pytest.mark.parametrize("quarters,count", XARM6_REGULAR)
+def test_xarm6_regular_axis_aligned_configurations_have_every_solution(quarters, count):
+    """Every solution of the multi-start, and ssik's, is among the reference's at XARM6_REGULAR,
+    unflagged (the Jacobian is regular there: relative smallest singular value at least 0.01).
+    The near chain's candidates (general6r._near_pair_candidates: a cluster whose null space is
+    narrower than its members) found the two that were lost."""
+    robot = derive.load_robot("xarm6")
+    q = np.array(quarters) * (math.pi / 2)
+    T = reference.fk_matrix(robot, q)
+    ms = _newton_multistart(robot, T)
+    assert len(ms) == count
+    res = general6r.solve(robot, reference.fk(robot, q[None]))
+    sols = res.q[0, :res.counts[0]]
+    assert res.counts[0] == count and not res.degenerate[0] and not res.singular[0].any()
+    assert np.abs(reference.fk_matrix(robot, sols) - T).max() < 1e-10
+    assert _contains(sols, q)
+    for s in ms:
+        assert _contains(sols, s), s
+    m = importlib.import_module(ARMS["xarm6"])
+    c, scale = general6r.chain_form(robot)
+    t = T.copy()
+    t[:3, 3] /= scale
+    theirs = [wrap_angle(general6r._newton(c, np.asarray(s.q, float)[None], t[None])[0])
+              for s in m.solve(T, native=True)]
+    assert len(theirs) > 0 and all(_contains(sols, s) for s in theirs)
+
+
+def test_jaco_pose_whose_pencil_is_singular_for_every_value_is_flagged():
+    """The Jaco 2 at q = (180, 90, 270, -90, 0, 90) degrees: its cut's pencil M(q3) has rank 10
+    for every q3 (checked at three values), so the leading matrix is singular at every offset; at
+    one it is exactly singular, whose pseudo-inverse used to pass for well conditioned. Then the
+    pose was solved without the nearby poses: 9 of its 12 solutions (the multi-start's), flagged
+    only by the odd count, and with the near chains' extra candidates 10, unflagged. Now it is
+    flagged degenerate and holds all 12."""
+    robot = derive.load_robot("jaco2-6dof")
+    q = np.array([2, 1, 3, -1, 0, 1]) * (math.pi / 2)
+    T = reference.fk_matrix(robot, q)
+    pl = general6r.plan(robot, progress=False)
+    t = T.copy()
+    t[:3, 3] /= pl.scale
+    mats = general6r._cut_front(pl, t[None])[-1][0]
+    for x in (0.1, 0.7, -2.0):
+        sv = np.linalg.svd(np.sin(x) * mats[0] + np.cos(x) * mats[1] + mats[2], compute_uv=False)
+        assert sv[-2] < 1e-12 * sv[0] < sv[-3], x
+    ms = _newton_multistart(robot, T)
+    assert len(ms) == 12
+    res = general6r.solve(robot, reference.fk(robot, q[None]))
+    sols = res.q[0, :res.counts[0]]
+    assert res.degenerate[0]
+    assert np.abs(reference.fk_matrix(robot, sols) - T).max() < 1e-10
+    for s in ms:
+        assert _contains(sols, s, 1e-5), s

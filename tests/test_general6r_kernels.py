@@ -493,3 +493,33 @@ def test_python_kernels_flag_as_the_reference_on_axis_aligned_poses():
                 assert bool(degen) == ref.degenerate[i], pick[i]
             else:
                 assert len(s) >= ref.counts[i]
+
+
+@needs_gcc
+def test_kernels_find_every_solution_at_regular_axis_aligned_xarm6_configurations(quick_c):
+    """Regular axis-aligned xArm6 configurations (quarter turns) where four roots of the
+    eigen-variable fall within 1e-6 (a cluster with fewer null directions than members) or 1e-4:
+    12, 12, 8 and 8 solutions (the counts of the multi-starts of test_general6r_arms, on the
+    plain 4x4-matrix FK and on the product-form chain). The C, numpy and pure-Python kernels take
+    the run as one near chain (its s-dimensional near-null space) and return every solution, the
+    reference's set, unflagged; before, the numpy kernels lost two at each and the C at the two
+    of 8 solutions, with an even count and no flag."""
+    robot = derive.load_robot("xarm6")
+    q = np.array([[-1, 1, 0, 0, 2, 0], [1, 1, 0, 0, 2, 1], [0, 0, -1, 0, 2, 0], [2, 0, -1, 0, 2, 2]]) * (math.pi / 2)
+    expected = np.array([12, 12, 8, 8])
+    P = reference.fk(robot, q)
+    ref = general6r.solve(robot, P)
+    assert np.array_equal(ref.counts, expected) and not ref.degenerate.any()
+    py = derive.kernels(robot, "python")._mod
+    answers = {"c": _c_general(robot, P), "numpy": derive.kernels(robot, "numpy")._mod.ik_general(P)}
+    rows = [py.ik_general(tuple(p)) for p in P]
+    s = np.full((len(P), 16, 6), np.nan)
+    for i, (sols, _, _) in enumerate(rows):
+        s[i, :len(sols)] = np.array(sols).reshape(-1, 6)
+    answers["python"] = (s, np.array([len(r[0]) for r in rows]), None, np.array([bool(r[2]) for r in rows]))
+    for name, (sols, counts, _, degen) in answers.items():
+        assert np.array_equal(counts, expected) and not degen.any(), name
+        assert _same_sets(sols, counts, ref.q, ref.counts).all(), name
+        for i in range(len(q)):
+            dp, dr = pose_error(reference.fk(robot, sols[i, :counts[i]]), np.broadcast_to(P[i], (counts[i], 8)))
+            assert dp.max() < 1e-10 and dr.max() < 1e-10 and _contains(sols[i, :counts[i]], q[i]), (name, i)

@@ -89,6 +89,46 @@ def test_identity_ignores_name_and_path_but_not_numbers(tmp_path):
     assert len({(r.id, r.limits_id) for r in robots}) == len(robots)
 
 
+def test_identity_does_not_depend_on_the_order_of_the_end_frames(tmp_path):
+    """The end frames' names do not enter the identity, and neither does their order: the CRX's
+    file dumped with sorted keys (yaml.safe_dump: fanuc_flange before flange) or with its end frames
+    reversed, and the seed arm's three end frames in every order, keep the library robot's identity,
+    so the shipped decision of the general 6R (derive/data/general6r.json) and the caches find
+    them. Another default end, or an end frame moved, is another identity."""
+    from derive.ik import general6r
+    crx = derive.load_robot("crx10ia")
+    data = yaml.safe_load(Path(crx.path).read_text())
+    dumped = tmp_path / "crx-sorted.yaml"
+    dumped.write_text(yaml.safe_dump(data))                     # sorted keys
+    sorted_crx = derive.load_robot(dumped)
+    assert list(sorted_crx.ends) == ["fanuc_flange", "flange"] and sorted_crx.default_end == "flange"
+    assert sorted_crx.id == crx.id
+    assert crx.id in general6r.shipped_decisions()
+    assert general6r.status(sorted_crx) == "kernels"
+    # the same FK at the default end (the artifacts are made for it)
+    q = np.random.default_rng(2).uniform(-3, 3, (5, 6))
+    assert _same_pose(reference.fk(sorted_crx, q), reference.fk(crx, q)) < 1e-15
+    rev = dict(data, ends=dict(reversed(list(data["ends"].items()))))
+    assert derive.load_robot(_write(tmp_path / "crx-rev.yaml", rev)).id == crx.id
+    # another default end: another robot
+    other = dict(data, default_end="fanuc_flange")
+    assert derive.load_robot(_write(tmp_path / "crx-other.yaml", other)).id != crx.id
+    # an end frame moved: another robot
+    moved = yaml.safe_load(Path(crx.path).read_text())
+    moved["ends"]["fanuc_flange"]["origin"][0]["translation"] = ["l_6", 0, 0.001]
+    assert derive.load_robot(_write(tmp_path / "crx-moved.yaml", moved)).id != crx.id
+    seed = derive.load_robot("seed-arm")
+    sdata = yaml.safe_load(Path(seed.path).read_text())
+    names = list(sdata["ends"])
+    ids = set()
+    for k, perm in enumerate([[0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]]):
+        d = dict(sdata, ends={names[i]: sdata["ends"][names[i]] for i in perm})
+        r = derive.load_robot(_write(tmp_path / f"seed{k}.yaml", d))
+        assert list(r.ends) == [names[i] for i in perm]
+        ids.add(r.id)
+    assert ids == {seed.id}
+
+
 def test_a_file_robot_pickles_with_its_exact_values(tmp_path):
     """A robot read from a file crosses to another process (Dask workers of reach / place) by
     pickle: the copy has the same identity, the same numbers and the same exact values."""

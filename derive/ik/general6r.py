@@ -935,11 +935,15 @@ def _pencil_roots(pl, mats, degen):
         sub = mats if len(todo) == n else mats[todo]
         cand = (_half(d3).T @ sub.reshape(len(todo), 3, 144)).reshape(len(todo), 3, 12, 12)   # M0, M1, M2
         lead = cand[:, 2]
-        inv = _inv_safe(lead)
+        exact = np.ones(len(todo), dtype=bool)
+        inv = _inv_safe(lead, exact)
         with np.errstate(all="ignore"):
             cond = np.abs(lead).sum(1).max(1) * np.abs(inv).sum(1).max(1)
-        cond = np.where(np.isfinite(cond), cond, np.inf)
-        better = cond < best_cond[todo]
+        # an exactly singular leading matrix (its pseudo-inverse taken, whose norm says nothing of
+        # the condition) is as bad as any: before, a pose whose pencil is singular for every value
+        # took such an offset as well conditioned and was not flagged (a Jaco 2 pose, two solutions lost)
+        cond = np.where(np.isfinite(cond) & exact, cond, np.inf)
+        better = (cond < best_cond[todo]) | (k == 0)            # the first offset at least
         idx = todo[better]
         if len(idx) == n:
             best[:], best_cond[:], lead_inv, mk = k, cond, inv, cand
@@ -1148,16 +1152,8 @@ def _monomial_vectors(mk, ip, x3):
         if d < 2:
             continue
         members = order[st:en + 1]
-        basis = vth[-d:].T                                   # (12, d)
-        with np.errstate(all="ignore"):
-            a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
-                 + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
-            _, cvec = np.linalg.eig(a)
-            vecs = (basis @ cvec).T                          # (d, 12), complex in general
-            # a real monomial vector times a complex scale: rotate each onto the real axis
-            big = vecs[np.arange(d), np.argmax(np.abs(vecs), axis=1)]
-            vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
-        if np.all(np.isfinite(vecs)):
+        vecs = _shift_vectors(vth[-d:].T)                    # the null space basis (12, d)
+        if vecs is not None:
             v[members[:d]] = vecs.reshape(d, 4, 3)
     return v
 
@@ -1203,41 +1199,89 @@ def _wide_cluster_candidates(mk, ip, x3, v, order):
     return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, *extra_v])
 
 
+def _shift_vectors(basis):
+    """Stetter's eigenvector method in a basis (12, d) of (near-)null directions of M(x): the d
+    monomial vectors x4^i x5^j in its span (V[shift] c = x V[base] c for x4 and x5, combined),
+    each scaled to a largest entry of 1, (d, 12); None where it fails."""
+    with np.errstate(all="ignore"):
+        a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
+             + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
+        _, cvec = np.linalg.eig(a)
+        vecs = (basis @ cvec).T                              # (d, 12), complex in general
+        # a real monomial vector times a complex scale: rotate each onto the real axis
+        big = vecs[np.arange(len(vecs)), np.argmax(np.abs(vecs), axis=1)]
+        vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
+    return vecs if np.all(np.isfinite(vecs)) else None
+
+
+#: A near chain of at most this many roots is taken whole (:func:`_near_pair_candidates`); a
+#: longer one pair by pair.
+NEAR_CHAIN_MAX = 4
+
+
 def _near_pair_candidates(mk, ip, x3, v):
-    """Extra candidates for near pairs of eigenvalues (:data:`NEAR_PAIR_TOL`): for the pair's
-    two members, the two monomial vectors in the span of M(x)'s two smallest right singular
-    vectors (x the pair's mean) found by the shift structure as in :func:`_monomial_vectors`,
-    each with each member's x3. They only add candidates (Newton and the FK check decide), so a
-    solution the single null vectors missed (the two nearly parallel) is found. Returns (ip,
-    x3, v) with the extra candidates appended."""
+    """Extra candidates for near chains of eigenvalues: a run of real eigenvalues of one pose,
+    each within :data:`NEAR_PAIR_TOL` (relative to 1 + |x3|) of the next, that is not one
+    multiple root: some gap is past :data:`CLUSTER_TOL` (a near pair: two solutions with almost
+    the same q3, near a fold of the pose's solutions), or a cluster in it (a run within
+    CLUSTER_TOL) has fewer null directions at its head (singular values of M(x) below 1e-7 of the
+    largest, :func:`_monomial_vectors`' test) than members: distinct roots closer than
+    CLUSTER_TOL (the xArm6 at q = (-pi/2, pi/2, 0, 0, pi, 0): four solutions within 2e-6 rad of
+    q4 = 0, two pairs of them 5e-12 and 3e-8 apart, where the cluster's two null vectors lost
+    two solutions with an even count and no flag). A run of s <= :data:`NEAR_CHAIN_MAX` roots:
+    the s monomial vectors in the span of M(x)'s s smallest right singular vectors (x the run's
+    mean) by the shift structure (:func:`_shift_vectors`), each with each member's x3 (s * s
+    candidates); a longer run: the same for each of its pairs apart by more than CLUSTER_TOL. They
+    only add candidates (Newton and the FK check decide), so a solution the single null vectors
+    missed (the members' nearly parallel) is found. Returns (ip, x3, v) with the extra
+    candidates appended (the first len(ip) rows unchanged)."""
     if len(ip) < 2:
         return ip, x3, v
     order = np.lexsort((x3, ip))
     ip, x3, v = _wide_cluster_candidates(mk, ip, x3, v, order)
     ips, xs = ip[order], x3[order]
     gap = np.abs(xs[1:] - xs[:-1])
-    pair = (ips[1:] == ips[:-1]) & (gap > CLUSTER_TOL * (1 + np.abs(xs[1:]))) & \
-        (gap <= NEAR_PAIR_TOL * (1 + np.abs(xs[1:])))
-    k = np.nonzero(pair)[0]
-    if len(k) == 0:
+    rel = 1 + np.abs(xs[1:])
+    same = ips[1:] == ips[:-1]
+    close = same & (gap <= NEAR_PAIR_TOL * rel)
+    if not np.any(close):
         return ip, x3, v
-    a, b = order[k], order[k + 1]
-    xm = 0.5 * (x3[a] + x3[b])
-    powers = np.stack([np.ones_like(xm), xm, xm * xm], 1)[:, None, :]
-    mx = (powers @ mk.reshape(len(mk), 3, 144)[ip[a]]).reshape(len(a), 12, 12)
-    basis = np.swapaxes(np.linalg.svd(mx)[2][:, -2:], 1, 2)                 # (p, 12, 2)
-    with np.errstate(all="ignore"):
-        mult = (np.linalg.pinv(basis[:, _BASE4]) @ basis[:, _SHIFT4]
-                + 0.7071 * np.linalg.pinv(basis[:, _BASE5]) @ basis[:, _SHIFT5])
-        _, cvec = np.linalg.eig(mult)
-        vecs = np.swapaxes(basis @ cvec, 1, 2)                                # (p, 2, 12)
-        big = np.take_along_axis(vecs, np.argmax(np.abs(vecs), axis=2)[..., None], axis=2)
-        vecs = (vecs / np.where(big != 0, big, 1.0)).real
-    ok = np.all(np.isfinite(vecs), axis=(1, 2))
-    a, b, vecs = a[ok], b[ok], vecs[ok]
-    # each vector with each member's x3: 4 candidates per pair
-    idx = np.concatenate([a, a, b, b])
-    extra = np.concatenate([vecs[:, 0], vecs[:, 1], vecs[:, 0], vecs[:, 1]]).reshape(-1, 4, 3)
+    tight = same & (gap <= CLUSTER_TOL * rel)
+    mk144 = mk.reshape(len(mk), 3, 144)
+
+    def pencil(i, x):
+        return (np.array([1.0, x, x * x]) @ mk144[i]).reshape(12, 12)
+
+    edge = np.diff(np.concatenate([[0], close.astype(np.int8), [0]]))
+    groups = []                                               # (sorted positions, directions)
+    for s, e in zip(np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]):
+        size = e - s + 1                                      # members: sorted positions s .. e
+        wide = bool(np.any(~tight[s:e]))
+        narrow = False
+        if not wide or size <= NEAR_CHAIN_MAX:
+            te = np.diff(np.concatenate([[0], tight[s:e].astype(np.int8), [0]]))
+            for cs, ce in zip(np.nonzero(te == 1)[0] + s, np.nonzero(te == -1)[0] + s):
+                sv = np.linalg.svd(pencil(ips[cs], xs[cs]), compute_uv=False)
+                narrow |= int(np.sum(sv < 1e-7 * sv[0])) < ce - cs + 1
+        if not (wide or narrow):
+            continue
+        if size <= NEAR_CHAIN_MAX:
+            groups.append(np.arange(s, e + 1))
+        else:
+            groups += [np.array([g, g + 1]) for g in range(s, e) if not tight[g]]
+    extra_i, extra_v = [], []
+    for members in groups:
+        d = len(members)
+        basis = np.linalg.svd(pencil(ips[members[0]], float(np.mean(xs[members]))))[2][-d:].T
+        vecs = _shift_vectors(basis)
+        if vecs is None:
+            continue
+        extra_i += [order[m] for m in members for _ in range(d)]
+        extra_v.append(np.tile(vecs, (d, 1)))
+    if not extra_i:
+        return ip, x3, v
+    idx = np.array(extra_i)
+    extra = np.concatenate(extra_v).reshape(-1, 4, 3)
     return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, extra])
 
 
@@ -1263,15 +1307,19 @@ def _null_vectors(m):
     return v.reshape(-1, 4, 3)
 
 
-def _inv_safe(a):
-    """Batched inverse; an exactly singular matrix gives its pseudo-inverse (never raises)."""
+def _inv_safe(a, exact=None):
+    """Batched inverse; an exactly singular matrix gives its pseudo-inverse (never raises).
+    ``exact``: a boolean array (len(a),) set False where the pseudo-inverse was taken."""
     try:
         return np.linalg.inv(a)
     except np.linalg.LinAlgError:
         if len(a) == 1:
+            if exact is not None:
+                exact[0] = False
             return np.linalg.pinv(a)
         h = len(a) // 2
-        return np.concatenate([_inv_safe(a[:h]), _inv_safe(a[h:])])
+        return np.concatenate([_inv_safe(a[:h], None if exact is None else exact[:h]),
+                               _inv_safe(a[h:], None if exact is None else exact[h:])])
 
 
 def _solve_safe(a, b):

@@ -13,7 +13,8 @@ parent's fixed motions after the motion, its own before, and its offset) and eac
 as one translation and one roll-pitch-yaw triple (:mod:`derive.model.origins`). So the way a
 file splits the same transform into operations does not matter where the form is taken as it
 is (a URDF origin), and a robot exported as URDF and read back (:mod:`derive.model.export`)
-has the identity of the robot it was exported from.
+has the identity of the robot it was exported from. The end frames enter in a canonical order
+(:func:`canonical_ends`: the default end first, then by parent joint and origin), not the file's.
 
 Every cache and artifact of dq-derive is keyed by this identity (:mod:`derive.cache`). The
 artifacts that embed the joint limits (the generated kernels: the C nearest-solution pass and
@@ -67,7 +68,20 @@ def normalised(joints, ends: dict, default_end: str, exact: bool) -> dict:
         })
     ends_out = [{"parent": e.parent, "origin": origin, "default": name == default_end}
                 for (name, e), origin in zip(ends.items(), end_origins)]
-    return {"joints": out, "ends": ends_out, "exact": bool(exact)}
+    return {"joints": out, "ends": canonical_ends(ends_out), "exact": bool(exact)}
+
+
+def canonical_ends(ends_out: list) -> list:
+    """The end frames in an order that does not depend on the file's: the default end first, then
+    the others by parent joint and by the text of their origin. Their names do not enter the
+    identity, so their order must not either (a file written with sorted keys, such as
+    ``yaml.safe_dump``'s, lists them in another order). Every artifact of a robot is made for
+    its default end, so two descriptions whose end frames differ only in order have the same
+    artifacts. The library's robots keep their identities: each lists its default end first and
+    the others (seed-arm's two fingers) by parent joint already."""
+    def key(e):
+        return (not e["default"], e["parent"], json.dumps(e["origin"], separators=(",", ":")))
+    return sorted(ends_out, key=key)
 
 
 def digest(joints, ends: dict, default_end: str, exact: bool) -> str:
