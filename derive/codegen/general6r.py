@@ -93,6 +93,36 @@ def _arr(a) -> str:
     return "{" + ", ".join(_arr(r) for r in a) + "}"
 
 
+def _mul_by_link(c) -> list:
+    """The twelve C expressions of a rigid transform's rows 0-2 times the constant link c (4 x 4,
+    last row 0 0 0 1), in terms of the variable ``a[0..11]``: g6_mul4's sums in its order
+    (a[4r] c[0][j] + a[4r + 1] c[1][j] + a[4r + 2] c[2][j], then + a[4r + 3] in column 3), the
+    terms of exact zeros left out and the factors +-1 applied as signs. The results are g6_mul4's
+    to the bit (a zero term adds nothing; a product with +-1 is exact) but for the sign of a zero."""
+    c = np.asarray(c, dtype=float).reshape(4, 4)
+    out = []
+    for r in range(3):
+        for j in range(4):
+            terms = []
+            for k in range(3):
+                v = c[k, j]
+                if v == 0.0:
+                    continue
+                x = f"a[{4 * r + k}]"
+                sign = "-" if v < 0 else "+"
+                terms.append((sign, x if abs(v) == 1.0 else f"{x} * {_lit(abs(v))}"))
+            if j == 3:
+                terms.append(("+", f"a[{4 * r + 3}]"))
+            if not terms:
+                out.append("0.0")
+                continue
+            e = ("-" if terms[0][0] == "-" else "") + terms[0][1]
+            for sg, t in terms[1:]:
+                e += f" {sg} {t}"
+            out.append(e)
+    return out
+
+
 def general_context(robot) -> dict:
     """The template context of a general 6R robot's IK (``ik.general``): the plan's constants
     as C initialisers (:func:`derive.ik.general6r.plan`: the derivation, cached, with progress).
@@ -149,7 +179,8 @@ def general_context(robot) -> dict:
     start = g6._START
     return {
         "mode": mode, "reverse": bool(pl.reverse) and not cut, "scale": _lit(pl.scale),
-        "chain": _arr(np.reshape(chain, (7, 16))), "fchain": _arr(np.reshape(pl.c, (7, 16))), "y": _arr(y), "perm": perm, "order": order,
+        "chain": _arr(np.reshape(chain, (7, 16))),
+        "chain_mul": [_mul_by_link(np.reshape(chain, (7, 16))[i]) for i in range(7)], "fchain": _arr(np.reshape(pl.c, (7, 16))), "y": _arr(y), "perm": perm, "order": order,
         "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair], "last": last - 1,
         "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(h) for h in halves],
