@@ -20,7 +20,8 @@ of :func:`derive.ik.general6r._solve_chunk` and ``_solve_chunk_cut``, which it f
    eigen-variable moved by an offset d3, the Moebius substitution: the first of three offsets
    whose leading matrix has a 1-norm condition below G6_GOOD_COND, else the best), and the
    24 x 24 companion matrix C = [[0, I], [-M2^-1 M0, -M2^-1 M1]] (M2^-1 [M0 M1] and M2^-1, for
-   the condition, by one Gauss-Jordan elimination with partial pivoting of [M2 | M0 M1 | I]). Its eigenvectors every pose
+   the condition, by one Gauss-Jordan elimination with partial pivoting of [M2 | M0 M1 | I], run on
+   [M2 | M0 M1] with M2^-1 built in the columns of M2 it clears). Its eigenvectors every pose
    shares (x = +-i and a cut's constant real roots: the plan's deflation,
    :func:`derive.ik.general6r._deflation`) are deflated as the reference does
    (:func:`derive.ik.general6r._eigvals`): with the baked orthonormal basis [W V]
