@@ -185,6 +185,9 @@ def _deflation_context(pl) -> dict:
     a deflation), ``keep``, ``b`` (n_d3, 24, 24), ``w1tb2`` (n_d3, keep, 24) = W1^T B2,
     ``w2t`` (n_d3, keep, 12) = W2^T, ``n`` = 24 - keep (the removed dimension), ``leak_tol``
     (DEFLATE_LEAK: the largest |W^T C V| allowed, relative to max(1, L's largest entry)),
+    for the C kernel ``bc`` (n_d3, 24, width) = [W, V R] and ``w1tb2c`` (n_d3, keep, width) =
+    W1^T [W2, V2 R] with R = :func:`_leak_mix` (the leak on fixed combinations of V's columns;
+    width = keep + R's columns),
     ``spurious`` (the removed real roots, rad). Arrays as nested C initialisers (the numpy
     template turns the braces into lists)."""
     if pl.deflate is None:
@@ -193,9 +196,37 @@ def _deflation_context(pl) -> dict:
     b = np.asarray(pl.deflate)                                  # (n_d3, 24, 24)
     w1tb2 = np.einsum("kai,kaj->kij", b[:, :12, :keep], b[:, 12:, :])   # W1^T B2
     w2t = np.swapaxes(b[:, 12:, :keep], 1, 2)                   # W2^T
+    mix = _leak_mix(24 - keep)
+    bc = np.concatenate([b[:, :, :keep], b[:, :, keep:] @ mix], axis=2)
+    w1tb2c = np.concatenate([w1tb2[:, :, :keep], w1tb2[:, :, keep:] @ mix], axis=2)
     return {"on": True, "keep": keep, "n": 24 - keep, "b": _arr(b), "w1tb2": _arr(w1tb2),
             "w2t": _arr(w2t), "leak_tol": _lit(g6.DEFLATE_LEAK),
+            "width": keep + mix.shape[1], "bc": _arr(bc), "w1tb2c": _arr(w1tb2c),
             "spurious": [_lit(v) for v in pl.spurious]}
+
+
+#: the C kernel's leak check: at most this many fixed combinations of V's columns
+LEAK_MIX = 8
+
+
+def _leak_mix(n: int) -> np.ndarray:
+    """The fixed combinations (n x m, unit columns) of the n removed columns V on which the C
+    kernel checks the deflation's leak W^T C V: the identity where n <= LEAK_MIX, else LEAK_MIX
+    columns of a fixed generic matrix (sines at incommensurate angles: every entry nonzero, each
+    row at least about 0.2 in some column for n <= 12). The C computes W^T C [W, V R] (keep + m
+    columns, not 24: the products per pose a sixth smaller for a general arm) and takes the
+    leak as the largest |W^T C V R|. Where the deflation holds W^T C V is zero to rounding and so
+    is every combination; where it fails, a nonzero row x of W^T C V has x R = 0 only if x lies
+    in the (n - m)-dimensional orthogonal complement of R's fixed columns, which a failure does
+    not pick (with R's columns of unit length, |x R|_max is between 0.22 and 1.1 times
+    |x|_max on the 20000 CRX, xArm6, Jaco2 and general-6r poses measured, against the
+    tolerance's margin of 4 orders of magnitude above the largest leak of a holding deflation)."""
+    if n <= LEAK_MIX:
+        return np.eye(n)
+    j = np.arange(n)[:, None] + 1.0
+    c = np.arange(LEAK_MIX)[None, :] + 1.0
+    r = np.sin(2.399963229728653 * j * c + 1.7 * c)
+    return r / np.linalg.norm(r, axis=0)
 
 
 def g6_comment(text: str) -> str:
