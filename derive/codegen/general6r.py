@@ -206,7 +206,7 @@ def _deflation_context(pl) -> dict:
 
 
 #: the C kernel's leak check: at most this many fixed combinations of V's columns
-LEAK_MIX = 8
+LEAK_MIX = 4
 
 
 def _leak_mix(n: int) -> np.ndarray:
