@@ -218,9 +218,11 @@ def _leak_mix(n: int) -> np.ndarray:
     leak as the largest |W^T C V R|. Where the deflation holds W^T C V is zero to rounding and so
     is every combination; where it fails, a nonzero row x of W^T C V has x R = 0 only if x lies
     in the (n - m)-dimensional orthogonal complement of R's fixed columns, which a failure does
-    not pick (with R's columns of unit length, |x R|_max is between 0.22 and 1.1 times
-    |x|_max on the 20000 CRX, xArm6, Jaco2 and general-6r poses measured, against the
-    tolerance's margin of 4 orders of magnitude above the largest leak of a holding deflation)."""
+    not pick. Measured on the 20674 deflation checks of 2000 random and 1583 axis-aligned or
+    near-singular poses of each of the CRX, xArm6, Jaco2 and general-6r (nearby poses included):
+    with R's columns of unit length the largest |W^T C V R| is 0.22 to 1.1 times the largest
+    |W^T C V|, and every deflation held with a leak below 4e-5 of the tolerance, so the
+    decision (deflated or the whole 24 x 24) is the same on each."""
     if n <= LEAK_MIX:
         return np.eye(n)
     j = np.arange(n)[:, None] + 1.0
