@@ -141,10 +141,11 @@ def test_baked_deflation_holds_at_random_values_and_poses(name, k):
 
 
 @needs_gcc
-@pytest.mark.parametrize("k", [5, 2])
+@pytest.mark.parametrize("k", [5, 2, 3])
 def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path, k):
     """The emitted source (two copies of the general 6R solver core, the plan and its rescue;
-    with q2 given the plan's deflation baked, the rescue's not), warnings as errors, -Wpedantic,
+    with q2 given the plan's deflation baked, the rescue's not; with q3 the plan's deflation per
+    value, its basis a trigonometric polynomial in the value), warnings as errors, -Wpedantic,
     as C99 and C++17."""
     src = tmp_path / f"xarm7_q{k}.c"
     src.write_text(cfree.c_source("xarm7", k))
@@ -241,3 +242,109 @@ def test_free_joint_general_route_flags_stay_rare_on_random_poses(name, k):
     fn = free_joint.solve(robot, poses, k, q[:, k - 1]).degenerate
     assert fc.mean() <= 0.02 and fn.mean() <= 0.02, (np.nonzero(fc)[0], np.nonzero(fn)[0])
     assert np.sum(fc != fn) <= 1, (np.nonzero(fc)[0], np.nonzero(fn)[0])
+
+
+def _pencil_companions(robot, pl, q):
+    """The companion matrices (3 offsets, n, 24, 24) of the locked 6R's pencil at the poses of the
+    7R configurations q (n, 7), joint pl.joint held at q's value, built by the reference's
+    per-value fit (free_joint._coefs), not by the code under test."""
+    g6 = free_joint.g6
+    n, k = len(q), pl.joint
+    target = g6._to_matrix(reference.fk(robot, q))
+    target[:, :3, 3] /= pl.scale
+    d = free_joint.locked_chain(pl.c, k, q[:, k - 1])
+    if pl.reverse:
+        d = np.stack([g6._reverse(x) for x in d])
+        target = np.linalg.inv(target)
+    y, x = free_joint._coefs(d, pl.e, target)
+    qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
+    yy = y.copy()
+    yy[:, :, 26] -= x[:, :, 8]
+    order = [pl.ev] + [i for i in range(3) if i != pl.ev]
+    ten = np.moveaxis((np.swapaxes(qq[:, :, 8:], 1, 2) @ yy).reshape(n, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
+    mats = g6._twelve((ten.reshape(n, 6, 3, 9) @ g6._t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3))
+    out = []
+    for d3 in pl.d3:
+        mk = np.einsum("ak,naij->nkij", g6._half(d3), mats)
+        inv = np.linalg.inv(mk[:, 2])
+        comp = np.zeros((n, 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:, :12] = -inv @ mk[:, 0]
+        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+        out.append(comp)
+    return out
+
+
+@pytest.mark.parametrize("name,k,keep", [("xarm7", 3, 16), ("panda", 5, 12)])
+def test_triple_side_plan_deflates(name, k, keep):
+    """With joint 3-5 held (the held link on the loop cut's triple side) the C plan still deflates
+    the eigenvectors every pose shares: xArm7's q3 per value (a basis as a trigonometric
+    polynomial in the value, the core's runtime deflation), the Panda's q5 once for every value
+    (their span does not move): the eigenproblem is keep x keep, not 24 x 24."""
+    pl = cfree.c_plans(name, k)[0]
+    assert not cfree._held_on_pair_side(pl)
+    defl = cfree._core_context(pl)["defl"]
+    assert bool(defl.get("runtime")) == (name == "xarm7") and (defl["on"] or defl.get("runtime"))
+    assert defl["keep"] == keep
+
+
+def test_value_basis_is_invariant_at_random_values_and_poses():
+    """xArm7 with q3 held: the per-value basis V(v) (cfree.value_basis, rotated to each offset)
+    spans a subspace that every pose's companion matrix at that value maps into itself, on
+    pencils built by the reference's per-value fit at values and poses it was not fitted at;
+    the eigenvalues of the kept block and of the removed block together are the whole matrix's
+    (no solution removed), and the removed ones are the same at every pose of a value."""
+    robot = derive.load_robot("xarm7")
+    pl = cfree.c_plans(robot, 3)[0]
+    h, n = cfree.value_basis(pl)
+    rng = np.random.default_rng(41)
+    for v in rng.uniform(-np.pi, np.pi, 4):
+        q = _inside(robot, 4, rng)
+        q[:, 2] = v
+        v0 = np.einsum("k,kij->ij", cfree._value_harmonics(v, n)[0], h)
+        for o, comp in enumerate(_pencil_companions(robot, pl, q)):
+            b = np.linalg.qr(cfree._offset_rotation(pl, o) @ v0, mode="complete")[0]
+            r = v0.shape[1]
+            t = b.T @ comp @ b                        # [V W] basis: V's block first
+            leak = np.abs(t[:, r:, :r]).max(axis=(1, 2)) / np.maximum(1.0, np.abs(comp).max(axis=(1, 2)))
+            assert leak.max() < 1e-9, (v, o, leak)
+            removed = np.linalg.eigvals(t[:, :r, :r])
+            kept = np.linalg.eigvals(t[:, r:, r:])
+            whole = np.linalg.eigvals(comp)
+            for i in range(len(q)):
+                both = np.concatenate([removed[i], kept[i]])
+                assert np.abs(both[:, None] - whole[i][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(whole[i]).max())
+                assert np.abs(removed[i][:, None] - removed[0][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(removed[0]).max())
+
+
+@needs_gcc
+@pytest.mark.parametrize("name,k", [("xarm7", 3), ("panda", 5)])
+def test_c_triple_side_deflation_matches_the_reference(name, k):
+    """With the triple-side deflation (per value for xArm7's q3, baked for the Panda's q5), 30
+    configurations at their generating value and at one other value: the C kernel's counts,
+    solutions (1e-9 rad), singular and degenerate flags equal the numpy reference's (which solves
+    the whole 24 x 24); every solution within 1e-10 on the plain matrix FK; the generating
+    configuration among them."""
+    robot = derive.load_robot(name)
+    rng = np.random.default_rng(43)
+    q = _inside(robot, 30, rng)
+    lo, hi = free_joint.joint_range(robot, k)
+    v = np.stack([q[:, k - 1], rng.uniform(lo, hi, 30)], 1).reshape(-1)
+    poses = np.repeat(reference.fk(robot, q), 2, axis=0)
+    target = np.repeat(reference.fk_matrix(robot, q), 2, axis=0)
+    cq, cc, cs, cd = cfree.c_library(robot, k, _compile).solve(poses, v)
+    ref = free_joint.solve(robot, poses, k, v)
+    np.testing.assert_array_equal(cc, ref.counts)
+    np.testing.assert_array_equal(cd, ref.degenerate)
+    assert cc.sum() > 100
+    for i in range(len(v)):
+        a, b = cq[i, :cc[i]], ref.q[i, :ref.counts[i]]
+        assert _same_set(a, b, tol=1e-9), i
+        if not len(a):
+            continue
+        match = _wrapped(a[:, None] - b[None]).max(-1).argmin(1)
+        np.testing.assert_array_equal(cs[i, :cc[i]], ref.singular[i, :ref.counts[i]][match])
+    valid = np.arange(16)[None] < cc[:, None]
+    assert np.abs(reference.fk_matrix(robot, cq[valid]) - target[np.nonzero(valid)[0]]).max() < 1e-10
+    gen = np.nanmin(np.where(valid, _wrapped(cq - np.repeat(q, 2, axis=0)[:, None]).max(-1), np.inf), axis=1)
+    assert np.all(gen[::2] < 1e-6)

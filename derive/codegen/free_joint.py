@@ -70,7 +70,7 @@ def _held_on_pair_side(pl: free_joint.Plan) -> bool:
     return link in (0, 6) or link in {(pl.e + 3) % 6 + 1, (pl.e + 4) % 6 + 1}
 
 
-def _fixed_deflation(pl: free_joint.Plan):
+def _fixed_deflation(pl: free_joint.Plan, any_side: bool = False):
     """:func:`derive.ik.general6r._deflation` of the locked 6R where it holds for every held
     value: the held link off the triple side (:func:`_held_on_pair_side`; there the pencil's
     pose-independent eigenvectors, at x = +-i and at complex roots every pose shares, need not
@@ -81,7 +81,7 @@ def _fixed_deflation(pl: free_joint.Plan):
     spurious real roots. (bases, keep, spurious) or None."""
     from types import SimpleNamespace
 
-    if not _held_on_pair_side(pl):
+    if not any_side and not _held_on_pair_side(pl):
         return None
     found = []
     for v in _DEFLATION_VALUES:
@@ -116,8 +116,9 @@ def c_plans(robot, joint: int) -> list:
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
-    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). On the general route
-    only; once per process."""
+    (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3-5 held,
+    where the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
+    (:func:`_triple_deflates`), the two swap (gen3 q3). On the general route only; once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
@@ -163,7 +164,19 @@ def _c_plans(robot, joint: int) -> list:
                     found = _fixed_deflation(cand)
                     if found is not None and found[1] < best_keep:
                         best, best_keep = cand, found[1]
+    if best is None and pl.alt is not None and not _held_on_pair_side(pl) and not _triple_deflates(pl) \
+            and _triple_deflates(pl.alt):
+        # joints 3-5: the reference's rescue plan deflates (its span fits, the plan's does not): it
+        # is the C plan and the reference's plan its rescue (gen3 q3)
+        return [dataclasses.replace(pl.alt, alt=pl, notes=pl.alt.notes + " (its shared eigenvectors deflated per "
+                                    "value; the reference's plan is the rescue)"), pl]
     return plans if best is None else [best, pl]
+
+
+def _triple_deflates(pl: free_joint.Plan) -> bool:
+    """Whether a plan with the held link on the triple side has a deflation: baked
+    (:func:`_triple_side_deflation`) or per value (:func:`value_basis`)."""
+    return _triple_side_deflation(pl) is not None or value_basis(pl) is not None
 
 
 def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
@@ -204,6 +217,264 @@ def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
     return True
 
 
+#: Random values and poses per value at which a deflation of a plan with the held link on the
+#: triple side is checked (:func:`_triple_side_deflation`), and the largest leak |(I - V V^T) C V|
+#: allowed there, relative to max(1, the companion's largest entry)
+_TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK = 24, 4, 1e-10
+
+
+def _companions(pl: free_joint.Plan, v: float, q, d: float) -> np.ndarray:
+    """The companion matrices (m, 24, 24) at offset d of the locked 6R's pencil (the reference's
+    loop cut, :func:`derive.ik.general6r._cut_front`) with the joint held at v, at the poses of the
+    6R configurations q (m, 6)."""
+    from types import SimpleNamespace
+
+    dd = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
+    if pl.reverse:
+        dd = g6._reverse(dd)
+    p = SimpleNamespace(c=dd, cut={"e": pl.e, "ev": pl.ev, "y": g6._triple_coefs(dd, pl.e)}, offsets=pl.offsets,
+                        d3=pl.d3)
+    _, target = g6._chain_frames(dd, q)
+    mats = g6._cut_front(p, target)[-1]
+    mk = np.einsum("ak,naij->nkij", g6._half(d), mats)
+    with np.errstate(all="ignore"):
+        low = -g6._inv_safe(mk[:, 2]) @ np.concatenate([mk[:, 0], mk[:, 1]], axis=2)
+    comp = np.zeros((len(q), 24, 24))
+    comp[:, :12, 12:] = np.eye(12)
+    comp[:, 12:] = low
+    return comp
+
+
+def _leak(comp, v) -> float:
+    """max over the companion matrices comp (m, 24, 24) of |(I - V V^T) C V| / max(1, |C|) for the
+    orthonormal V (24, r): zero where span V is invariant under each."""
+    out = comp @ v - v @ (np.swapaxes(v, 0, 1) @ comp @ v)
+    with np.errstate(all="ignore"):
+        r = np.abs(out).max(axis=(1, 2)) / np.maximum(1.0, np.abs(comp).max(axis=(1, 2)))
+    return float(np.max(np.where(np.isfinite(r), r, np.inf)))
+
+
+def _shared_subspace(pl: free_joint.Plan, v: float, rng, m: int = 4):
+    """(V (24, r) orthonormal, leak) at offset d3[0] and value v: the span of the companion
+    matrix's eigenvectors (real and imaginary parts) whose eigenvalues m random poses share (the
+    eigenvectors every pose shares: the pencil's spurious eigenpairs of the triple side alone),
+    and its leak (:func:`_leak`) on those poses; (None, inf) where none is shared."""
+    comp = _companions(pl, v, rng.uniform(-np.pi, np.pi, (m, 6)), pl.d3[0])
+    if not np.all(np.isfinite(comp)):
+        return None, np.inf
+    lam, vec = np.linalg.eig(comp[0])
+    others = [np.linalg.eigvals(c) for c in comp[1:]]
+    sel = [i for i, x in enumerate(lam) if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
+    if not sel:
+        return None, np.inf
+    u, s, _ = np.linalg.svd(np.concatenate([vec[:, sel].real, vec[:, sel].imag], 1), full_matrices=False)
+    basis = u[:, :int(np.sum(s > 1e-8 * s[0]))]
+    return basis, _leak(comp, basis)
+
+
+def _offset_rotation(pl: free_joint.Plan, k: int) -> np.ndarray:
+    """R (24, 24) with R V_0 = V_k: the companion's eigenvector [u; x u] at offset d3[0] is,
+    up to a factor, [cos h u; sin h u] with h = (t - d) / 2 (t the eigen-variable's angle), so at
+    offset d3[k] it is the rotation of the two halves by (d3[k] - d3[0]) / 2."""
+    a = 0.5 * (pl.d3[k] - pl.d3[0])
+    c, s = np.cos(a) * np.eye(12), np.sin(a) * np.eye(12)
+    return np.block([[c, s], [-s, c]])
+
+
+def _triple_side_deflation(pl: free_joint.Plan):
+    """A deflation baked once for a plan whose held link lies on the triple side (joints 3-5,
+    :func:`_held_on_pair_side` false), where the subspace of the eigenvectors every pose shares
+    does not move with the value although its eigenvalues do: (bases (n_d3, 24, 24) [W V],
+    keep, ()) or None. Two candidates: :func:`_fixed_deflation`'s (the reference's
+    :func:`derive.ik.general6r._deflation` at each of :data:`_DEFLATION_VALUES`; it finds the
+    eigenvectors at x = +-i, the Panda's q5) and the span of the shared eigenvectors at the
+    value among :data:`_DEFLATION_VALUES` where it is invariant best (:func:`_shared_subspace`;
+    xArm7's q3: 8 eigenvectors whose eigenvalues move with the value but not their span); the
+    one removing more that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every
+    offset on :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    :data:`_TRIPLE_CHECK_VALUES` random values. Where it moves (the other arms' joints 3-5), None:
+    the whole pencil."""
+    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-triple-deflation", key, lambda: _triple_side_deflation_uncached(pl))
+
+
+def _triple_side_deflation_uncached(pl: free_joint.Plan):
+    rng = np.random.default_rng(29)
+    options = []
+    found = _fixed_deflation(pl, any_side=True)
+    if found is not None:
+        options.append(np.asarray(found[0], dtype=float)[0][:, found[1]:])
+    best = min((_shared_subspace(pl, v, rng) for v in _DEFLATION_VALUES), key=lambda f: f[1])
+    if best[0] is not None and best[1] < _TRIPLE_CHECK_LEAK:
+        options.append(best[0])
+    values = np.concatenate([_DEFLATION_VALUES, rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)])
+    for v0 in sorted(options, key=lambda b: -b.shape[1]):
+        if not 2 <= v0.shape[1] <= 12:
+            continue
+        rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+        ok = True
+        for v in values:
+            q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6))
+            for k, d in enumerate(pl.d3):
+                if not _leak(_companions(pl, v, q, d), rots[k] @ v0) <= _TRIPLE_CHECK_LEAK:
+                    ok = False
+                    break
+            if not ok:
+                break
+        if ok:
+            bases = []
+            for k in range(len(pl.d3)):
+                qv = np.linalg.qr(rots[k] @ v0, mode="complete")[0]
+                r = v0.shape[1]
+                bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+            return np.array(bases), 24 - v0.shape[1], ()
+    return None
+
+
+#: The per-value deflation basis (:func:`value_basis`): values sampled, the degrees tried, the
+#: largest fitting leak accepted at a sample and the smallest singular value of the fitted basis
+_VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV = 160, (1, 2, 4, 8, 12, 16, 24, 32), 1e-11, 1e-3
+#: The share of the check values at which a fitted basis must hold where it does not hold at all
+#: (near a value where the shared span is not analytic, or its samples inaccurate): the C kernel's
+#: leak check sends the poses at the others to the whole pencil
+_VALUE_MIN_SHARE = 0.75
+
+
+def value_basis(pl: free_joint.Plan):
+    """The deflation of a plan whose held link lies on the triple side (joints 3-5) where the
+    subspace V(v) of the eigenvectors every pose shares moves with the value v: a basis of it as
+    a trigonometric polynomial in v, V(v) = sum_k H[k] h_k(v), h = (1, cos v, sin v, ...,
+    cos N v, sin N v), at the offset d3[0] (the other offsets' by :func:`_offset_rotation`).
+    The spurious eigenvectors depend on the value only, never on the pose, and their span is an
+    analytic function of v (where no spurious eigenvalue meets another eigenvalue of the triple
+    side's equations), so its Fourier series converges geometrically. Fitted by least squares to
+    the spans at :data:`_VALUE_SAMPLES` equispaced values (:func:`_shared_subspace`, the best of
+    the three offsets, each projected on a fixed basis V0 so that the fit is linear), the
+    smallest degree of :data:`_VALUE_DEGREES` whose basis holds (:func:`_leak` at most
+    :data:`_TRIPLE_CHECK_LEAK`, its smallest singular value above :data:`_VALUE_MIN_SV`) on
+    :data:`_TRIPLE_CHECK_POSES` random poses at :data:`_TRIPLE_CHECK_VALUES` random values and every
+    offset. (H (2N + 1, 24, r), N) or None (then the whole pencil). Once per process."""
+    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-value-basis", key, lambda: _value_basis_stored(pl))
+
+
+def _value_basis_stored(pl: free_joint.Plan):
+    """:func:`_value_basis`, kept in the user cache (a few seconds per plan; keyed by the robot's
+    identity, the plan and this code's version and constants)."""
+    import hashlib
+    import json
+    from derive.cache import find_artifact, step, store_artifacts, task
+    from derive.model.robot import load_robot
+    robot = load_robot(pl.robot)
+    tag = hashlib.sha256(repr((__version__, pl.joint, pl.reverse, pl.e, pl.ev, np.asarray(pl.offsets).tolist(),
+                               _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV, _TRIPLE_CHECK_VALUES,
+                               _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK, _VALUE_MIN_SHARE)).encode()).hexdigest()[:16]
+    key = f"{robot.id}-free-q{pl.joint}-vb-{tag}"
+    found = find_artifact(key, "value_basis")
+    if found is not None:
+        data = json.loads(found.read_text(encoding="utf-8"))
+        return None if data["h"] is None else (np.array(data["h"], dtype=float), int(data["n"]))
+    with task(f"{robot.name} q{pl.joint}"):
+        step("fitting the deflation basis per value of the plan's loop cut")
+        out = _value_basis(pl)
+    text = json.dumps({"h": None if out is None else out[0].tolist(), "n": None if out is None else out[1]})
+    store_artifacts(key, {"value_basis": ("value_basis.json", text)}, {"robot": robot.name, "free": f"q{pl.joint}"})
+    return out
+
+
+def _value_harmonics(v, n: int) -> np.ndarray:
+    v = np.atleast_1d(np.asarray(v, dtype=float))
+    cols = [np.ones_like(v)]
+    for k in range(1, n + 1):
+        cols += [np.cos(k * v), np.sin(k * v)]
+    return np.stack(cols, -1)
+
+
+def _shared_span(comp):
+    """The orthonormal basis (24, r) of the invariant subspace of the companion matrices comp
+    (m, 24, 24) for the eigenvalues they all share (within 1e-6, a cluster within 1e-4 taken as one
+    eigenvalue of its multiplicity k: the null space of (C - x I)^k, generalised eigenvectors
+    too), real and imaginary parts; None where none is shared."""
+    lam = np.linalg.eigvals(comp[0])
+    others = [np.linalg.eigvals(c) for c in comp[1:]]
+    sel = [x for x in lam if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
+    if not sel:
+        return None
+    groups = []
+    for x in sel:
+        for g in groups:
+            if abs(np.mean(g) - x) < 1e-4 * (1 + abs(x)):
+                g.append(x)
+                break
+        else:
+            groups.append([x])
+    cols = []
+    for g in groups:
+        x, k = np.mean(g), len(g)
+        a = np.linalg.matrix_power(comp[0] - x * np.eye(24), k)
+        cols.append(np.linalg.svd(a)[2][-k:].conj().T)
+    v = np.concatenate(cols, 1)
+    u, sv, _ = np.linalg.svd(np.concatenate([v.real, v.imag], 1), full_matrices=False)
+    return u[:, :int(np.sum(sv > 1e-8 * sv[0]))]
+
+
+def _value_basis(pl: free_joint.Plan):
+    rng = np.random.default_rng(37)
+    vs = 2 * np.pi * np.arange(_VALUE_SAMPLES) / _VALUE_SAMPLES
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    spans = []
+    for v in vs:
+        q = rng.uniform(-np.pi, np.pi, (4, 6))
+        best = (None, np.inf)
+        for k, d in enumerate(pl.d3):           # the first offset whose span is accurate, else the best
+            comp = _companions(pl, v, q, d)
+            if not np.all(np.isfinite(comp)):
+                continue
+            b = _shared_span(comp)
+            if b is None:
+                continue
+            leak = _leak(comp, b)
+            if leak < best[1]:
+                best = (rots[k].T @ b, leak)
+            if leak < _VALUE_SAMPLE_LEAK:
+                break
+        spans.append(best)
+    dims = [b.shape[1] for b, leak in spans if b is not None and leak < _VALUE_SAMPLE_LEAK]
+    if len(dims) < _VALUE_SAMPLES // 2:
+        return None
+    r = max(set(dims), key=dims.count)
+    good = [i for i, (b, leak) in enumerate(spans) if b is not None and leak < _VALUE_SAMPLE_LEAK and b.shape[1] == r]
+    if not 2 <= r <= 12 or len(good) < _VALUE_SAMPLES // 2:
+        return None
+    # the fixed basis V0: the sample's span that every other sample's span sees best
+    sv_min = [min(np.linalg.svd(spans[j][0].T @ spans[i][0], compute_uv=False).min() for j in good[::4])
+              for i in good[::4]]
+    v0 = spans[good[::4][int(np.argmax(sv_min))]][0]
+    y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good])         # P(v) V0: linear in P
+    test = rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)
+    test_q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, 6))
+    found = None
+    for n in _VALUE_DEGREES:
+        if 2 * n + 1 > len(good) // 2:
+            break
+        h = np.linalg.lstsq(_value_harmonics(vs[good], n), y.reshape(len(good), -1), rcond=None)[0]
+        h = h.reshape(2 * n + 1, 24, r)
+        passed = 0
+        for j, v in enumerate(test):
+            if j - passed > (1 - _VALUE_MIN_SHARE) * len(test):
+                break                           # this degree cannot reach the share any more
+            b = np.einsum("k,kij->ij", _value_harmonics(v, n)[0], h)
+            sv = np.linalg.svd(b, compute_uv=False)
+            passed += bool(sv[-1] > _VALUE_MIN_SV * sv[0]) and all(
+                _leak(_companions(pl, v, test_q[j], d), np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK
+                for k, d in enumerate(pl.d3))
+        if passed == len(test):
+            return h, n
+        if passed >= _VALUE_MIN_SHARE * len(test) and (found is None or passed > found[2]):
+            found = (h, n, passed)
+    return None if found is None else found[:2]
+
+
 def _deflation(pl: free_joint.Plan):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value
@@ -224,8 +495,17 @@ def _deflation(pl: free_joint.Plan):
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
     found = _fixed_deflation(pl) if general else None
+    if found is None and general and not _held_on_pair_side(pl):
+        found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
-        return make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+        off = make(SimpleNamespace(deflate=None, deflate_keep=24, spurious=()))
+        vb = value_basis(pl) if general and not _held_on_pair_side(pl) else None
+        if vb is not None:                        # joints 3-5: the basis per value (the caller's)
+            from derive.codegen.general6r import _arr
+            r = vb[0].shape[2]
+            rot = [[np.cos(0.5 * (d - pl.d3[0])), np.sin(0.5 * (d - pl.d3[0]))] for d in pl.d3]
+            off = dict(off, runtime=True, n=r, keep=24 - r, rot=_arr(np.array(rot)))
+        return off
     b, keep, spurious = found
     return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
 
@@ -366,11 +646,22 @@ def c_source(robot, joint: int) -> str:
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
-                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27))} for p in plans],
+                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
         max_solutions=MAX_SOLUTIONS)
+
+
+def _value_basis_context(pl: free_joint.Plan):
+    """The per-value deflation basis of a plan for templates/free_joint.c.j2 (its coefficients,
+    degree and columns), where :func:`_deflation` uses it (the core's ``defl.runtime``), else None."""
+    from derive.codegen.general6r import _arr
+    ctx = _deflation(pl)
+    if not (ctx or {}).get("runtime"):
+        return None
+    h, n = value_basis(pl)
+    return {"h": _arr(h), "n": int(n), "r": int(h.shape[2])}
 
 
 def _load(text: str, ident: str, compile_fn):
