@@ -47,8 +47,8 @@ def counting_source(robot):
     newton_max = int(re.search(r"    for \(int it = 0; it < (\d+); \+\+it\) \{\n        double err\[6\], jac\[36\]",
                                src).group(1))
     head = ("#define _POSIX_C_SOURCE 199309L\nstatic long st[%d];\n" % len(COUNTERS))
-    src = _sub(src, "static double g6_newton(const double c[7][16], double *q, const double *t, int patient)\n{\n",
-               "static double g6_newton(const double c[7][16], double *q, const double *t, int patient)\n{\n"
+    sig = "static double g6_newton(const double c[7][16], double *q, const double (*sc0)[2], const double *t, int patient)\n{\n"
+    src = _sub(src, sig, sig +
                "    st[patient ? 3 : 1]++;\n    int itc = 0;\n")
     src = _sub(src, "{\n        double err[6], jac[36]", "{\n        st[patient ? 4 : 2]++;\n        itc++;\n"
                "        double err[6], jac[36]")

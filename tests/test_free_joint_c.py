@@ -10,6 +10,7 @@ import subprocess
 
 import numpy as np
 import pytest
+from scipy.optimize import linear_sum_assignment
 
 import derive
 from derive import reference
@@ -318,7 +319,11 @@ def test_value_basis_is_invariant_at_random_values_and_poses():
             whole = np.linalg.eigvals(comp)
             for i in range(len(q)):
                 both = np.concatenate([removed[i], kept[i]])
-                assert np.abs(both[:, None] - whole[i][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(whole[i]).max())
+                # matched one to one (a lost eigenvalue cannot hide behind a near duplicate)
+                gap = np.abs(both[:, None] - whole[i][None])
+                rows, cols = linear_sum_assignment(gap)
+                assert len(both) == len(whole[i]) == len(rows)
+                assert gap[rows, cols].max() < 1e-6 * (1 + np.abs(whole[i]).max())
                 assert np.abs(removed[i][:, None] - removed[0][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(removed[0]).max())
 
 
@@ -353,3 +358,13 @@ def test_c_triple_side_deflation_matches_the_reference(name, k):
     assert np.abs(reference.fk_matrix(robot, cq[valid]) - target[np.nonzero(valid)[0]]).max() < 1e-10
     gen = np.nanmin(np.where(valid, _wrapped(cq - np.repeat(q, 2, axis=0)[:, None]).max(-1), np.inf), axis=1)
     assert np.all(gen[::2] < 1e-6)
+
+
+def test_plans_carry_the_robots_identity_for_their_caches():
+    """The caches of the C plans (value_basis, _triple_side_deflation, the quiet plan's choice) are
+    keyed by the robot's identity, which every plan (and its rescue) carries: a file arm that
+    keeps a library arm's name must not share them."""
+    robot = derive.load_robot("xarm7")
+    for pl in cfree.c_plans(robot, 3):
+        assert pl.robot_id == robot.id
+        assert pl.alt is None or pl.alt.robot_id == robot.id

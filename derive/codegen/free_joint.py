@@ -120,9 +120,11 @@ def c_plans(robot, joint: int) -> list:
     (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3, 4 or 5
     held (the held link on the triple side of every cut) the cut and eigen-variable with the fewest
     poses sent to the rescue (:func:`_quiet_plan`), where it beats the reference's plan, with the
-    reference's plan as its rescue; else, where the reference's plan has no deflation of its shared
-    eigenvectors but its rescue plan has (:func:`_triple_deflates`), the two swap
-    (:func:`_deflating_rescue`). On the general route only; once per process."""
+    reference's plan as its rescue (the rescue's share decides, not the deflated size); else, where
+    the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
+    (:func:`_triple_deflates`), the two swap (:func:`_deflating_rescue`; also for joints 2 and 6
+    when the reference's plan has the held link on the triple side and no pair-side cut
+    deflates). On the general route only; once per process."""
     from derive.model.robot import load_robot
     robot = load_robot(robot)
     return memo("free-joint-c-plans", (robot.id, joint), lambda: _c_plans(robot, joint))
@@ -142,8 +144,9 @@ def _c_plans(robot, joint: int) -> list:
     if own is None and not any(_held_on_pair_side(dataclasses.replace(pl, reverse=r, e=e))
                                for r in (False, True) for e in (1, 2)):
         # the held link on the triple side of every cut (joints 3-5): no baked deflation; the cut
-        # and eigen-variable whose pencil has the fewest spurious real roots
-        quiet = _quiet_plan(pl)
+        # and eigen-variable with the fewest poses sent to the rescue (_fewest_suspects), else the
+        # reference's plans, swapped where only its rescue plan deflates
+        quiet = _quiet_plan(pl, robot)
         if quiet is not None:
             return [quiet, pl]
         return _deflating_rescue(pl) or plans
@@ -201,7 +204,7 @@ def _triple_deflates(pl: free_joint.Plan) -> bool:
 _SUSPECT_POSES = 120
 
 
-def _suspects(pl: free_joint.Plan, poses, values, counts) -> tuple[int, float] | None:
+def _suspects(pl: free_joint.Plan, robot, poses, values, counts) -> tuple[int, float] | None:
     """(the poses on which the plan's candidates make :func:`derive.ik.free_joint._general` run its
     rescue: an odd count, none, the degenerate flag, two candidates merged, a candidate failing
     the check on the 7R's FK; candidates per pose), or None where the plan finds fewer solutions
@@ -211,7 +214,7 @@ def _suspects(pl: free_joint.Plan, poses, values, counts) -> tuple[int, float] |
     with np.errstate(all="ignore"):
         ip, q7, degen = free_joint._candidates(dataclasses.replace(pl, alt=None), poses, values)
     cand = free_joint._grid(ip, q7, n)
-    ok, _ = free_joint._check(pl.robot, poses, cand)
+    ok, _ = free_joint._check(robot, poses, cand)
     dup = finish.duplicates(cand, ok)
     count = (ok & ~dup).sum(1)
     if np.any(count < counts):
@@ -221,18 +224,17 @@ def _suspects(pl: free_joint.Plan, poses, values, counts) -> tuple[int, float] |
     return int(suspect.sum()), len(ip) / max(n, 1)
 
 
-def _quiet_plan(pl: free_joint.Plan):
+def _quiet_plan(pl: free_joint.Plan, robot):
     """:func:`_fewest_suspects`, its choice kept in the user cache (once per code version: it
     solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan"."""
     import json
     from derive.cache import find_artifact, store_artifacts
-    from derive.model.robot import load_robot
-    key = f"{load_robot(pl.robot).id}-free-q{pl.joint}-cplan"
+    key = f"{robot.id}-free-q{pl.joint}-cplan"
     found = find_artifact(key, "c_plan")
     if found is not None:
         choice = json.loads(found.read_text(encoding="utf-8"))["choice"]
     else:
-        choice = _fewest_suspects(pl)
+        choice = _fewest_suspects(pl, robot)
         store_artifacts(key, {"c_plan": ("c_plan.json", json.dumps({"choice": choice}))},
                         {"robot": pl.robot, "free": f"q{pl.joint}"})
     if choice is None:
@@ -241,11 +243,11 @@ def _quiet_plan(pl: free_joint.Plan):
     return dataclasses.replace(
         pl, reverse=reverse, e=e, ev=ev, alt=pl,
         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
-              f"q{g6._cut_joints(e)[0][ev]} of the 6R (the fewest spurious real roots: the "
+              f"q{g6._cut_joints(e)[0][ev]} of the 6R (the fewest poses sent to the rescue: the "
               f"reference's plan is the rescue)")
 
 
-def _fewest_suspects(pl: free_joint.Plan):
+def _fewest_suspects(pl: free_joint.Plan, robot):
     """For a held joint whose link lies on the triple side of every cut (joints 3-5: no deflation
     is baked, the 24 x 24 companion keeps the pencil's 8 pose-independent eigenvalues, and where
     some of them are real, as the +-theta double roots of the Gen3's q3 with the reference's plan,
@@ -259,15 +261,13 @@ def _fewest_suspects(pl: free_joint.Plan):
     depends on the pencil's eigenvalue structure too, and on the Gen3's q4 a plan with 2 % fewer
     suspect poses runs 6 % slower). [reverse, e, ev] or None."""
     from derive.kinematics.fk import fk
-    from derive.model.robot import load_robot
-    robot = load_robot(pl.robot)
     rng = np.random.default_rng(97 + pl.joint)
     q = rng.uniform(-np.pi, np.pi, (_SUSPECT_POSES, 7))
     poses = fk(robot, q)
     values = q[:, pl.joint - 1]
     ref = free_joint.solve(robot, poses, pl.joint, values)
     # (the reference's plan may find fewer without its rescue: that is what the rescue is for)
-    own = _suspects(pl, poses, values, np.zeros_like(ref.counts))
+    own = _suspects(pl, robot, poses, values, np.zeros_like(ref.counts))
     best, score = None, own
     for reverse in (False, True):
         for e in (1, 2):
@@ -277,7 +277,7 @@ def _fewest_suspects(pl: free_joint.Plan):
             for ev in range(3):
                 if (reverse, e, ev) == (pl.reverse, pl.e, pl.ev):
                     continue
-                got = _suspects(dataclasses.replace(pl, reverse=reverse, e=e, ev=ev), poses, values, ref.counts)
+                got = _suspects(dataclasses.replace(pl, reverse=reverse, e=e, ev=ev), robot, poses, values, ref.counts)
                 if got is not None and got < score:
                     best, score = [reverse, e, ev], got
     if best is None or not (score[0] <= own[0] - 0.05 * len(poses) and 3 * score[0] <= 2 * own[0]):
@@ -400,7 +400,7 @@ def _triple_side_deflation(pl: free_joint.Plan):
     offset on :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
     :data:`_TRIPLE_CHECK_VALUES` random values. Where it moves (the other arms' joints 3-5), None:
     the whole pencil."""
-    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
     return memo("free-joint-triple-deflation", key, lambda: _triple_side_deflation_uncached(pl))
 
 
@@ -460,7 +460,7 @@ def value_basis(pl: free_joint.Plan):
     :data:`_TRIPLE_CHECK_LEAK`, its smallest singular value above :data:`_VALUE_MIN_SV`) on
     :data:`_TRIPLE_CHECK_POSES` random poses at :data:`_TRIPLE_CHECK_VALUES` random values and every
     offset. (H (2N + 1, 24, r), N) or None (then the whole pencil). Once per process."""
-    key = (pl.robot, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
     return memo("free-joint-value-basis", key, lambda: _value_basis_stored(pl))
 
 
@@ -470,21 +470,19 @@ def _value_basis_stored(pl: free_joint.Plan):
     import hashlib
     import json
     from derive.cache import find_artifact, step, store_artifacts, task
-    from derive.model.robot import load_robot
-    robot = load_robot(pl.robot)
     tag = hashlib.sha256(repr((__version__, pl.joint, pl.reverse, pl.e, pl.ev, np.asarray(pl.offsets).tolist(),
                                _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV, _TRIPLE_CHECK_VALUES,
                                _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK, _VALUE_MIN_SHARE)).encode()).hexdigest()[:16]
-    key = f"{robot.id}-free-q{pl.joint}-vb-{tag}"
+    key = f"{pl.robot_id}-free-q{pl.joint}-vb-{tag}"
     found = find_artifact(key, "value_basis")
     if found is not None:
         data = json.loads(found.read_text(encoding="utf-8"))
         return None if data["h"] is None else (np.array(data["h"], dtype=float), int(data["n"]))
-    with task(f"{robot.name} q{pl.joint}"):
+    with task(f"{pl.robot} q{pl.joint}"):
         step("fitting the deflation basis per value of the plan's loop cut")
         out = _value_basis(pl)
     text = json.dumps({"h": None if out is None else out[0].tolist(), "n": None if out is None else out[1]})
-    store_artifacts(key, {"value_basis": ("value_basis.json", text)}, {"robot": robot.name, "free": f"q{pl.joint}"})
+    store_artifacts(key, {"value_basis": ("value_basis.json", text)}, {"robot": pl.robot, "free": f"q{pl.joint}"})
     return out
 
 

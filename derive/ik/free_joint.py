@@ -154,6 +154,7 @@ class Plan:
     d3: np.ndarray
     notes: str
     alt: "Plan | None" = None    # the rescue: another cut (or other offsets), see _general
+    robot_id: str = ""           # the robot's identity (robot is its name): the caches' key
 
 
 def plan(robot, joint: int) -> Plan:
@@ -203,7 +204,7 @@ def _plan(robot, joint):
         plans = []
         for shared, _, reverse, e, ev, info in (options * 2)[:2]:
             offsets = rng.uniform(-np.pi, np.pi, 3)
-            plans.append(Plan(robot=robot.name, joint=joint, c=c, scale=scale, reverse=reverse, e=e, ev=ev,
+            plans.append(Plan(robot=robot.name, robot_id=robot.id, joint=joint, c=c, scale=scale, reverse=reverse, e=e, ev=ev,
                               offsets=offsets, d3=offsets[2] + np.array([0.0, 2.0, 4.0]),
                               notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}: {info} "
                                     f"({shared} shared roots over the 3 values)"))
