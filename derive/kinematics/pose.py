@@ -102,10 +102,32 @@ def _is_rt_pair(pose) -> bool:
     return np.shape(rot)[-2:] == (3, 3) and np.shape(t)[-1:] == (3,)
 
 
+def _one_pose(arr: np.ndarray) -> np.ndarray | None:
+    """The fast path of :func:`as_pose_batch` for one pose, a float64 array (8,), (4, 4) or
+    (3, 4): the unit dual quaternion (1, 8), bit for bit the array code's
+    (:func:`derive.algebra.dualquat._unit_one`, :func:`derive.algebra.dualquat._from_matrix_one`),
+    or None where the input is not one such pose or not clearly valid: the array code then
+    decides, and raises its errors with their messages."""
+    shape = arr.shape
+    if shape == (8,):
+        out = dq._unit_one(arr.tolist())
+    elif shape == (4, 4):
+        out = dq._from_matrix_one(arr.tolist())
+    elif shape == (3, 4):
+        out = dq._from_matrix_one(arr.tolist() + [[0.0, 0.0, 0.0, 1.0]])
+    else:
+        return None
+    return None if out is None else np.array([out])
+
+
 def as_pose_batch(pose) -> tuple:
     """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4), (n, 4, 4), (3, 4) or (n, 3, 4)
     ([R | t]) input, or a pair (R, t) of rotations (3, 3) / (n, 3, 3) or a scipy Rotation and
     translations (3,) / (n, 3); single flag."""
+    if type(pose) is np.ndarray and pose.dtype == np.float64:
+        out = _one_pose(pose)
+        if out is not None:
+            return out, True
     if _is_rt_pair(pose):
         rot, t = pose
         if hasattr(rot, "as_matrix"):
