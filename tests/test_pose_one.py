@@ -1,13 +1,22 @@
-"""The one-pose fast path of derive.kinematics.pose.as_pose_batch and derive.algebra.dualquat.check_unit
-(Python floats instead of array code) against the array code run on the same pose twice in a batch:
-the same numbers bit for bit, the same errors with the same messages."""
+"""The fast path of derive.kinematics.pose.as_pose_batch for one pose or a few (Python floats instead of
+array code) and of derive.algebra.dualquat.check_unit for one, against the array code run on the same
+poses in a batch larger than FEW_POSES: the same numbers bit for bit, the same errors with the same
+messages."""
 
 import numpy as np
 import pytest
 
 from derive.algebra import dualquat as dq
 from derive.errors import InputError
-from derive.kinematics.pose import as_pose_batch
+from derive.kinematics.pose import FEW_POSES, as_pose_batch
+
+
+def _array_code(x, rows=None):
+    """as_pose_batch of one pose x (rows None) or of a batch x of ``rows`` poses, run by the array
+    code: x repeated to a batch larger than FEW_POSES."""
+    if rows is None:
+        return as_pose_batch(np.stack([x] * (FEW_POSES + 1)))[0][:1]
+    return as_pose_batch(np.concatenate([x] * (FEW_POSES + 1)))[0][:rows]
 
 
 def _outcome(f, x):
@@ -52,7 +61,7 @@ def test_one_dual_quaternion_is_the_batch_bit_for_bit():
     rng = np.random.default_rng(7)
     for a in _poses(rng, 600) + [np.array([1.0, 0, 0, 0, 0, 0, 0, 0]), np.array([-0.0, 1, 0, 0, -0.0, 0, 0, 0])]:
         one = _outcome(lambda x: as_pose_batch(x)[0], a)
-        _same(one, _outcome(lambda x: as_pose_batch(np.stack([x, x]))[0][:1], a))
+        _same(one, _outcome(_array_code, a))
         _same(_outcome(dq.check_unit, a), _outcome(lambda x: dq.check_unit(np.stack([x, x]))[0], a))
         _same(_outcome(dq.check_unit, a[None]), _outcome(lambda x: dq.check_unit(np.stack([x, x]))[:1], a))
 
@@ -79,10 +88,33 @@ def test_one_matrix_is_the_batch_bit_for_bit():
     bottom[3, 0] = 1e-8
     for m in mats + [bent, mirrored, bottom]:
         _same(_outcome(lambda x: as_pose_batch(x)[0], m),
-              _outcome(lambda x: as_pose_batch(np.stack([x, x]))[0][:1], m))
+              _outcome(_array_code, m))
         _same(_outcome(lambda x: as_pose_batch(x)[0], m[:3]),
-              _outcome(lambda x: as_pose_batch(np.stack([x, x]))[0][:1], m[:3]))
+              _outcome(_array_code, m[:3]))
     assert as_pose_batch(mats[0])[1] is True and as_pose_batch(mats[0][:3])[1] is True
+    for n in (1, 2, 5, FEW_POSES):        # a few matrices in one call, a bad one among them now and then
+        for _ in range(20):
+            bad = bool(rng.random() < 0.1)
+            batch = np.stack([mats[i] for i in rng.integers(0, len(mats), n - bad)] + [bent] * bad)
+            one = _outcome(lambda x: as_pose_batch(x)[0], batch)
+            _same(one, _outcome(lambda x: _array_code(x, len(x)), batch))
+            _same(_outcome(lambda x: as_pose_batch(x)[0], batch[:, :3]),
+                  _outcome(lambda x: _array_code(x, len(x)), batch[:, :3]))
+            assert one[0] == ("error" if bad else "ok")
+            if not bad:
+                assert as_pose_batch(batch)[1] is False
+
+
+def test_a_few_dual_quaternions_are_the_batch_bit_for_bit():
+    rng = np.random.default_rng(9)
+    poses = _poses(rng, 200)
+    for n in (1, 2, 5, FEW_POSES):
+        for _ in range(30):
+            batch = np.stack([poses[i] for i in rng.integers(0, len(poses), n)])
+            one = _outcome(lambda x: as_pose_batch(x)[0], batch)
+            _same(one, _outcome(lambda x: _array_code(x, len(x)), batch))
+            if n == 1 and one[0] == "ok":
+                assert as_pose_batch(batch)[1] is False and as_pose_batch(batch[0])[1] is True
 
 
 @pytest.mark.parametrize("bad, message", [
