@@ -793,9 +793,12 @@ def _load(text: str, ident: str, compile_fn):
 
 
 def _address(a: np.ndarray) -> int:
-    """The data address of an array this module allocated (writable, C-contiguous, not empty):
-    through the buffer protocol, a third of the time of ``a.ctypes.data``."""
-    return ctypes.addressof(ctypes.c_char.from_buffer(a))
+    """The data address of a C-contiguous, non-empty array: through the buffer protocol (a third
+    of the time of ``a.ctypes.data``) where the array is writable, else ``a.ctypes.data``."""
+    try:
+        return ctypes.addressof(ctypes.c_char.from_buffer(a))
+    except TypeError:       # read-only
+        return a.ctypes.data
 
 
 class _CLibrary:
@@ -824,7 +827,7 @@ class _CLibrary:
         if n:
             iw = ctypes.sizeof(ctypes.c_int)
             at = _address(ints)
-            self._f(n, poses.ctypes.data, values.ctypes.data, _address(q), at, at + 2 * n * iw, at + n * iw)
+            self._f(n, _address(poses), _address(values), _address(q), at, at + 2 * n * iw, at + n * iw)
         return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
 
 
@@ -862,7 +865,7 @@ class _CProgram:
         if n:
             iw = ctypes.sizeof(ctypes.c_int)
             at = _address(ints)
-            self._f(n, poses.ctypes.data, values.ctypes.data, _address(qw), at, at + n * iw,
+            self._f(n, _address(poses), _address(values), _address(qw), at, at + n * iw,
                     at + (n + n * w) * iw)
         q[:, :w], branch[:, :w], sing[:, :w] = qw, bw, sw.astype(bool)
         return q, counts.astype(np.int64), branch, sing
