@@ -68,7 +68,7 @@ def as_finite_array(value, name: str, last_dim: int | None = None,
         raise InputError(f"{name}: expected at least {ndim_min} dimension(s), got shape {arr.shape}")
     if last_dim is not None and arr.shape[-1] != last_dim:
         raise InputError(f"{name}: expected last dimension {last_dim}, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         bad = np.argwhere(~np.isfinite(arr))[0]
         kind = "NaN" if np.isnan(arr[tuple(bad)]) else "inf"
         raise InputError(f"{name}: contains {kind} at index {tuple(int(i) for i in bad)}")

@@ -23,6 +23,7 @@ to each half (``Q[..., :4]`` and ``Q[..., 4:]``).
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -145,6 +146,73 @@ def normalize(a) -> np.ndarray:
     return np.concatenate((p / n, q / n - p * pq / n**3), axis=-1)
 
 
+def _unit_one(x: list, tol: float = UNIT_TOL) -> list | None:
+    """The fast path of :func:`check_unit` for one dual quaternion given as 8 Python floats:
+    the normalised 8 floats when the input is finite and within ``tol`` of unit, else None (the
+    caller then runs the array code, which raises the error). The same operations in the same
+    order as :func:`check_unit` and :func:`normalize` on an array (1, 8) (numpy's norm and sum
+    over 4 entries add from the left onto 0.0, and IEEE arithmetic on Python floats is numpy's),
+    so the result is bit for bit the array code's; ``n**3`` is taken by numpy's ``power`` as
+    there (a vectorised pow may round differently from the C library's)."""
+    if not math.isfinite(sum(x)):        # NaN, inf (or an overflowing sum): the array code decides
+        return None
+    p0, p1, p2, p3, q0, q1, q2, q3 = x
+    n = math.sqrt(0.0 + p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+    qn = math.sqrt(0.0 + q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    pq = 0.0 + p0 * q0 + p1 * q1 + p2 * q2 + p3 * q3
+    if not (abs(n - 1.0) <= tol and qn != math.inf and abs(pq) / max(1.0, qn) <= tol):
+        return None
+    n3 = float(np.power(n, 3))
+    return [p0 / n, p1 / n, p2 / n, p3 / n,
+            q0 / n - p0 * pq / n3, q1 / n - p1 * pq / n3, q2 / n - p2 * pq / n3, q3 / n - p3 * pq / n3]
+
+
+def _from_matrix_one(m: list) -> list | None:
+    """The fast path of the matrix input of :func:`derive.kinematics.pose.as_pose_batch` for one
+    pose, rows ``m`` (4 lists of 4 Python floats): the unit dual quaternion (8 floats) of
+    :func:`from_matrix` when the matrix is finite, its rotation block clearly orthonormal (max
+    |R^T R - I| below 0.999e-6, det > 0.5) and its last row (0, 0, 0, 1) within 1e-9, else None
+    (the caller then runs the array code, which raises its error). Shepperd's pivot, the sign, the
+    norm and the product t q are :func:`derive.algebra.quaternion.from_matrix` and
+    :func:`_from_rt` operation for operation, so the result is bit for bit theirs."""
+    (r11, r12, r13, t0), (r21, r22, r23, t1), (r31, r32, r33, t2), bottom = m
+    if not math.isfinite(sum(m[0]) + sum(m[1]) + sum(m[2]) + sum(bottom)):
+        return None
+    if (abs(bottom[0]) > 1e-9 or abs(bottom[1]) > 1e-9 or abs(bottom[2]) > 1e-9
+            or abs(bottom[3] - 1.0) > 1e-9):
+        return None
+    c1, c2, c3 = (r11, r21, r31), (r12, r22, r32), (r13, r23, r33)       # columns of R
+    err = max(abs(c1[0] * c1[0] + c1[1] * c1[1] + c1[2] * c1[2] - 1.0),
+              abs(c2[0] * c2[0] + c2[1] * c2[1] + c2[2] * c2[2] - 1.0),
+              abs(c3[0] * c3[0] + c3[1] * c3[1] + c3[2] * c3[2] - 1.0),
+              abs(c1[0] * c2[0] + c1[1] * c2[1] + c1[2] * c2[2]),
+              abs(c1[0] * c3[0] + c1[1] * c3[1] + c1[2] * c3[2]),
+              abs(c2[0] * c3[0] + c2[1] * c3[1] + c2[2] * c3[2]))
+    det = (r11 * (r22 * r33 - r23 * r32) - r12 * (r21 * r33 - r23 * r31)
+           + r13 * (r21 * r32 - r22 * r31))
+    if not (err < 0.999e-6 and det > 0.5):
+        return None
+    tr = r11 + r22 + r33
+    piv = (1 + tr, 1 + 2 * r11 - tr, 1 + 2 * r22 - tr, 1 + 2 * r33 - tr)
+    k = max(range(4), key=piv.__getitem__)          # the first largest, as np.argmax
+    s = math.sqrt(piv[k])
+    h = 0.5 / s
+    if k == 0:
+        q = [0.5 * s, (r32 - r23) * h, (r13 - r31) * h, (r21 - r12) * h]
+    elif k == 1:
+        q = [(r32 - r23) * h, 0.5 * s, (r12 + r21) * h, (r13 + r31) * h]
+    elif k == 2:
+        q = [(r13 - r31) * h, (r12 + r21) * h, 0.5 * s, (r23 + r32) * h]
+    else:
+        q = [(r21 - r12) * h, (r13 + r31) * h, (r23 + r32) * h, 0.5 * s]
+    if q[0] < 0.0:
+        q = [-v for v in q]
+    n = math.sqrt(0.0 + q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    q = [v / n for v in q]
+    dual = quat.hamilton((0.0, t0, t1, t2), q)
+    return q + [0.5 * v for v in dual]
+
+
 def check_unit(a, name: str = "pose", tol: float = UNIT_TOL) -> np.ndarray:
     """Return a normalised copy of a unit dual quaternion, or raise InputError.
 
@@ -152,6 +220,10 @@ def check_unit(a, name: str = "pose", tol: float = UNIT_TOL) -> np.ndarray:
     translation size); anything farther from unit is an error rather than
     silently rescaled.
     """
+    if type(a) is np.ndarray and a.dtype == np.float64 and a.shape in ((8,), (1, 8)):
+        out = _unit_one(a.ravel().tolist(), tol)       # one pose: the same numbers, fewer steps
+        if out is not None:
+            return np.array(out).reshape(a.shape)
     a = _dq(a, name)
     p, q = a[..., :4], a[..., 4:]
     dev_n = np.abs(np.linalg.norm(p, axis=-1) - 1.0)

@@ -790,6 +790,15 @@ def _load(text: str, ident: str, compile_fn):
         return path, ctypes.CDLL(str(path))
 
 
+def _address(a: np.ndarray) -> int:
+    """The data address of a C-contiguous, non-empty array: through the buffer protocol (a third
+    of the time of ``a.ctypes.data``) where the array is writable, else ``a.ctypes.data``."""
+    try:
+        return ctypes.addressof(ctypes.c_char.from_buffer(a))
+    except TypeError:       # read-only
+        return a.ctypes.data
+
+
 class _CLibrary:
     """The compiled IK of one (arm, joint) on the general route, through ctypes. ``compile_fn``:
     (source path, prefix, again=None) -> shared library path, the C backend's compile step
@@ -810,12 +819,13 @@ class _CLibrary:
         values = np.ascontiguousarray(values, dtype=np.float64)
         n = len(poses)
         q = np.empty((n, MAX_SOLUTIONS, 7))
-        counts = np.empty(n, dtype=np.intc)
-        sing = np.empty((n, MAX_SOLUTIONS), dtype=np.intc)
-        degen = np.empty(n, dtype=np.intc)
+        ints = np.empty(n * (MAX_SOLUTIONS + 2), dtype=np.intc)     # counts, singular, degenerate
+        counts, degen = ints[:n], ints[n:2 * n]
+        sing = ints[2 * n:].reshape(n, MAX_SOLUTIONS)
         if n:
-            self._f(n, poses.ctypes.data, values.ctypes.data, q.ctypes.data, counts.ctypes.data,
-                    sing.ctypes.data, degen.ctypes.data)
+            iw = ctypes.sizeof(ctypes.c_int)
+            at = _address(ints)
+            self._f(n, _address(poses), _address(values), _address(q), at, at + 2 * n * iw, at + n * iw)
         return q, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
 
 
@@ -847,11 +857,14 @@ class _CProgram:
         branch = np.full((n, MAX_SOLUTIONS), -1, dtype=np.int64)
         sing = np.zeros((n, MAX_SOLUTIONS), dtype=bool)
         qw = np.empty((n, w, 7))
-        counts = np.empty(n, dtype=np.intc)
-        bw, sw = np.empty((n, w), dtype=np.intc), np.empty((n, w), dtype=np.intc)
+        ints = np.empty(n * (2 * w + 1), dtype=np.intc)      # counts, branch ids, singular flags
+        counts = ints[:n]
+        bw, sw = ints[n:n + n * w].reshape(n, w), ints[n + n * w:].reshape(n, w)
         if n:
-            self._f(n, poses.ctypes.data, values.ctypes.data, qw.ctypes.data, counts.ctypes.data,
-                    bw.ctypes.data, sw.ctypes.data)
+            iw = ctypes.sizeof(ctypes.c_int)
+            at = _address(ints)
+            self._f(n, _address(poses), _address(values), _address(qw), at, at + n * iw,
+                    at + (n + n * w) * iw)
         q[:, :w], branch[:, :w], sing[:, :w] = qw, bw, sw.astype(bool)
         return q, counts.astype(np.int64), branch, sing
 

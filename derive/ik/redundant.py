@@ -229,6 +229,9 @@ def free_choice(robot, free: str | None) -> str | None:
 def free_values(free, n: int) -> np.ndarray:
     """The free parameter for n poses as a float64 array (n,): a number for every pose or one
     per pose; InputError for other shapes, NaN or inf."""
+    if type(free) is float or type(free) is np.float64:     # one number: the checks below, fewer steps
+        if math.isfinite(free):
+            return np.full(n, float(free)) if n != 1 else np.array([float(free)])
     arr = as_finite_array(free, "free", ndim_min=0)
     if arr.ndim == 0 or arr.shape == (1,):
         return np.full(n, float(arr.reshape(-1)[0]))

@@ -102,10 +102,47 @@ def _is_rt_pair(pose) -> bool:
     return np.shape(rot)[-2:] == (3, 3) and np.shape(t)[-1:] == (3,)
 
 
+#: batches up to this size take the fast path of :func:`_few_poses` (Python floats, a few
+#: microseconds a pose, against the array code's ~70 us a call)
+FEW_POSES = 16
+
+
+def _few_poses(arr: np.ndarray) -> tuple | None:
+    """The fast path of :func:`as_pose_batch` for one pose or a few (at most :data:`FEW_POSES`),
+    a float64 array (8,) / (n, 8), (4, 4) / (n, 4, 4) or (3, 4) / (n, 3, 4): (unit dual
+    quaternions (n, 8), single flag), bit for bit the array code's
+    (:func:`derive.algebra.dualquat._unit_one`, :func:`derive.algebra.dualquat._from_matrix_one`),
+    or None where the input is not of that form or not clearly valid: the array code then
+    decides, and raises its errors with their messages."""
+    shape = arr.shape
+    if shape[-1:] == (8,) and len(shape) <= 2:
+        single, one = len(shape) == 1, dq._unit_one
+    elif shape[-2:] in ((4, 4), (3, 4)) and len(shape) <= 3:
+        single, one = len(shape) == 2, dq._from_matrix_one
+    else:
+        return None
+    if not (single or 0 < shape[0] <= FEW_POSES):
+        return None
+    rows = [arr.tolist()] if single else arr.tolist()
+    if shape[-2:] == (3, 4):
+        rows = [m + [[0.0, 0.0, 0.0, 1.0]] for m in rows]
+    out = []
+    for row in rows:
+        o = one(row)
+        if o is None:
+            return None
+        out.append(o)
+    return np.array(out), single
+
+
 def as_pose_batch(pose) -> tuple:
     """Unit dual quaternions (n, 8) from (8,), (n, 8), (4, 4), (n, 4, 4), (3, 4) or (n, 3, 4)
     ([R | t]) input, or a pair (R, t) of rotations (3, 3) / (n, 3, 3) or a scipy Rotation and
     translations (3,) / (n, 3); single flag."""
+    if type(pose) is np.ndarray and pose.dtype == np.float64:
+        out = _few_poses(pose)
+        if out is not None:
+            return out
     if _is_rt_pair(pose):
         rot, t = pose
         if hasattr(rot, "as_matrix"):
