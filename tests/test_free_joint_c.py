@@ -110,30 +110,9 @@ def test_baked_deflation_holds_at_random_values_and_poses(name, k):
     found = cfree._fixed_deflation(pl)
     assert found is not None and found[1] <= 20
     bases, keep = np.asarray(found[0]), found[1]
-    g6 = free_joint.g6
     rng = np.random.default_rng(21)
     q = _inside(robot, 8, rng)
-    target = g6._to_matrix(reference.fk(robot, q))
-    target[:, :3, 3] /= pl.scale
-    d = free_joint.locked_chain(pl.c, k, q[:, k - 1])
-    if pl.reverse:
-        d = np.stack([g6._reverse(x) for x in d])
-        target = np.linalg.inv(target)
-    y, x = free_joint._coefs(d, pl.e, target)
-    qq, _ = np.linalg.qr(x[:, :, :8], mode="complete")
-    yy = y.copy()
-    yy[:, :, 26] -= x[:, :, 8]
-    order = [pl.ev] + [i for i in range(3) if i != pl.ev]
-    ten = np.moveaxis((np.swapaxes(qq[:, :, 8:], 1, 2) @ yy).reshape(8, 6, 3, 3, 3), [2 + i for i in order], [2, 3, 4])
-    sig = (ten.reshape(8, 6, 3, 9) @ g6._t45(pl.offsets[0], pl.offsets[1])).transpose(0, 2, 1, 3)
-    mats = g6._twelve(sig)
-    for o, d3 in enumerate(pl.d3):
-        mk = np.einsum("ak,naij->nkij", g6._half(d3), mats)
-        inv = np.linalg.inv(mk[:, 2])
-        comp = np.zeros((8, 24, 24))
-        comp[:, :12, 12:] = np.eye(12)
-        comp[:, 12:, :12] = -inv @ mk[:, 0]
-        comp[:, 12:, 12:] = -inv @ mk[:, 1]
+    for o, comp in enumerate(_pencil_companions(robot, pl, q)):
         t = np.swapaxes(bases[o], 0, 1) @ comp @ bases[o]
         leak = np.abs(t[:, :keep, keep:]).max(axis=(1, 2)) / np.maximum(1.0, np.abs(comp).max(axis=(1, 2)))
         assert leak.max() < 1e-9, (o, leak)
