@@ -1202,16 +1202,19 @@ def _wide_cluster_candidates(mk, ip, x3, v, order):
 def _shift_vectors(basis):
     """Stetter's eigenvector method in a basis (12, d) of (near-)null directions of M(x): the d
     monomial vectors x4^i x5^j in its span (V[shift] c = x V[base] c for x4 and x5, combined),
-    each scaled to a largest entry of 1, (d, 12); None where it fails."""
+    each scaled to a largest entry of 1, (d, 12); None where it fails. A stack of bases
+    (p, 12, d) gives (p, d, 12), with the failed ones' rows NaN."""
     with np.errstate(all="ignore"):
-        a = (np.linalg.pinv(basis[_BASE4]) @ basis[_SHIFT4]
-             + 0.7071 * np.linalg.pinv(basis[_BASE5]) @ basis[_SHIFT5])
+        a = (np.linalg.pinv(basis[..., _BASE4, :]) @ basis[..., _SHIFT4, :]
+             + 0.7071 * np.linalg.pinv(basis[..., _BASE5, :]) @ basis[..., _SHIFT5, :])
         _, cvec = np.linalg.eig(a)
-        vecs = (basis @ cvec).T                              # (d, 12), complex in general
+        vecs = np.swapaxes(basis @ cvec, -1, -2)             # (..., d, 12), complex in general
         # a real monomial vector times a complex scale: rotate each onto the real axis
-        big = vecs[np.arange(len(vecs)), np.argmax(np.abs(vecs), axis=1)]
-        vecs = (vecs / np.where(big != 0, big, 1.0)[:, None]).real
-    return vecs if np.all(np.isfinite(vecs)) else None
+        big = np.take_along_axis(vecs, np.argmax(np.abs(vecs), axis=-1)[..., None], axis=-1)
+        vecs = (vecs / np.where(big != 0, big, 1.0)).real
+    if basis.ndim == 2:
+        return vecs if np.all(np.isfinite(vecs)) else None
+    return np.where(np.all(np.isfinite(vecs), axis=(-2, -1))[:, None, None], vecs, np.nan)
 
 
 #: A near chain of at most this many roots is taken whole (:func:`_near_pair_candidates`); a
@@ -1253,31 +1256,44 @@ def _near_pair_candidates(mk, ip, x3, v):
         return (np.array([1.0, x, x * x]) @ mk144[i]).reshape(12, 12)
 
     edge = np.diff(np.concatenate([[0], close.astype(np.int8), [0]]))
-    groups = []                                               # (sorted positions, directions)
-    for s, e in zip(np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]):
-        size = e - s + 1                                      # members: sorted positions s .. e
-        wide = bool(np.any(~tight[s:e]))
-        narrow = False
-        if not wide or size <= NEAR_CHAIN_MAX:
+    runs = list(zip(np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]))   # members: s .. e
+    # the clusters' heads whose null directions are counted, all in one batched SVD
+    heads = []                                                # (run, head position, members)
+    for r, (s, e) in enumerate(runs):
+        if bool(np.all(tight[s:e])) or e - s + 1 <= NEAR_CHAIN_MAX:
             te = np.diff(np.concatenate([[0], tight[s:e].astype(np.int8), [0]]))
             for cs, ce in zip(np.nonzero(te == 1)[0] + s, np.nonzero(te == -1)[0] + s):
-                sv = np.linalg.svd(pencil(ips[cs], xs[cs]), compute_uv=False)
-                narrow |= int(np.sum(sv < 1e-7 * sv[0])) < ce - cs + 1
-        if not (wide or narrow):
+                heads.append((r, cs, ce - cs + 1))
+    narrow = np.zeros(len(runs), dtype=bool)
+    if heads:
+        sv = np.linalg.svd(np.stack([pencil(ips[cs], xs[cs]) for _, cs, _ in heads]), compute_uv=False)
+        few = np.sum(sv < 1e-7 * sv[:, :1], axis=1) < np.array([n for _, _, n in heads])
+        for (r, _, _), f in zip(heads, few):
+            narrow[r] |= bool(f)
+    groups = []                                               # sorted positions
+    for r, (s, e) in enumerate(runs):
+        wide = bool(np.any(~tight[s:e]))
+        if not (wide or narrow[r]):
             continue
-        if size <= NEAR_CHAIN_MAX:
+        if e - s + 1 <= NEAR_CHAIN_MAX:
             groups.append(np.arange(s, e + 1))
         else:
             groups += [np.array([g, g + 1]) for g in range(s, e) if not tight[g]]
     extra_i, extra_v = [], []
-    for members in groups:
-        d = len(members)
-        basis = np.linalg.svd(pencil(ips[members[0]], float(np.mean(xs[members]))))[2][-d:].T
-        vecs = _shift_vectors(basis)
-        if vecs is None:
-            continue
-        extra_i += [order[m] for m in members for _ in range(d)]
-        extra_v.append(np.tile(vecs, (d, 1)))
+    if groups:
+        vt = np.linalg.svd(np.stack([pencil(ips[m[0]], float(np.mean(xs[m]))) for m in groups]))[2]
+        sizes = np.array([len(m) for m in groups])
+        vecs = [None] * len(groups)
+        for d in np.unique(sizes):                            # the groups of one size at once
+            at = np.nonzero(sizes == d)[0]
+            for g, w in zip(at, _shift_vectors(np.swapaxes(vt[at, -d:], 1, 2))):
+                vecs[g] = w
+        for members, w in zip(groups, vecs):
+            if not np.all(np.isfinite(w)):
+                continue
+            d = len(members)
+            extra_i += [order[m] for m in members for _ in range(d)]
+            extra_v.append(np.tile(w, (d, 1)))
     if not extra_i:
         return ip, x3, v
     idx = np.array(extra_i)
