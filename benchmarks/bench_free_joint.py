@@ -8,7 +8,7 @@ With ``--c``: the C kernel (derive.codegen.free_joint.c_library, batched, one th
 before timing: on the SRS class routes the class's IK program, where the numpy column is the same
 closed form; on the Panda's q7 the Panda class's kernels, ``derive.kernels(robot, "c")``, which
 ``free="q7"`` returns; on the general route the general elimination, wherever it has a plan) on the
-same poses and values: its CPU time per pose and value
+same poses and values: its CPU time per pose and value (the calling thread's)
 (best of ``--repeats``), and on how many poses its solution set equals the numpy reference's.
 
     .venv/bin/python benchmarks/bench_free_joint.py [--poses N] [--arms a,b] [--joints 1,2] [--ssik M]
@@ -119,9 +119,11 @@ def main():
                         solve = lambda p, v: lib.solve(p, v)[:2]    # noqa: E731
                     times = []
                     for _ in range(max(args.repeats, 1)):
-                        t0 = time.process_time()
+                        # the calling thread's CPU time: the C runs in it, and the process's
+                        # would count BLAS threads still spinning after the numpy solves above
+                        t0 = time.thread_time()
                         cq, cc = solve(poses, q[:, k - 1])
-                        times.append(time.process_time() - t0)
+                        times.append(time.thread_time() - t0)
                     us = min(times) / args.poses * 1e6
                     same = sum(_same(cq[i, :cc[i]], r.q[i, :r.counts[i]]) for i in range(args.poses))
                     ctext = f" {us:.3g} | {same}/{args.poses} | {dt * 1e3 / us:.2g}x |"
