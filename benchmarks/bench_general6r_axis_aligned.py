@@ -22,7 +22,6 @@ The truth takes minutes per arm (2304 xArm6 poses: about 2 min on one core).
 from __future__ import annotations
 
 import argparse
-import ctypes
 import importlib
 import itertools
 import math
@@ -35,6 +34,7 @@ import derive
 from derive import reference
 from derive.algebra import quaternion as quat
 from derive.algebra.angles import wrap_angle
+from derive.codegen.general6r import c_ik_general
 from derive.ik import general6r as g
 
 SSIK = {"crx10ia": "ssik.prebuilt.fanuc.crx10ia_ik", "xarm6": "ssik.prebuilt.ufactory.xarm6_ik",
@@ -107,17 +107,8 @@ def truth(robot, q, starts, seed=0):
 
 
 def _c_general(robot, P):
-    k = derive.kernels(robot, "c")
-    k._load_ctypes()
-    f = getattr(k._lib, f"{k._ident}_ik_batch_general")
-    n = len(P)
-    P = np.ascontiguousarray(P, dtype=np.float64)
-    sols, counts = np.zeros((n, 16, 6)), np.zeros(n, np.intc)
-    sing, degen = np.zeros((n, 16), np.intc), np.zeros(n, np.intc)
-    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-    f(ctypes.c_size_t(n), P.ctypes.data_as(dp), sols.ctypes.data_as(dp), counts.ctypes.data_as(ip),
-      sing.ctypes.data_as(ip), degen.ctypes.data_as(ip))
-    return sols, counts.astype(int), degen.astype(bool)
+    sols, counts, _, degen = c_ik_general(derive.kernels(robot, "c"), P)
+    return sols, counts.astype(int), degen
 
 
 def solve(robot, method, P):

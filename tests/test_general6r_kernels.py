@@ -14,6 +14,7 @@ import pytest
 import derive
 from derive import InputError, reference
 from derive.algebra.angles import wrap_angle
+from derive.codegen.general6r import c_ik_general
 from derive.ik import general6r
 from derive.kinematics.fk import pose_error
 
@@ -382,20 +383,9 @@ def test_numpy_kernels_flag_every_pose_whose_set_differs_on_axis_aligned_xarm6_p
 
 
 def _c_general(robot, P):
-    """The C kernels' whole answer through ctypes: <id>_ik_batch_general (solutions, counts,
-    singular and degenerate flags; k.ik gives no degenerate flag)."""
-    import ctypes
-    k = derive.kernels(robot, "c")
-    k._load_ctypes()
-    f = getattr(k._lib, f"{k._ident}_ik_batch_general")
-    n = len(P)
-    P = np.ascontiguousarray(P, dtype=np.float64)
-    sols, counts = np.zeros((n, 16, 6)), np.zeros(n, np.intc)
-    sing, degen = np.zeros((n, 16), np.intc), np.zeros(n, np.intc)
-    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
-    f(ctypes.c_size_t(n), P.ctypes.data_as(dp), sols.ctypes.data_as(dp), counts.ctypes.data_as(ip),
-      sing.ctypes.data_as(ip), degen.ctypes.data_as(ip))
-    return sols, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
+    """The C kernels' whole answer (solutions, counts, singular and degenerate flags; k.ik gives
+    no degenerate flag)."""
+    return c_ik_general(derive.kernels(robot, "c"), P)
 
 
 def _axis_aligned(robot, n, seed):

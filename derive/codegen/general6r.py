@@ -66,6 +66,8 @@ The rank-deficient Q of a general arm (rank < 8, ``Plan.mix``) is not emitted: D
 
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 
 from derive.errors import DeriveError
@@ -275,3 +277,20 @@ def tables_context(pl) -> dict | None:
     el = pl.elim
     qk = el.q.reshape(112, -1)
     return {"qkt": _arr(qk.T), "r0t": _arr(np.asarray(el.r0).T)}
+
+
+def c_ik_general(kernels, poses) -> tuple:
+    """The C kernels' whole answer for poses (n, 8) through ctypes, ``<id>_ik_batch_general`` of
+    templates/general6r.c.j2: (solutions (n, 16, 6) NaN-padded, counts (n,), singular flags
+    (n, 16), degenerate flags (n,)), as the numpy kernels' ``ik_general`` gives them (``k.ik``
+    gives no degenerate flag). ``kernels``: ``derive.kernels(robot, "c")`` of a general 6R arm."""
+    kernels._load_ctypes()
+    f = getattr(kernels._lib, f"{kernels._ident}_ik_batch_general")
+    p = np.ascontiguousarray(poses, dtype=np.float64)
+    n = len(p)
+    sols, counts = np.zeros((n, 16, 6)), np.zeros(n, np.intc)
+    sing, degen = np.zeros((n, 16), np.intc), np.zeros(n, np.intc)
+    dp, ip = ctypes.POINTER(ctypes.c_double), ctypes.POINTER(ctypes.c_int)
+    f(ctypes.c_size_t(n), p.ctypes.data_as(dp), sols.ctypes.data_as(dp), counts.ctypes.data_as(ip),
+      sing.ctypes.data_as(ip), degen.ctypes.data_as(ip))
+    return sols, counts.astype(np.int64), sing.astype(bool), degen.astype(bool)
