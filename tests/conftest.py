@@ -1,4 +1,6 @@
 import os
+import shutil
+import subprocess
 
 import numpy as np
 import pytest
@@ -28,3 +30,14 @@ def random_unit_dq(rng, n):
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     t = rng.uniform(-2, 2, size=(n, 3))
     return dq.from_rt(q, t)
+
+
+def assert_compiles_strict(src, what=""):
+    """The C source file ``src`` compiles with warnings as errors (-Wall -Wextra -Werror) as C99
+    with -Wpedantic and as C++17, with each compiler that is installed (gcc, g++)."""
+    for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
+                ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
+        if shutil.which(cmd[0]) is None:
+            continue
+        res = subprocess.run([*cmd, "-Wall", "-Wextra", "-Werror", str(src)], capture_output=True, text=True)
+        assert res.returncode == 0, (what, cmd, res.stderr[-3000:])

@@ -17,6 +17,7 @@ from derive.algebra.angles import wrap_angle
 from derive.codegen.general6r import c_ik_general
 from derive.ik import general6r
 from derive.kinematics.fk import pose_error
+from conftest import assert_compiles_strict
 
 needs_gcc = pytest.mark.skipif(shutil.which("gcc") is None, reason="needs gcc")
 
@@ -77,8 +78,7 @@ def test_c_kernels_give_the_reference_solution_sets(robot, quick_c):
         s = sols[i, :counts[i]]
         assert np.all(np.isfinite(s)) and np.all(np.isnan(sols[i, counts[i]:]))
         assert _contains(s, q[i]), i
-        dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-        assert dp.max() < 1e-10 and dr.max() < 1e-10
+        _assert_on_pose(robot, s, P[i])
     # the single-pose call is the batch of one
     s1, c1 = k.ik(P[3])
     assert c1 == counts[3] and np.array_equal(s1[:c1], sols[3, :c1])
@@ -241,12 +241,7 @@ def test_general_c_source_compiles_as_c99_and_cxx17(tmp_path):
         for name, text in files.values():
             (tmp_path / name).write_text(text)
         src = tmp_path / files["c_source"][0]
-        for cmd in (["gcc", "-std=c99", "-Wpedantic", "-O1", "-c", "-o", "/dev/null"],
-                    ["g++", "-std=c++17", "-x", "c++", "-fsyntax-only"]):
-            if shutil.which(cmd[0]) is None:
-                continue
-            res = subprocess.run([*cmd, "-Wall", "-Wextra", "-Werror", str(src)], capture_output=True, text=True)
-            assert res.returncode == 0, (robot, cmd, res.stderr[-3000:])
+        assert_compiles_strict(src, robot)
 
 
 @needs_gcc
@@ -342,9 +337,7 @@ def test_numpy_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_p
     assert same.sum() >= 50 and degen[~same].all()
     for i in range(len(q)):
         s = sols[i, :counts[i]]
-        if counts[i]:
-            dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-            assert dp.max() < 1e-10 and dr.max() < 1e-10
+        _assert_on_pose(robot, s, P[i])
         if regular[i]:
             assert _contains(s, q[i]), i
         else:
@@ -375,11 +368,17 @@ def test_numpy_kernels_flag_every_pose_whose_set_differs_on_axis_aligned_xarm6_p
     assert counts.sum() >= 2600
     for i in range(len(q)):
         s = sols[i, :counts[i]]
-        if counts[i]:
-            dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-            assert dp.max() < 1e-10 and dr.max() < 1e-10
+        _assert_on_pose(robot, s, P[i])
         if _contains(ref.q[i, :ref.counts[i]], q[i]) and not degen[i]:
             assert _contains(s, q[i]), i
+
+
+def _assert_on_pose(robot, s, pose):
+    """Every solution of s (k, 6) on the pose: position and rotation error of the reference FK
+    below 1e-10."""
+    if len(s):
+        dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(pose, (len(s), 8)))
+        assert dp.max() < 1e-10 and dr.max() < 1e-10
 
 
 def _c_general(robot, P):
@@ -422,9 +421,7 @@ def test_c_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_poses
     assert np.all(svs[sing[ok], -1] < 1e-6 * svs[sing[ok], 0])
     for i in range(len(q)):
         s = sols[i, :counts[i]]
-        if counts[i]:
-            dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-            assert dp.max() < 1e-10 and dr.max() < 1e-10
+        _assert_on_pose(robot, s, P[i])
         if regular[i]:
             assert _contains(s, q[i]), i
 
@@ -449,9 +446,7 @@ def test_c_kernels_flag_every_pose_whose_set_differs_on_axis_aligned_xarm6_poses
     assert counts.sum() >= 2630 and np.sum(degen != ref.degenerate) <= 4
     for i in range(len(q)):
         s = sols[i, :counts[i]]
-        if counts[i]:
-            dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-            assert dp.max() < 1e-10 and dr.max() < 1e-10
+        _assert_on_pose(robot, s, P[i])
         if _contains(ref.q[i, :ref.counts[i]], q[i]) and not degen[i]:
             assert _contains(s, q[i]), i
 
@@ -473,9 +468,7 @@ def test_python_kernels_flag_as_the_reference_on_axis_aligned_poses():
         for i in range(len(P)):
             sols, sing, degen = mod.ik_general(tuple(P[i]))
             s = np.array(sols).reshape(-1, 6)
-            if len(s):
-                dp, dr = pose_error(reference.fk(robot, s), np.broadcast_to(P[i], (len(s), 8)))
-                assert dp.max() < 1e-10 and dr.max() < 1e-10
+            _assert_on_pose(robot, s, P[i])
             same = _same_sets(s[None], [len(s)], ref.q[i:i + 1], ref.counts[i:i + 1])[0]
             whole = len(s) > ref.counts[i] and all(_contains(s, r) for r in ref.q[i, :ref.counts[i]])
             assert same or degen or whole, (name, pick[i])
