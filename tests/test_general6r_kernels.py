@@ -315,9 +315,7 @@ def test_numpy_kernels_flag_and_fall_back_as_the_reference_on_axis_aligned_crx_p
     factor 10 either side: a singular solution is fixed only to about 1e-5, so many fall between). (Before these rules the kernels flagged 20 of these poses, the
     reference 132.)"""
     robot = derive.load_robot("crx10ia")
-    vals = np.array([-math.pi / 2, 0.0, math.pi / 2, math.pi])
-    q = vals[np.random.default_rng(31).integers(0, 4, (150, 6))]
-    P = reference.fk(robot, q)
+    q, P = _axis_aligned(robot, 150, 31)
     ref = general6r.solve(robot, P)
     sols, counts, sing, degen = derive.kernels(robot, "numpy")._mod.ik_general(P)
     # the singular set, on plain 4x4 matrices: the geometric Jacobian's relative smallest singular value
@@ -358,9 +356,7 @@ def test_numpy_kernels_flag_every_pose_whose_set_differs_on_axis_aligned_xarm6_p
     as the reference's _near_pair_candidates) make that hold: without them three poses lost two
     solutions each with an even count and no flag (10 solutions, the reference 12)."""
     robot = derive.load_robot("xarm6")
-    vals = np.array([-math.pi / 2, 0.0, math.pi / 2, math.pi])
-    q = vals[np.random.default_rng(5).integers(0, 4, (300, 6))]
-    P = reference.fk(robot, q)
+    q, P = _axis_aligned(robot, 300, 5)
     ref = general6r.solve(robot, P)
     sols, counts, sing, degen = derive.kernels(robot, "numpy")._mod.ik_general(P)
     same = _same_sets(sols, counts, ref.q, ref.counts)
