@@ -276,7 +276,20 @@ def tables_context(pl) -> dict | None:
         return None
     el = pl.elim
     qk = el.q.reshape(112, -1)
-    return {"qkt": _arr(qk.T), "r0t": _arr(np.asarray(el.r0).T)}
+    r0 = np.asarray(el.r0)
+    return {"qkt": _arr(qk.T), "r0t": _arr(r0.T), "q_sums": [_sparse_sum(row) for row in qk],
+            "r0_sums": [_sparse_sum(row) for row in r0]}
+
+
+def _sparse_sum(coefs) -> str:
+    """The C expression of sum_k coefs[k] mono[k] with its terms of exact zeros left out, in the
+    order of k from 0.0: the loop ``s = 0.0; s += c[k] * mono[k]`` to the bit (a zero coefficient
+    times a finite monomial adds a zero, which leaves a sum that starts at +0.0 as it is)."""
+    out = "0.0"
+    for k, c in enumerate(np.asarray(coefs, dtype=float)):
+        if c != 0.0:
+            out += f" {'-' if c < 0 else '+'} {_lit(abs(c))} * mono[{k}]"
+    return out
 
 
 def c_ik_general(kernels, poses) -> tuple:
