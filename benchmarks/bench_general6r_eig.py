@@ -126,10 +126,12 @@ int main(int argc, char **argv)
                 ++ng;
             }
 #ifdef G6B_LANES
-            if (ng > 1) {
+            if (ng >= G6_LOCKSTEP) {
                 g6_eigenvalues_lanes(n0, ng, av, pr, pi, ret);
             } else {
-                g6_eigenvalues(n0, a[0], 24, wr[0], wi[0]);
+                for (int v = 0; v < ng; ++v) {
+                    ret[v] = g6_eigenvalues(n0, a[v], 24, wr[v], wi[v]);
+                }
             }
 #else
             for (int v = 0; v < ng; ++v) {
@@ -243,10 +245,10 @@ def main(argv=None):
               f"{p['calls']} calls, {p['eig_us']:.2f} us per call)")
         print(f"  balancing + Hessenberg {p['pre_us']:.2f} us per call ({p['passes']:.2f} balancing passes); "
               f"QR {qr:.2f} us per call: {p['sweeps']:.2f} sweeps, {1e3 * qr / p['sweeps']:.0f} ns per sweep")
-        lqr = p["lanes_us"] - p["pre_us"]
-        print(f"  four in lock step (g6_eigenvalues_lanes, the batch's groups): {p['lanes_us']:.2f} us per call "
-              f"({p['lanes_us'] / p['eig_us']:.3f} of g6_eigenvalues'), QR {lqr:.2f} us per call "
-              f"({lqr / qr:.3f}); {p['lock_sweeps']} lock-step sweeps over {p['calls']} calls")
+        print(f"  in the batch's groups, four in lock step (g6_eigenvalues_lanes, alone where a group has one "
+              f"or two matrices of its size, as the batch): {p['lanes_us']:.2f} us per call ({p['lanes_us'] / p['eig_us']:.3f} of "
+              f"g6_eigenvalues', balancing and Hessenberg form included); {p['lock_sweeps'] / p['calls']:.2f} "
+              f"sweeps per call (a lock-step sweep counted once for its group)")
 
 
 if __name__ == "__main__":
