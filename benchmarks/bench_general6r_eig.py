@@ -1,9 +1,11 @@
 """Where the general 6R C kernel's time goes, and the eigen-solver's share (issue 31's C speed):
 the per-pose time of the batch IK (``<id>_ik_batch_general``), then the eigen-solver alone
-(``g6_eigenvalues`` of templates/general6r.c.j2, cut out of the emitted source) on the very
-matrices the kernel hands it for these poses: its time per call, the part before the QR iteration
-(balancing and Hessenberg form, timed by a build that returns there), the QR sweeps per call and
-the time per sweep, and the balancing passes.
+(``g6_eigenvalues`` of templates/general6r.c.j2, in the emitted source) on the very matrices the
+kernel hands it for these poses: its time per call, the part before the QR iteration (balancing
+and Hessenberg form, timed by a build that returns there), the QR sweeps per call and the time per
+sweep, and the balancing passes; then the same matrices, in the batch's groups (up to four in a
+row of one size), through ``g6_eigenvalues_lanes`` (four in lock step), timed in the same run
+(scalar and lanes builds interleaved, the best of each), and its lock-step sweeps.
 
     .venv/bin/python benchmarks/bench_general6r_eig.py [--robots crx10ia,xarm6] [--poses N]
         [--seed S] [--repeats R]
@@ -91,26 +93,57 @@ int main(int argc, char **argv)
         best = t < best ? t : best;
     }
 #else
-    double wr[24], wi[24], a[24 * 24];
+    /* the matrices in groups as the batch makes them (up to 4 in a row of one size), solved
+       by g6_eigenvalues one by one, or with G6B_LANES by g6_eigenvalues_lanes (one alone by
+       g6_eigenvalues, as in the batch); the copies of the input are timed too (2 KB each) */
+    static double wr[4][24], wi[4][24], a[4][24 * 24];
+    double *av[4], *pr[4], *pi[4];
+    int ret[4];
+    for (int v = 0; v < 4; ++v) {
+        av[v] = a[v];
+        pr[v] = wr[v];
+        pi[v] = wi[v];
+    }
     for (int r = 0; r < reps; ++r) {
         long off = 0;
         count = 0;
         g6b_sweeps = g6b_passes = 0;
-        const double t0 = cpu();       /* (the copies of the input are timed too: 2 KB each) */
+        const double t0 = cpu();
         while (off < bytes) {
-            int n;
-            memcpy(&n, buf + off, sizeof n);
-            off += (long)sizeof n;
-            for (int i = 0; i < n; ++i) {
-                memcpy(a + i * 24, buf + off + (long)i * n * 8, (size_t)n * 8);
+            int n0 = -1, ng = 0;
+            while (ng < 4 && off < bytes) {
+                int n;
+                memcpy(&n, buf + off, sizeof n);
+                if (ng > 0 && n != n0) {
+                    break;
+                }
+                n0 = n;
+                off += (long)sizeof n;
+                for (int i = 0; i < n; ++i) {
+                    memcpy(a[ng] + i * 24, buf + off + (long)i * n * 8, (size_t)n * 8);
+                }
+                off += (long)n * n * 8;
+                ++ng;
             }
-            off += (long)n * n * 8;
-            g6_eigenvalues(n, a, 24, wr, wi);
-            ++count;
+#ifdef G6B_LANES
+            if (ng >= G6_LOCKSTEP) {
+                g6_eigenvalues_lanes(n0, ng, av, pr, pi, ret);
+            } else {
+                for (int v = 0; v < ng; ++v) {
+                    ret[v] = g6_eigenvalues(n0, a[v], 24, wr[v], wi[v]);
+                }
+            }
+#else
+            for (int v = 0; v < ng; ++v) {
+                ret[v] = g6_eigenvalues(n0, a[v], 24, wr[v], wi[v]);
+            }
+#endif
+            count += ng;
         }
         const double t = cpu() - t0;
         best = t < best ? t : best;
     }
+    (void)ret;
 #endif
     printf("%ld %.6e %ld %ld\n", count, best / (double)count, g6b_sweeps, g6b_passes);
     return 0;
@@ -118,28 +151,32 @@ int main(int argc, char **argv)
 """
 
 
-def _eigen_function(src: str) -> str:
-    """The text of g6_eigenvalues in an emitted C source."""
-    a = src.index("static int g6_eigenvalues(")
-    return src[a:src.index("\n}\n", a) + 3]
+def _hooked(src: str, record: bool, stop_before_qr: bool, count: bool) -> str:
+    """The emitted source with the benchmark's hooks in its eigen-solver (g6_balance_hessenberg,
+    g6_hqr, g6_eigenvalues and g6_eigenvalues_lanes): recording each input matrix, counting the QR
+    sweeps, the lock-step sweeps and the balancing passes, or returning before the QR iteration."""
+    out = src
 
+    def hook(marker, add, after=True):
+        nonlocal out
+        if marker not in out:
+            raise SystemExit(f"bench_general6r_eig: the marker {marker.strip()!r} is not in the eigen-solver")
+        out = out.replace(marker, marker + add if after else add + marker, 1)
 
-def _hooked(fn: str, record: bool, stop_before_qr: bool, count: bool) -> str:
-    """g6_eigenvalues with the benchmark's hooks: recording its input, counting the QR sweeps and
-    balancing passes, or returning before the QR iteration."""
-    out = fn
-    body = out.index("{") + 1
     if record:
-        out = out[:body] + "\n    g6b_record(n, a, ld);" + out[body:]
+        hook("static int g6_eigenvalues(int n, double *a, int ld, double *wr, double *wi)\n{\n",
+             "    g6b_record(n, a, ld);\n")
+        hook("double *const *wi, int *ret)\n{\n", "    for (int g6b_v = 0; g6b_v < cnt; ++g6b_v) {\n"
+             "        g6b_record(n, a[g6b_v], 24);\n    }\n")
     if count:
-        for marker, hook in (("        done = 1;\n", "        ++g6b_passes;\n"), ("++its;", " ++g6b_sweeps;")):
-            if marker not in out:
-                raise SystemExit(f"bench_general6r_eig: the marker {marker.strip()!r} is not in g6_eigenvalues")
-            out = out.replace(marker, marker + hook, 1)
+        hook("        done = 1;\n", "        ++g6b_passes;\n")
+        hook("++its;", " ++g6b_sweeps;")
+        hook("        if (k1 < 0) {\n            break;\n        }\n", "        ++g6b_sweeps;\n")
     if stop_before_qr:
-        if "    /* shifted QR */" not in out:
-            raise SystemExit("bench_general6r_eig: the marker '/* shifted QR */' is not in g6_eigenvalues")
-        out = out.replace("    /* shifted QR */", "    return 0;\n    /* shifted QR */", 1)
+        marker = "    g6_balance_hessenberg(n, a, ld);\n    return g6_hqr(n, a, ld, wr, wi);\n"
+        if marker not in out:
+            raise SystemExit("bench_general6r_eig: g6_eigenvalues is not g6_balance_hessenberg + g6_hqr")
+        out = out.replace(marker, "    g6_balance_hessenberg(n, a, ld);\n    (void)wr;\n    (void)wi;\n    return 0;\n", 1)
     return out
 
 
@@ -168,35 +205,27 @@ def profile(robot: str, n: int, seed: int, repeats: int) -> dict:
     files = render_kernels(r)
     _, src = files["c_source"]
     _, hdr = files["c_header"]
-    fn = _eigen_function(src)
     batch = re.search(r"void (\w+_ik_batch_general)\(", src).group(1)
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         (d / files["c_header"][0]).write_text(hdr)
         (d / "poses.bin").write_bytes(poses.tobytes())
-        kernel = src.replace(fn, _hooked(fn, record=True, stop_before_qr=False, count=False))
-        whole = _build(d, "whole", _HEAD + kernel + _MAIN, [f"-DG6B_BATCH={batch}"])
+        whole = _build(d, "whole", _HEAD + _hooked(src, True, False, False) + _MAIN, [f"-DG6B_BATCH={batch}"])
         cnt, t_pose, _, _ = _run(whole, d / "poses.bin", repeats, d / "mats.bin")
-        head = _HEAD + _macros(src)
-        full = _build(d, "eig", head + _hooked(fn, False, False, True) + _MAIN)
-        calls, t_eig, sweeps, passes = _run(full, d / "mats.bin", repeats)
-        pre = _build(d, "pre", head + _hooked(fn, False, True, False) + _MAIN)
+        full = _build(d, "eig", _HEAD + _hooked(src, False, False, True) + _MAIN)
+        lanes = _build(d, "lanes", _HEAD + _hooked(src, False, False, True) + _MAIN, ["-DG6B_LANES"])
+        pre = _build(d, "pre", _HEAD + _hooked(src, False, True, False) + _MAIN)
+        # scalar and lanes interleaved, the best of each
+        t_eig = t_lanes = np.inf
+        for _ in range(2):
+            calls, t, sweeps, passes = _run(full, d / "mats.bin", repeats)
+            t_eig = min(t_eig, t)
+            _, t, lsweeps, _ = _run(lanes, d / "mats.bin", repeats)
+            t_lanes = min(t_lanes, t)
         _, t_pre, _, _ = _run(pre, d / "mats.bin", repeats)
     return {"robot": robot, "poses": cnt, "pose_us": t_pose * 1e6, "calls": calls, "eig_us": t_eig * 1e6,
-            "pre_us": t_pre * 1e6, "sweeps": sweeps / calls, "passes": passes / calls}
-
-
-def _macros(src: str) -> str:
-    """The emitted source's DQ_FMA and DQ_RESTRICT definitions (the solver uses them)."""
-    out = []
-    for name in ("DQ_FMA", "DQ_RESTRICT"):
-        m = re.search(r"#if[^\n]*\n(?:[^\n]*\n){0,6}?#define " + name + r"\b[^\n]*\n(?:#else\n#define[^\n]*\n)?#endif\n",
-                      src)
-        if m:
-            out.append(m.group(0))
-    if not any("DQ_FMA" in o for o in out):
-        out.append("#define DQ_FMA(a, b, c) fma((a), (b), (c))\n")
-    return "".join(out)
+            "pre_us": t_pre * 1e6, "sweeps": sweeps / calls, "passes": passes / calls,
+            "lanes_us": t_lanes * 1e6, "lock_sweeps": lsweeps}
 
 
 def main(argv=None):
@@ -216,6 +245,10 @@ def main(argv=None):
               f"{p['calls']} calls, {p['eig_us']:.2f} us per call)")
         print(f"  balancing + Hessenberg {p['pre_us']:.2f} us per call ({p['passes']:.2f} balancing passes); "
               f"QR {qr:.2f} us per call: {p['sweeps']:.2f} sweeps, {1e3 * qr / p['sweeps']:.0f} ns per sweep")
+        print(f"  in the batch's groups, four in lock step (g6_eigenvalues_lanes, alone where a group has one "
+              f"or two matrices of its size, as the batch): {p['lanes_us']:.2f} us per call ({p['lanes_us'] / p['eig_us']:.3f} of "
+              f"g6_eigenvalues', balancing and Hessenberg form included); {p['lock_sweeps'] / p['calls']:.2f} "
+              f"sweeps per call (a lock-step sweep counted once for its group)")
 
 
 if __name__ == "__main__":

@@ -248,7 +248,8 @@ def test_general_c_source_compiles_as_c99_and_cxx17(tmp_path):
 def test_c_kernels_are_clean_under_address_and_undefined_sanitizers(tmp_path):
     """The CRX's C source with a driver, built with -fsanitize=address,undefined, on axis-aligned
     configurations (singular, shared roots) and random ones: no invalid access, no undefined
-    behaviour, the counts within 0..16 and no NaN before the padding."""
+    behaviour, the counts within 0..16 and no NaN before the padding. G6_LOCKSTEP=1: the batch's
+    lock-step eigen-solver on every group of poses (g6_eigenvalues_lanes)."""
     from derive.codegen import emit
     files = emit.render_kernels("crx10ia")
     for name, text in files.values():
@@ -275,7 +276,7 @@ int main(void) {{
     return 0;
 }}
 """)
-    res = subprocess.run(["gcc", "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
+    res = subprocess.run(["gcc", "-std=c99", "-O1", "-DG6_LOCKSTEP=1", "-Wall", "-Wextra", "-Werror", "-fsanitize=address,undefined",
                           "-fno-sanitize-recover=all", "-o", str(tmp_path / "t"), str(tmp_path / "main.c"),
                           str(tmp_path / "crx10ia_kinematics.c"), "-lm"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr[-3000:]
