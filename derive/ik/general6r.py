@@ -70,7 +70,7 @@ from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
                                   G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
-from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP
+from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP, G6_REF_NEWTON_FAR
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -1093,7 +1093,8 @@ def _solve_chunk(robot, pl: Plan, poses):
     q6 = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
     qc[:, 5] = q6
     _x_rot(x, np.cos(q6)[:, None], np.sin(q6)[:, None])
-    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])))
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])),
+                           far=(NEWTON_FAR, degen[ip]))
     if pl.reverse:
         qc = -qc[:, ::-1]
         jac = None                     # the reversed chain's Jacobian: the forward one is made again
@@ -1540,22 +1541,31 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     cq[:, e - 1], sq[:, e - 1] = np.cos(qe), np.sin(qe)
     _x_rot(x, cq[:, e - 1, None], sq[:, e - 1, None])
     x = _chain_x(c, cq, sq, zs, ps, x=x, start=e)
-    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x))
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x), far=(NEWTON_FAR, degen[ip]))
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
 #: Newton stops after a step below this (rad, every joint): derive.ik.tolerances.G6_NEWTON_DONE.
 NEWTON_DONE = G6_NEWTON_DONE
+#: The first solve's Newton gives up on a far candidate of a pose not flagged degenerate from
+#: this step on (:func:`_newton`'s ``far``): derive.ik.tolerances.G6_REF_NEWTON_FAR.
+NEWTON_FAR = G6_REF_NEWTON_FAR
 
 
-def _newton(c, q, target, steps=None, with_error=False, first=None):
+def _newton(c, q, target, steps=None, with_error=False, first=None, far=None):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
     error (scaled lengths and rad) is below 1e-13, or after a step below :data:`NEWTON_DONE`
     from an error below it, or when G6_NEWTON_MAX steps are done. ``first``: the chain at q
     ((zs, ps, end) of :func:`_frames_x`) when the caller has it. With ``with_error``, also the
     last error measured per candidate (max of scaled position and rotation; after a last step
     below NEWTON_DONE, the bound on the error it leaves) and the Jacobian
-    there (m, 6, 6) (at the returned q, or before that last step)."""
+    there (m, 6, 6) (at the returned q, or before that last step). ``far``: (step, patient (m,)
+    bool): from that step on, a candidate not patient whose error is above 1e-6 and not below
+    half the previous step's stops (a spurious candidate with no root near, which would take
+    every step to G6_NEWTON_MAX, each step costing the whole batch's overhead, and then be
+    dropped: the C kernels' rule G6_NEWTON_FAR, with more patience, :data:`NEWTON_FAR`);
+    patient: the candidates of a pose already flagged degenerate, whose singular roots Newton
+    approaches linearly. None: every step for every candidate."""
     q = q.copy()
     last = np.full(len(q), np.inf)
     last_jt = np.zeros((len(q), 6, 6))
@@ -1566,10 +1576,12 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         else:
             err, jt = _err_jt(target[idx], *_frames_x(c, q[idx]))
         size = np.max(np.abs(err), axis=1)
+        todo = size > G6_NEWTON_STOP
+        if far is not None and k >= far[0]:
+            todo &= far[1][idx] | ~((size > 1e-6) & (size > 0.5 * last[idx]))
         last[idx] = size
         if with_error:
             last_jt[idx] = jt
-        todo = size > G6_NEWTON_STOP
         if not np.all(todo):
             idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:
