@@ -1253,52 +1253,64 @@ def _near_pair_candidates(mk, ip, x3, v):
     tight = same & (gap <= CLUSTER_TOL * rel)
     mk144 = mk.reshape(len(mk), 3, 144)
 
-    def pencil(i, x):
-        return (np.array([1.0, x, x * x]) @ mk144[i]).reshape(12, 12)
+    def pencils(pos, x):
+        """M(x) (p, 12, 12) of the poses at sorted positions pos: (1, x, x^2) times the
+        pencil's three matrices, pose by pose."""
+        return (np.stack([np.ones_like(x), x, x * x], 1)[:, None, :] @ mk144[ips[pos]]).reshape(-1, 12, 12)
 
+    # runs of close gaps: members s .. e (sorted positions), whole arrays (no loop per run)
     edge = np.diff(np.concatenate([[0], close.astype(np.int8), [0]]))
-    runs = list(zip(np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]))   # members: s .. e
-    # the clusters' heads whose null directions are counted, all in one batched SVD
-    heads = []                                                # (run, head position, members)
-    for r, (s, e) in enumerate(runs):
-        if bool(np.all(tight[s:e])) or e - s + 1 <= NEAR_CHAIN_MAX:
-            te = np.diff(np.concatenate([[0], tight[s:e].astype(np.int8), [0]]))
-            for cs, ce in zip(np.nonzero(te == 1)[0] + s, np.nonzero(te == -1)[0] + s):
-                heads.append((r, cs, ce - cs + 1))
-    narrow = np.zeros(len(runs), dtype=bool)
-    if heads:
-        sv = np.linalg.svd(np.stack([pencil(ips[cs], xs[cs]) for _, cs, _ in heads]), compute_uv=False)
-        few = np.sum(sv < 1e-7 * sv[:, :1], axis=1) < np.array([n for _, _, n in heads])
-        for (r, _, _), f in zip(heads, few):
-            narrow[r] |= bool(f)
-    groups = []                                               # sorted positions
-    for r, (s, e) in enumerate(runs):
-        wide = bool(np.any(~tight[s:e]))
-        if not (wide or narrow[r]):
-            continue
-        if e - s + 1 <= NEAR_CHAIN_MAX:
-            groups.append(np.arange(s, e + 1))
-        else:
-            groups += [np.array([g, g + 1]) for g in range(s, e) if not tight[g]]
-    extra_i, extra_v = [], []
-    if groups:
-        vt = np.linalg.svd(np.stack([pencil(ips[m[0]], float(np.mean(xs[m]))) for m in groups]))[2]
-        sizes = np.array([len(m) for m in groups])
-        vecs = [None] * len(groups)
-        for d in np.unique(sizes):                            # the groups of one size at once
-            at = np.nonzero(sizes == d)[0]
-            for g, w in zip(at, _shift_vectors(np.swapaxes(vt[at, -d:], 1, 2))):
-                vecs[g] = w
-        for members, w in zip(groups, vecs):
-            if not np.all(np.isfinite(w)):
-                continue
-            d = len(members)
-            extra_i += [order[m] for m in members for _ in range(d)]
-            extra_v.append(np.tile(w, (d, 1)))
-    if not extra_i:
+    rs, re_ = np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]
+    loose = np.concatenate([[0], np.cumsum(close & ~tight)])
+    wide = loose[re_] - loose[rs] > 0                         # some gap past CLUSTER_TOL
+    short = re_ - rs + 1 <= NEAR_CHAIN_MAX
+    # the clusters (runs of tight gaps, each inside one run) whose heads' null directions are
+    # counted: those of the runs all tight or short, all in one batched SVD
+    tedge = np.diff(np.concatenate([[0], tight.astype(np.int8), [0]]))
+    cs, ce = np.nonzero(tedge == 1)[0], np.nonzero(tedge == -1)[0]
+    run_of = np.searchsorted(rs, cs, side="right") - 1
+    keep = ~wide[run_of] | short[run_of]
+    cs, ce, run_of = cs[keep], ce[keep], run_of[keep]
+    narrow = np.zeros(len(rs), dtype=bool)
+    if len(cs):
+        sv = np.linalg.svd(pencils(cs, xs[cs]), compute_uv=False)
+        few = np.sum(sv < 1e-7 * sv[:, :1], axis=1) < ce - cs + 1
+        narrow[run_of[few]] = True
+    # groups (contiguous sorted positions: first, size): a short run whole, a long one pair by
+    # pair (its gaps past CLUSTER_TOL), in the order of the runs
+    todo = wide | narrow
+    gs, gd = [rs[todo & short]], [re_[todo & short] - rs[todo & short] + 1]
+    for r in np.nonzero(todo & ~short)[0]:
+        g = np.arange(rs[r], re_[r])
+        gs.append(g[~tight[g]])
+        gd.append(np.full(len(gs[-1]), 2))
+    first, size = np.concatenate(gs).astype(np.int64), np.concatenate(gd).astype(np.int64)
+    at_order = np.argsort(first, kind="stable")               # the runs' order, then the pairs'
+    first, size = first[at_order], size[at_order]
+    if len(first) == 0:
         return ip, x3, v
-    idx = np.array(extra_i)
-    extra = np.concatenate(extra_v).reshape(-1, 4, 3)
+    mean = np.empty(len(first))
+    for d in np.unique(size):
+        at = np.nonzero(size == d)[0]
+        mean[at] = np.mean(xs[first[at, None] + np.arange(d)], axis=1)
+    vt = np.linalg.svd(pencils(first, mean))[2]
+    extra_i, extra_v, extra_at = [], [], []
+    for d in np.unique(size):                                 # the groups of one size at once
+        at = np.nonzero(size == d)[0]
+        w = _shift_vectors(np.swapaxes(vt[at, -d:], 1, 2))    # (p, d, 12)
+        ok = np.all(np.isfinite(w), axis=(1, 2))
+        at, w = at[ok], w[ok]
+        # member j of the group with each of its d vectors: rows j * d + k
+        members = order[first[at, None] + np.arange(d)]       # (p, d)
+        extra_i.append(np.repeat(members, d, axis=1).ravel())
+        extra_v.append(np.tile(w, (1, d, 1)).reshape(-1, 12))
+        extra_at.append(np.repeat(at, d * d))
+    idx = np.concatenate(extra_i)
+    if len(idx) == 0:
+        return ip, x3, v
+    back = np.argsort(np.concatenate(extra_at), kind="stable")   # the groups' order
+    idx = idx[back]
+    extra = np.concatenate(extra_v)[back].reshape(-1, 4, 3)
     return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, extra])
 
 
