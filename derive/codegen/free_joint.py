@@ -725,76 +725,98 @@ def _separated_span(comp):
 
 
 def _piece_basis(pl: free_joint.Plan):
-    """The piecewise basis (:class:`ValueBasis` "pieces"): [-pi, pi) in :data:`_PIECES` pieces;
-    per piece the spans (:func:`_separated_span` on :data:`_PIECE_POSES` random poses, the first
-    offset whose leak is below :data:`_VALUE_SAMPLE_LEAK`, rotated back to d3[0]) at
-    :data:`_PIECE_SAMPLES` Chebyshev nodes, each projected on the piece's fixed basis V0 (the
-    middle good sample's) and fitted by least squares in Chebyshev polynomials, the smallest degree
-    of :data:`_PIECE_DEGREES` that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK` at every
-    offset, smallest singular value above :data:`_VALUE_MIN_SV`) at :data:`_PIECE_CHECK` random
-    values of the piece on :data:`_TRIPLE_CHECK_POSES` random poses; a piece where none holds, or
-    with fewer good samples than the degree needs, has none (the whole pencil there: near v = pi or
-    0 on some plans the span turns fast or its samples are inaccurate). The degree is the
-    largest any piece needs (the others' padded with zeros). None where no piece has a basis."""
+    """The piecewise basis (:class:`ValueBasis` "pieces"): [-pi, pi) in :data:`_PIECES` pieces,
+    each fitted by :func:`_fit_piece`; a piece where no fit holds is split in two halves, each
+    fitted on its own; the result has 2 :data:`_PIECES` pieces of equal width where a split was
+    needed (the unsplit pieces' polynomials re-expanded on their halves: exact, the same degree),
+    else :data:`_PIECES`. A piece without a fit has none (the whole pencil there: near v = pi or
+    0 on some plans the span turns fast or its samples are inaccurate). The degree is the largest
+    any piece needs (the others' padded with zeros). None where no piece has a basis."""
+    from numpy.polynomial import chebyshev as cheb
     rng = np.random.default_rng(53)
     rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
     width = 2 * np.pi / _PIECES
-    nodes = np.cos(np.pi * (np.arange(_PIECE_SAMPLES) + 0.5) / _PIECE_SAMPLES)
-    fits, r = [], None
+    fits, r = [], [None]
     for p in range(_PIECES):
         a = -np.pi + p * width
-        spans = []
-        for t in nodes:
-            v = a + (t + 1) * width / 2
-            comps = _companions(pl, v, rng.uniform(-np.pi, np.pi, (_PIECE_POSES, 6)), pl.d3)
-            best = (None, np.inf)
-            for k in range(len(pl.d3)):
-                b, leak = _separated_span(comps[k])
-                if b is not None and leak < best[1]:
-                    best = (rots[k].T @ b, leak)
-                if leak < _VALUE_SAMPLE_LEAK:
-                    break
-            spans.append(best)
-        dims = [b.shape[1] for b, leak in spans if b is not None and leak < _VALUE_SAMPLE_LEAK]
-        if r is None and dims:
-            r = max(set(dims), key=dims.count)
-        good = [i for i, (b, leak) in enumerate(spans) if b is not None and leak < _VALUE_SAMPLE_LEAK
-                and b.shape[1] == r]
-        fit = None
-        if r is not None and 2 <= r <= 12 and len(good) > _PIECE_DEGREES[0] + 1:
-            v0 = spans[good[len(good) // 2]][0]
-            y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good]).reshape(len(good), -1)
-            test = a + rng.uniform(0, width, _PIECE_CHECK)
-            test_q = rng.uniform(-np.pi, np.pi, (_PIECE_CHECK, _TRIPLE_CHECK_POSES, 6))
-            checks = [None] * _PIECE_CHECK
-            for n in _PIECE_DEGREES:
-                if n + 2 > len(good):
-                    break
-                h = np.polynomial.chebyshev.chebfit(nodes[good], y, n).reshape(n + 1, 24, r)
-                vb = ValueBasis("pieces", np.broadcast_to(h, (_PIECES,) + h.shape), n, (True,) * _PIECES)
-                ok = True
-                for j, v in enumerate(test):
-                    b = vb.at(v)
-                    sv = np.linalg.svd(b, compute_uv=False)
-                    if checks[j] is None:
-                        checks[j] = _companions(pl, v, test_q[j], pl.d3)
-                    if not (sv[-1] > _VALUE_MIN_SV * sv[0] and all(
-                            _leak(checks[j][k], np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK
-                            for k in range(len(pl.d3)))):
-                        ok = False
-                        break
-                if ok:
-                    fit = h
-                    break
-        fits.append(fit)
-    if r is None or all(f is None for f in fits):
+        f = _fit_piece(pl, a, a + width, rng, rots, r)
+        fits.append(f if f is not None else [_fit_piece(pl, a + i * width / 2, a + (i + 1) * width / 2, rng, rots, r)
+                                              for i in (0, 1)])
+    if r[0] is None or not any(f is not None for f in fits for f in (f if isinstance(f, list) else [f])):
         return None
+    if any(isinstance(f, list) for f in fits):
+        halves = []
+        for f in fits:
+            if isinstance(f, list):
+                halves += f
+                continue
+            n = len(f) - 1
+            nodes = np.cos(np.pi * (np.arange(n + 1) + 0.5) / (n + 1))
+            for s in (-1.0, 1.0):            # t' on the half is t = (t' + s) / 2 on the piece
+                y = np.moveaxis(cheb.chebval((nodes + s) / 2, f), -1, 0).reshape(n + 1, -1)
+                halves.append(cheb.chebfit(nodes, y, n).reshape(n + 1, 24, r[0]))
+        fits = halves
     n = max(len(f) for f in fits if f is not None) - 1
-    h = np.zeros((_PIECES, n + 1, 24, r))
+    h = np.zeros((len(fits), n + 1, 24, r[0]))
     for p, f in enumerate(fits):
         if f is not None:
             h[p, :len(f)] = f
     return ValueBasis("pieces", h, n, tuple(f is not None for f in fits))
+
+
+def _fit_piece(pl: free_joint.Plan, a: float, b: float, rng, rots, r: list):
+    """The Chebyshev coefficients (n + 1, 24, r) of the basis on the values [a, b] (t = -1 at a,
+    1 at b), or None: the spans (:func:`_separated_span` on :data:`_PIECE_POSES` random poses, the
+    first offset whose leak is below :data:`_VALUE_SAMPLE_LEAK`, rotated back to d3[0]) at
+    :data:`_PIECE_SAMPLES` Chebyshev nodes, each projected on the piece's fixed basis V0 (the
+    middle good sample's), fitted by least squares, the smallest degree of :data:`_PIECE_DEGREES`
+    that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK` at every offset, smallest singular
+    value above :data:`_VALUE_MIN_SV`) at :data:`_PIECE_CHECK` random values of the piece on
+    :data:`_TRIPLE_CHECK_POSES` random poses. r[0]: the span's dimension (set by the first piece
+    with samples, the most common there)."""
+    nodes = np.cos(np.pi * (np.arange(_PIECE_SAMPLES) + 0.5) / _PIECE_SAMPLES)
+    spans = []
+    for t in nodes:
+        v = a + (t + 1) * (b - a) / 2
+        comps = _companions(pl, v, rng.uniform(-np.pi, np.pi, (_PIECE_POSES, 6)), pl.d3)
+        best = (None, np.inf)
+        for k in range(len(pl.d3)):
+            s, leak = _separated_span(comps[k])
+            if s is not None and leak < best[1]:
+                best = (rots[k].T @ s, leak)
+            if leak < _VALUE_SAMPLE_LEAK:
+                break
+        spans.append(best)
+    dims = [s.shape[1] for s, leak in spans if s is not None and leak < _VALUE_SAMPLE_LEAK]
+    if r[0] is None and dims:
+        r[0] = max(set(dims), key=dims.count)
+    good = [i for i, (s, leak) in enumerate(spans) if s is not None and leak < _VALUE_SAMPLE_LEAK
+            and s.shape[1] == r[0]]
+    if r[0] is None or not 2 <= r[0] <= 12 or len(good) <= _PIECE_DEGREES[0] + 1:
+        return None
+    v0 = spans[good[len(good) // 2]][0]
+    y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good]).reshape(len(good), -1)
+    test = rng.uniform(a, b, _PIECE_CHECK)
+    test_q = rng.uniform(-np.pi, np.pi, (_PIECE_CHECK, _TRIPLE_CHECK_POSES, 6))
+    checks = [None] * _PIECE_CHECK
+    for n in _PIECE_DEGREES:
+        if n + 2 > len(good):
+            break
+        h = np.polynomial.chebyshev.chebfit(nodes[good], y, n).reshape(n + 1, 24, r[0])
+        ok = True
+        for j, v in enumerate(test):
+            s = np.einsum("k,kij->ij", _chebyshev(2 * (v - a) / (b - a) - 1, n), h)
+            sv = np.linalg.svd(s, compute_uv=False)
+            if checks[j] is None:
+                checks[j] = _companions(pl, v, test_q[j], pl.d3)
+            if not (sv[-1] > _VALUE_MIN_SV * sv[0] and all(
+                    _leak(checks[j][k], np.linalg.qr(rots[k] @ s)[0]) <= _TRIPLE_CHECK_LEAK
+                    for k in range(len(pl.d3)))):
+                ok = False
+                break
+        if ok:
+            return h
+    return None
 
 
 def _deflation(pl: free_joint.Plan):
