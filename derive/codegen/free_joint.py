@@ -630,12 +630,20 @@ def _shared_span(comp, own: bool = False):
 
 
 def _value_basis(pl: free_joint.Plan):
-    """The trigonometric basis (:func:`_fourier_basis`) where it holds at every check value, else
+    """The trigonometric basis (:func:`_fourier_basis`) where it holds at every check value (the
+    piecewise one instead where that holds on every piece with fewer terms), else
     the piecewise one (:func:`_piece_basis`) where its pieces cover at least half of [-pi, pi) and
     a larger share than the check values the trigonometric one holds at, else the trigonometric
     one where it holds at :data:`_VALUE_MIN_SHARE` of them; None where neither does."""
     four = _fourier_basis(pl)
     if four is not None and four[2] == 1.0:
+        if 2 * four[1] + 1 <= _PIECE_DEGREES[-1] + 1:
+            return ValueBasis("fourier", four[0], four[1])
+        # a trigonometric degree past 6: the pieces where they all hold with fewer terms (the C
+        # evaluates 13 terms per pose at most, against 2 n + 1: 49 for gen3 q3, 65 for panda q3)
+        pieces = _piece_basis(pl)
+        if pieces is not None and all(pieces.present) and pieces.n + 1 < 2 * four[1] + 1:
+            return pieces
         return ValueBasis("fourier", four[0], four[1])
     pieces = _piece_basis(pl)
     if pieces is not None and sum(pieces.present) >= _PIECES // 2 and (
