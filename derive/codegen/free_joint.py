@@ -121,7 +121,8 @@ def c_plans(robot, joint: int) -> list:
     (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3, 4 or 5
     held (the held link on the triple side of every cut) the cut and eigen-variable with the fewest
     poses sent to the rescue (:func:`_quiet_plan`), where it beats the reference's plan, with the
-    reference's plan as its rescue (the rescue's share decides, not the deflated size); else, where
+    reference's plan as its rescue (the rescue's share decides, but where only the reference's
+    plan deflates and sends few poses more to the rescue it comes first, :func:`_deflating_first`); else, where
     the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
     (:func:`_triple_deflates`), the two swap (:func:`_deflating_rescue`; also for joints 2 and 6
     when the reference's plan has the held link on the triple side and no pair-side cut
