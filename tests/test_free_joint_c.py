@@ -269,20 +269,30 @@ def test_triple_side_plan_deflates(name, k, keep):
     assert defl["keep"] == keep
 
 
-def test_value_basis_is_invariant_at_random_values_and_poses():
-    """xArm7 with q3 held: the per-value basis V(v) (cfree.value_basis, rotated to each offset)
-    spans a subspace that every pose's companion matrix at that value maps into itself, on
-    pencils built by the reference's per-value fit at values and poses it was not fitted at;
-    the eigenvalues of the kept block and of the removed block together are the whole matrix's
-    (no solution removed), and the removed ones are the same at every pose of a value."""
-    robot = derive.load_robot("xarm7")
-    pl = cfree.c_plans(robot, 3)[0]
-    h, n = cfree.value_basis(pl)
+@pytest.mark.parametrize("name,k,kind", [("xarm7", 3, "fourier"), ("panda", 4, "pieces")])
+def test_value_basis_is_invariant_at_random_values_and_poses(name, k, kind):
+    """xArm7 with q3 held (a trigonometric polynomial in the value) and the Panda with q4 held
+    (piecewise: no trigonometric fit holds; the pieces near v = 0 and pi have none): the
+    per-value basis V(v) (cfree.value_basis, rotated to each offset) spans a subspace that every
+    pose's companion matrix at that value maps into itself, on pencils built by the reference's
+    per-value fit at values and poses it was not fitted at; the eigenvalues of the kept block and
+    of the removed block together are the whole matrix's (no solution removed), and the removed
+    ones are the same at every pose of a value. Where a piece has no basis V is zero."""
+    robot = derive.load_robot(name)
+    pl = cfree.c_plans(robot, k)[0]
+    vb = cfree.value_basis(pl)
+    assert vb.kind == kind and vb.r == 8
     rng = np.random.default_rng(41)
-    for v in rng.uniform(-np.pi, np.pi, 4):
+    values = rng.uniform(-np.pi, np.pi, 4)
+    if kind == "pieces":
+        assert 8 <= sum(vb.present) < len(vb.present)
+        absent = vb.present.index(False)
+        assert not np.any(vb.at(-np.pi + (absent + 0.5) * 2 * np.pi / len(vb.present)))
+        values = [v for v in rng.uniform(-np.pi, np.pi, 40) if vb.present[cfree._piece_of(v, len(vb.present))[0]]][:4]
+    for v in values:
         q = _inside(robot, 4, rng)
-        q[:, 2] = v
-        v0 = np.einsum("k,kij->ij", cfree._value_harmonics(v, n)[0], h)
+        q[:, k - 1] = v
+        v0 = vb.at(v)
         for o, comp in enumerate(_pencil_companions(robot, pl, q)):
             b = np.linalg.qr(cfree._offset_rotation(pl, o) @ v0, mode="complete")[0]
             r = v0.shape[1]
@@ -303,9 +313,10 @@ def test_value_basis_is_invariant_at_random_values_and_poses():
 
 
 @needs_gcc
-@pytest.mark.parametrize("name,k", [("xarm7", 3), ("panda", 5)])
+@pytest.mark.parametrize("name,k", [("xarm7", 3), ("panda", 5), ("panda", 4)])
 def test_c_triple_side_deflation_matches_the_reference(name, k):
-    """With the triple-side deflation (per value for xArm7's q3, baked for the Panda's q5), 30
+    """With the triple-side deflation (per value for xArm7's q3, piecewise per value for the
+    Panda's q4, baked for the Panda's q5), 30
     configurations at their generating value and at one other value: the C kernel's counts,
     solutions (1e-9 rad), singular and degenerate flags equal the numpy reference's (which solves
     the whole 24 x 24); every solution within 1e-10 on the plain matrix FK; the generating
