@@ -108,6 +108,69 @@ def _fixed_deflation(pl: free_joint.Plan, any_side: bool = False):
     return best
 
 
+def _pair_deflation(pl: free_joint.Plan):
+    """The baked deflation of a plan with the held link off the triple side
+    (:func:`_held_on_pair_side`): the one of :func:`_fixed_deflation` and :func:`_span_deflation`
+    that removes more eigenvectors (the first where they tie). (bases, keep, spurious) or None.
+    Once per process."""
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-pair-deflation", key, lambda: _pair_deflation_uncached(pl))
+
+
+def _pair_deflation_uncached(pl: free_joint.Plan):
+    fixed = _fixed_deflation(pl)
+    span = _span_deflation(pl) if _held_on_pair_side(pl) else None
+    if span is not None and (fixed is None or span[1] < fixed[1]):
+        return span
+    return fixed
+
+
+def _span_deflation(pl: free_joint.Plan):
+    """A deflation baked once for a plan with the held link off the triple side, from the
+    invariant subspace of the companion matrix for the eigenvalues every pose shares, clusters
+    taken as one eigenvalue of their multiplicity (:func:`_shared_span`: the null space of
+    (C - x I)^k, generalised eigenvectors too). :func:`_fixed_deflation` matches the shared
+    eigenvalues one by one within 1e-7 and takes only eigenvectors; where a shared eigenvalue is
+    multiple (x = +-i with a Jordan block, or a pose-independent complex double or triple root
+    that rounding splits by up to 1e-5, the Gen3's q6 with the reversed cut at joint 2) it misses
+    them at most values and removes 4 of 8. The triple side Y does not depend on the value here,
+    so neither does that subspace: the span at the value among :data:`_DEFLATION_VALUES` where it
+    is invariant best, kept where it holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every
+    offset on :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    :data:`_TRIPLE_CHECK_VALUES` random values. Its real eigenvalues, if any, are the spurious
+    real roots (in rad, at the offset d3[0]). (bases (n_d3, 24, 24) [W V], keep, spurious) or None."""
+    rng = np.random.default_rng(41)
+    best = (None, np.inf)
+    for v in _DEFLATION_VALUES:
+        comp = _companions(pl, v, rng.uniform(-np.pi, np.pi, (4, 6)), pl.d3[0])
+        if not np.all(np.isfinite(comp)):
+            continue
+        b = _shared_span(comp)
+        if b is not None:
+            leak = _leak(comp, b)
+            if leak < best[1]:
+                best = (b, leak, comp[0])
+    v0 = best[0]
+    if v0 is None or not best[1] <= _TRIPLE_CHECK_LEAK or not 2 <= v0.shape[1] <= 12:
+        return None
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    for v in np.concatenate([_DEFLATION_VALUES, rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)]):
+        q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6))
+        for k, d in enumerate(pl.d3):
+            if not _leak(_companions(pl, v, q, d), rots[k] @ v0) <= _TRIPLE_CHECK_LEAK:
+                return None
+    # the removed eigenvalues (of V^T C V), the real ones as angles of the eigen-variable
+    lam = np.linalg.eigvals(v0.T @ best[2] @ v0)
+    real = lam[np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)].real
+    spurious = tuple(sorted({round(float(g6.wrap_angle(pl.d3[0] + 2 * np.arctan(x))), 9) for x in real}))
+    r = v0.shape[1]
+    bases = []
+    for k in range(len(pl.d3)):
+        qv = np.linalg.qr(rots[k] @ v0, mode="complete")[0]
+        bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+    return np.array(bases), 24 - r, spurious
+
+
 def c_plans(robot, joint: int) -> list:
     """The plans of the C kernel, the plan first and its rescue second: the reference's
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
@@ -140,7 +203,7 @@ def _c_plans(robot, joint: int) -> list:
         # here; the Panda's q7 (reached only by calling the free-joint kernels directly, as the
         # benchmarks do) keeps the reference's plans
         return plans
-    own = _fixed_deflation(pl)
+    own = _pair_deflation(pl)
     if own is None and not any(_held_on_pair_side(dataclasses.replace(pl, reverse=r, e=e))
                                for r in (False, True) for e in (1, 2)):
         # the held link on the triple side of every cut (joints 3-5): no baked deflation; the cut
@@ -175,7 +238,7 @@ def _c_plans(robot, joint: int) -> list:
                         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
                               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
                               f"deflation baked; the reference's plan is the rescue)")
-                    found = _fixed_deflation(cand)
+                    found = _pair_deflation(cand)
                     if found is not None and found[1] < best_keep:
                         best, best_keep = cand, found[1]
     if best is None and not _held_on_pair_side(pl):
@@ -598,7 +661,7 @@ def _deflation(pl: free_joint.Plan):
         return None
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
-    found = _fixed_deflation(pl) if general else None
+    found = _pair_deflation(pl) if general else None
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
@@ -650,6 +713,25 @@ def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
     depend on the pose: the cut's triple side holds links 1-5 of the locked 6R, never the pose link)."""
     d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
     return g6._triple_coefs(g6._reverse(d) if pl.reverse else d, pl.e)
+
+
+def triple_constant(pl: free_joint.Plan):
+    """(14, 27): the triple side Y of a plan where it is the same at every held value (the held
+    joint's link off the cut's triple side, :func:`_held_on_pair_side`), checked at
+    :data:`_DEFLATION_VALUES` (equal within 1e-13 of its largest entry); else None. The C kernel
+    then bakes it (templates/free_joint.c.j2) instead of evaluating its harmonics per value."""
+    if not _held_on_pair_side(pl):
+        return None
+    y = _triple_side(pl, 0.0)
+    tol = 1e-13 * max(1.0, float(np.abs(y).max()))
+    if any(float(np.abs(_triple_side(pl, v) - y).max()) > tol for v in _DEFLATION_VALUES):
+        return None
+    return y
+
+
+def _yc(pl: free_joint.Plan):
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev)
+    return memo("free-joint-triple-constant", key, lambda: triple_constant(pl))
 
 
 def _harmonics(v) -> np.ndarray:
@@ -750,7 +832,8 @@ def c_source(robot, joint: int) -> str:
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
-                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
+                "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
+                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
         # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
         newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
