@@ -126,17 +126,19 @@ def _pair_deflation_uncached(pl: free_joint.Plan):
 
 
 def _span_deflation(pl: free_joint.Plan):
-    """A deflation baked once for a plan with the held link off the triple side, from the
+    """A deflation baked once for a plan with the held link off the triple side, from an
     invariant subspace of the companion matrix for the eigenvalues every pose shares, clusters
-    taken as one eigenvalue of their multiplicity (:func:`_shared_span`: the null space of
-    (C - x I)^k, generalised eigenvectors too). :func:`_fixed_deflation` matches the shared
-    eigenvalues one by one within 1e-7 and takes only eigenvectors; where a shared eigenvalue is
-    multiple (x = +-i with a Jordan block, or a pose-independent complex double or triple root
-    that rounding splits by up to 1e-5, the Gen3's q6 with the reversed cut at joint 2) it misses
-    them at most values and removes 4 of 8. The triple side Y does not depend on the value here,
-    so neither does that subspace: the span at the value among :data:`_DEFLATION_VALUES` where it
-    is invariant best, kept where it holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every
-    offset on :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    taken as one eigenvalue: :func:`_shared_span` (the null space of (C - x I)^k, generalised
+    eigenvectors too) or :func:`_constant_eigenvectors` (the eigenvectors every pose shares, where
+    the generalised ones move with the pose). :func:`_fixed_deflation` matches the shared
+    eigenvalues one by one within 1e-7; where a shared eigenvalue is multiple (x = +-i, or a
+    pose-independent complex double or triple root that rounding splits by up to 1e-5: the Gen3's
+    q6 with the reversed cut at joint 2) it misses some at most values (xarm7 q6: 18 x 18 left,
+    gen3 q6 and panda q6: 20 x 20; with this 16, 16 and 14). The triple side Y does not depend on
+    the value here, so neither does that subspace: of the spans at :data:`_DEFLATION_VALUES` (both
+    kinds, invariant there within :data:`_TRIPLE_CHECK_LEAK`), the largest, then the least leak,
+    that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every offset on
+    :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
     :data:`_TRIPLE_CHECK_VALUES` random values. Its real eigenvalues, if any, are the spurious
     real roots (in rad, at the offset d3[0]). (bases (n_d3, 24, 24) [W V], keep, spurious) or None."""
     rng = np.random.default_rng(41)
@@ -211,7 +213,8 @@ def c_plans(robot, joint: int) -> list:
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
-    deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
+    deflation (:func:`_pair_deflation`) than the reference's plan by its eigenvectors
+    (:func:`_fixed_deflation`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
