@@ -109,12 +109,113 @@ def _fixed_deflation(pl: free_joint.Plan, any_side: bool = False):
     return best
 
 
+def _pair_deflation(pl: free_joint.Plan):
+    """The baked deflation of a plan with the held link off the triple side
+    (:func:`_held_on_pair_side`): the one of :func:`_fixed_deflation` and :func:`_span_deflation`
+    that removes more eigenvectors (the first where they tie). (bases, keep, spurious) or None.
+    Once per process."""
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-pair-deflation", key, lambda: _pair_deflation_uncached(pl))
+
+
+def _pair_deflation_uncached(pl: free_joint.Plan):
+    fixed = _fixed_deflation(pl)
+    span = _span_deflation(pl) if _held_on_pair_side(pl) else None
+    if span is not None and (fixed is None or span[1] < fixed[1]):
+        return span
+    return fixed
+
+
+def _span_deflation(pl: free_joint.Plan):
+    """A deflation baked once for a plan with the held link off the triple side, from an
+    invariant subspace of the companion matrix for the eigenvalues every pose shares, clusters
+    taken as one eigenvalue: :func:`_shared_span` (the null space of (C - x I)^k, generalised
+    eigenvectors too) or :func:`_constant_eigenvectors` (the eigenvectors every pose shares, where
+    the generalised ones move with the pose). :func:`_fixed_deflation` matches the shared
+    eigenvalues one by one within 1e-7; where a shared eigenvalue is multiple (x = +-i, or a
+    pose-independent complex double or triple root that rounding splits by up to 1e-5: the Gen3's
+    q6 with the reversed cut at joint 2) it misses some at most values (xarm7 q6: 18 x 18 left,
+    gen3 q6 and panda q6: 20 x 20; with this 16, 16 and 14). The triple side Y does not depend on
+    the value here, so neither does that subspace: of the spans at :data:`_DEFLATION_VALUES` (both
+    kinds, invariant there within :data:`_TRIPLE_CHECK_LEAK`), the largest, then the least leak,
+    that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every offset on
+    :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    :data:`_TRIPLE_CHECK_VALUES` random values. Its real eigenvalues, if any, are the spurious
+    real roots (in rad, at the offset d3[0]). (bases (n_d3, 24, 24) [W V], keep, spurious) or None."""
+    rng = np.random.default_rng(41)
+    options = []
+    for v in _DEFLATION_VALUES:
+        comp = _companions(pl, v, rng.uniform(-np.pi, np.pi, (4, 6)), pl.d3[0])
+        if not np.all(np.isfinite(comp)):
+            continue
+        for b in (_shared_span(comp), _constant_eigenvectors(comp)):
+            if b is not None and 2 <= b.shape[1] <= 12:
+                leak = _leak(comp, b)
+                if leak <= _TRIPLE_CHECK_LEAK:
+                    options.append((-b.shape[1], leak, len(options), b, comp[0]))
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    checks = [(v, rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6)))
+              for v in np.concatenate([_DEFLATION_VALUES, rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)])]
+    for _, _, _, v0, c0 in sorted(options, key=lambda o: o[:3]):      # the most removed first, then the least leak
+        if all(_leak(_companions(pl, v, q, d), rots[k] @ v0) <= _TRIPLE_CHECK_LEAK
+               for v, q in checks for k, d in enumerate(pl.d3)):
+            break
+    else:
+        return None
+    best = (v0, None, c0)
+    # the removed eigenvalues (of V^T C V), the real ones as angles of the eigen-variable
+    lam = np.linalg.eigvals(v0.T @ best[2] @ v0)
+    real = lam[np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)].real
+    spurious = tuple(sorted({round(float(g6.wrap_angle(pl.d3[0] + 2 * np.arctan(x))), 9) for x in real}))
+    r = v0.shape[1]
+    bases = []
+    for k in range(len(pl.d3)):
+        qv = np.linalg.qr(rots[k] @ v0, mode="complete")[0]
+        bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+    return np.array(bases), 24 - r, spurious
+
+
+def _constant_eigenvectors(comp):
+    """The orthonormal basis (24, r) of the eigenvectors that the companion matrices comp
+    (m, 24, 24) share, for the eigenvalues they all share (within 1e-6; a cluster within 1e-4 as one
+    eigenvalue x, its mean): per x the null space of the stacked [C_1 - x I; ...; C_m - x I]
+    (singular values below 1e-8 of the largest), real and imaginary parts; None where there is
+    none. Unlike :func:`_shared_span` it keeps the eigenvectors every pose shares where the
+    generalised ones move with the pose (a multiple x = +-i whose Jordan chains do: the Panda's q6)."""
+    lam = np.linalg.eigvals(comp[0])
+    others = [np.linalg.eigvals(c) for c in comp[1:]]
+    groups = []
+    for x in lam:
+        if x.imag < -1e-9 * (1 + abs(x)) or not all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others):
+            continue
+        for g in groups:
+            if abs(np.mean(g) - x) < 1e-4 * (1 + abs(x)):
+                g.append(x)
+                break
+        else:
+            groups.append([x])
+    cols = []
+    for g in groups:
+        x = np.mean(g)
+        a = np.concatenate([c - x * np.eye(24) for c in comp])
+        _, s, vh = np.linalg.svd(a, full_matrices=False)
+        k = int(np.sum(s < 1e-8 * s[0]))
+        if k:
+            cols.append(vh[-k:].conj().T)
+    if not cols:
+        return None
+    v = np.concatenate(cols, 1)
+    u, sv, _ = np.linalg.svd(np.concatenate([v.real, v.imag], 1), full_matrices=False)
+    return u[:, :int(np.sum(sv > 1e-8 * sv[0]))]
+
+
 def c_plans(robot, joint: int) -> list:
     """The plans of the C kernel, the plan first and its rescue second: the reference's
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
-    deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
+    deflation (:func:`_pair_deflation`) than the reference's plan by its eigenvectors
+    (:func:`_fixed_deflation`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
@@ -152,7 +253,12 @@ def _c_plans(robot, joint: int) -> list:
         if quiet is not None:
             return _deflating_first(pl, quiet, robot)
         return _deflating_rescue(pl) or plans
-    best, best_keep = None, 24 if own is None else own[1]
+    # the bar: the reference's plan with its eigenvector-wise deflation (_fixed_deflation); a
+    # candidate's score (size after _pair_deflation, whether only _span_deflation reaches it): at
+    # the same size a cut whose eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the
+    # cuts that reach 16 only with _span_deflation run 15 % slower: multiple eigenvalues stay in
+    # the block)
+    best, best_keep = None, (24 if own is None else own[1], 0)
     for reverse in (False, True):
         for e in (1, 2):
             if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
@@ -177,9 +283,13 @@ def _c_plans(robot, joint: int) -> list:
                         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
                               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
                               f"deflation baked; the reference's plan is the rescue)")
-                    found = _fixed_deflation(cand)
-                    if found is not None and found[1] < best_keep:
-                        best, best_keep = cand, found[1]
+                    found = _pair_deflation(cand)
+                    if found is None:
+                        continue
+                    fixed = _fixed_deflation(cand)
+                    score = (found[1], int(fixed is None or fixed[1] > found[1]))
+                    if score < best_keep:
+                        best, best_keep = cand, score
     if best is None and not _held_on_pair_side(pl):
         return _deflating_rescue(pl) or plans
     return plans if best is None else [best, pl]
@@ -847,7 +957,7 @@ def _deflation(pl: free_joint.Plan):
         return None
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
-    found = _fixed_deflation(pl) if general else None
+    found = _pair_deflation(pl) if general else None
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
@@ -899,6 +1009,25 @@ def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
     depend on the pose: the cut's triple side holds links 1-5 of the locked 6R, never the pose link)."""
     d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
     return g6._triple_coefs(g6._reverse(d) if pl.reverse else d, pl.e)
+
+
+def triple_constant(pl: free_joint.Plan):
+    """(14, 27): the triple side Y of a plan where it is the same at every held value (the held
+    joint's link off the cut's triple side, :func:`_held_on_pair_side`), checked at
+    :data:`_DEFLATION_VALUES` (equal within 1e-13 of its largest entry); else None. The C kernel
+    then bakes it (templates/free_joint.c.j2) instead of evaluating its harmonics per value."""
+    if not _held_on_pair_side(pl):
+        return None
+    y = _triple_side(pl, 0.0)
+    tol = 1e-13 * max(1.0, float(np.abs(y).max()))
+    if any(float(np.abs(_triple_side(pl, v) - y).max()) > tol for v in _DEFLATION_VALUES):
+        return None
+    return y
+
+
+def _yc(pl: free_joint.Plan):
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev)
+    return memo("free-joint-triple-constant", key, lambda: triple_constant(pl))
 
 
 def _harmonics(v) -> np.ndarray:
@@ -999,7 +1128,8 @@ def c_source(robot, joint: int) -> str:
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
-                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
+                "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
+                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
         # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
         newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
