@@ -99,17 +99,21 @@ def test_triple_side_harmonics_equal_the_per_value_fit(name, k):
         np.testing.assert_allclose((cfree._harmonics(q[:, k - 1]) @ h).reshape(6, 14, 27), y, atol=1e-12)
 
 
-@pytest.mark.parametrize("name,k", [("xarm7", 2), ("xarm7", 7), ("gen3", 6)])
-def test_baked_deflation_holds_at_random_values_and_poses(name, k):
+@pytest.mark.parametrize("name,k,keep", [("xarm7", 2, 16), ("xarm7", 7, 16), ("gen3", 6, 16), ("xarm7", 6, 16),
+                                         ("panda", 6, 14)])
+def test_baked_deflation_holds_at_random_values_and_poses(name, k, keep):
     """Where the C plan bakes the deflation (the held link off the cut's triple side,
-    cfree.c_plans), the removed subspace V is invariant under every pose's companion matrix at
-    values other than those it was checked at: |W^T C V| (the block the C kernel drops) is
-    zero to rounding on the pencils built by the reference's per-value fit (free_joint._coefs),
-    and the eigenvalues it removes are the same at every pose and value and none is real."""
+    cfree.c_plans; gen3 q6, xarm7 q6 and panda q6 by the span of the shared eigenvectors and
+    generalised eigenvectors, cfree._span_deflation), the removed subspace V is invariant under
+    every pose's companion matrix at values other than those it was checked at: |W^T C V| (the
+    block the C kernel drops) is zero to rounding on the pencils built by the reference's
+    per-value fit (free_joint._coefs), and the eigenvalues it removes are the same at every pose
+    and value (compared by the block's characteristic polynomial: some are multiple) and none is
+    real."""
     robot = derive.load_robot(name)
     pl = cfree.c_plans(robot, k)[0]
-    found = cfree._fixed_deflation(pl)
-    assert found is not None and found[1] <= 20
+    found = cfree._pair_deflation(pl)
+    assert found is not None and found[1] == keep
     bases, keep = np.asarray(found[0]), found[1]
     rng = np.random.default_rng(21)
     q = _inside(robot, 8, rng)
@@ -120,9 +124,10 @@ def test_baked_deflation_holds_at_random_values_and_poses(name, k):
         # the removed block's eigenvalues: the same at every pose and value, none real (no
         # solution is removed; these arms have no spurious real root)
         assert not found[2]
-        lam = np.linalg.eigvals(t[:, keep:, keep:])
-        for row in lam[1:]:
-            assert np.abs(row[:, None] - lam[0][None]).min(axis=1).max() < 1e-6 * (1 + np.abs(lam[0]).max())
+        block = t[:, keep:, keep:]
+        poly = np.array([np.poly(b) for b in block]).real
+        assert np.abs(poly[1:] - poly[0]).max() < 1e-6 * (1 + np.abs(poly[0]).max())
+        lam = np.linalg.eigvals(block)
         assert np.all(np.abs(lam.imag) > 1e-2 * (1 + np.abs(lam) ** 2))
 
 
@@ -269,20 +274,30 @@ def test_triple_side_plan_deflates(name, k, keep):
     assert defl["keep"] == keep
 
 
-def test_value_basis_is_invariant_at_random_values_and_poses():
-    """xArm7 with q3 held: the per-value basis V(v) (cfree.value_basis, rotated to each offset)
-    spans a subspace that every pose's companion matrix at that value maps into itself, on
-    pencils built by the reference's per-value fit at values and poses it was not fitted at;
-    the eigenvalues of the kept block and of the removed block together are the whole matrix's
-    (no solution removed), and the removed ones are the same at every pose of a value."""
-    robot = derive.load_robot("xarm7")
-    pl = cfree.c_plans(robot, 3)[0]
-    h, n = cfree.value_basis(pl)
+@pytest.mark.parametrize("name,k,kind", [("xarm7", 3, "fourier"), ("panda", 4, "pieces")])
+def test_value_basis_is_invariant_at_random_values_and_poses(name, k, kind):
+    """xArm7 with q3 held (a trigonometric polynomial in the value) and the Panda with q4 held
+    (piecewise: no trigonometric fit holds; the pieces near v = 0 and pi have none): the
+    per-value basis V(v) (cfree.value_basis, rotated to each offset) spans a subspace that every
+    pose's companion matrix at that value maps into itself, on pencils built by the reference's
+    per-value fit at values and poses it was not fitted at; the eigenvalues of the kept block and
+    of the removed block together are the whole matrix's (no solution removed), and the removed
+    ones are the same at every pose of a value. Where a piece has no basis V is zero."""
+    robot = derive.load_robot(name)
+    pl = cfree.c_plans(robot, k)[0]
+    vb = cfree.value_basis(pl)
+    assert vb.kind == kind and vb.r == 8
     rng = np.random.default_rng(41)
-    for v in rng.uniform(-np.pi, np.pi, 4):
+    values = rng.uniform(-np.pi, np.pi, 4)
+    if kind == "pieces":
+        assert 8 <= sum(vb.present) < len(vb.present)
+        absent = vb.present.index(False)
+        assert not np.any(vb.at(-np.pi + (absent + 0.5) * 2 * np.pi / len(vb.present)))
+        values = [v for v in rng.uniform(-np.pi, np.pi, 40) if vb.present[cfree._piece_of(v, len(vb.present))[0]]][:4]
+    for v in values:
         q = _inside(robot, 4, rng)
-        q[:, 2] = v
-        v0 = np.einsum("k,kij->ij", cfree._value_harmonics(v, n)[0], h)
+        q[:, k - 1] = v
+        v0 = vb.at(v)
         for o, comp in enumerate(_pencil_companions(robot, pl, q)):
             b = np.linalg.qr(cfree._offset_rotation(pl, o) @ v0, mode="complete")[0]
             r = v0.shape[1]
@@ -303,9 +318,10 @@ def test_value_basis_is_invariant_at_random_values_and_poses():
 
 
 @needs_gcc
-@pytest.mark.parametrize("name,k", [("xarm7", 3), ("panda", 5)])
+@pytest.mark.parametrize("name,k", [("xarm7", 3), ("panda", 5), ("panda", 4)])
 def test_c_triple_side_deflation_matches_the_reference(name, k):
-    """With the triple-side deflation (per value for xArm7's q3, baked for the Panda's q5), 30
+    """With the triple-side deflation (per value for xArm7's q3, piecewise per value for the
+    Panda's q4, baked for the Panda's q5), 30
     configurations at their generating value and at one other value: the C kernel's counts,
     solutions (1e-9 rad), singular and degenerate flags equal the numpy reference's (which solves
     the whole 24 x 24); every solution within 1e-10 on the plain matrix FK; the generating

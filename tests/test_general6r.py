@@ -258,3 +258,31 @@ def test_crx_root_shared_by_several_solutions(crx):
     assert _contains(sols, q)
     assert np.sum(np.abs(wrap_angle(sols[:, 2] - q[2])) < 1e-6) >= 4
     assert np.abs(reference.fk_matrix(robot, sols) - reference.fk_matrix(robot, q)).max() < 1e-10
+
+
+@pytest.mark.parametrize("robot", ["crx10ia", "xarm6"])
+def test_newton_giving_up_on_far_candidates_keeps_every_answer(robot, monkeypatch):
+    """The first solve's Newton stops a far candidate (error above 1e-6, not halving) from step
+    general6r.NEWTON_FAR on: on random poses within the limits the solutions, counts and flags are
+    those of Newton taking every step (NEWTON_FAR past G6_NEWTON_MAX: the rule never applies),
+    with fewer Newton evaluations (the spurious candidates of near chains and clusters no longer
+    take all G6_NEWTON_MAX steps)."""
+    r = derive.load_robot(robot)
+    rng = np.random.default_rng(31)
+    lo, hi = np.maximum(r.limits[:, 0], -np.pi), np.minimum(r.limits[:, 1], np.pi)
+    poses = reference.fk(r, rng.uniform(lo, hi, (300, 6)))
+    steps = []
+    err_jt = general6r._err_jt
+    monkeypatch.setattr(general6r, "_err_jt", lambda t, *a: steps.append(len(t)) or err_jt(t, *a))
+    fast = general6r.solve(r, poses)
+    n_fast = len(steps)
+    steps.clear()
+    monkeypatch.setattr(general6r, "NEWTON_FAR", general6r.G6_NEWTON_MAX + 1)
+    every = general6r.solve(r, poses)
+    assert n_fast < len(steps)
+    assert np.array_equal(fast.counts, every.counts) and fast.counts.sum() > 6 * len(poses)
+    assert np.array_equal(fast.singular, every.singular)
+    assert np.array_equal(fast.degenerate, every.degenerate)
+    ok = np.isfinite(every.q)
+    assert np.array_equal(ok, np.isfinite(fast.q))
+    assert np.abs(wrap_angle(fast.q[ok] - every.q[ok])).max() < 1e-12

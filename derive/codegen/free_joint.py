@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import math
 import re
 
 import numpy as np
@@ -108,19 +109,121 @@ def _fixed_deflation(pl: free_joint.Plan, any_side: bool = False):
     return best
 
 
+def _pair_deflation(pl: free_joint.Plan):
+    """The baked deflation of a plan with the held link off the triple side
+    (:func:`_held_on_pair_side`): the one of :func:`_fixed_deflation` and :func:`_span_deflation`
+    that removes more eigenvectors (the first where they tie). (bases, keep, spurious) or None.
+    Once per process."""
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev, tuple(np.round(pl.offsets, 12)))
+    return memo("free-joint-pair-deflation", key, lambda: _pair_deflation_uncached(pl))
+
+
+def _pair_deflation_uncached(pl: free_joint.Plan):
+    fixed = _fixed_deflation(pl)
+    span = _span_deflation(pl) if _held_on_pair_side(pl) else None
+    if span is not None and (fixed is None or span[1] < fixed[1]):
+        return span
+    return fixed
+
+
+def _span_deflation(pl: free_joint.Plan):
+    """A deflation baked once for a plan with the held link off the triple side, from an
+    invariant subspace of the companion matrix for the eigenvalues every pose shares, clusters
+    taken as one eigenvalue: :func:`_shared_span` (the null space of (C - x I)^k, generalised
+    eigenvectors too) or :func:`_constant_eigenvectors` (the eigenvectors every pose shares, where
+    the generalised ones move with the pose). :func:`_fixed_deflation` matches the shared
+    eigenvalues one by one within 1e-7; where a shared eigenvalue is multiple (x = +-i, or a
+    pose-independent complex double or triple root that rounding splits by up to 1e-5: the Gen3's
+    q6 with the reversed cut at joint 2) it misses some at most values (xarm7 q6: 18 x 18 left,
+    gen3 q6 and panda q6: 20 x 20; with this 16, 16 and 14). The triple side Y does not depend on
+    the value here, so neither does that subspace: of the spans at :data:`_DEFLATION_VALUES` (both
+    kinds, invariant there within :data:`_TRIPLE_CHECK_LEAK`), the largest, then the least leak,
+    that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK`) at every offset on
+    :data:`_TRIPLE_CHECK_POSES` random poses at each of :data:`_DEFLATION_VALUES` and
+    :data:`_TRIPLE_CHECK_VALUES` random values. Its real eigenvalues, if any, are the spurious
+    real roots (in rad, at the offset d3[0]). (bases (n_d3, 24, 24) [W V], keep, spurious) or None."""
+    rng = np.random.default_rng(41)
+    options = []
+    for v in _DEFLATION_VALUES:
+        comp = _companions(pl, v, rng.uniform(-np.pi, np.pi, (4, 6)), pl.d3[0])
+        if not np.all(np.isfinite(comp)):
+            continue
+        for b in (_shared_span(comp), _constant_eigenvectors(comp)):
+            if b is not None and 2 <= b.shape[1] <= 12:
+                leak = _leak(comp, b)
+                if leak <= _TRIPLE_CHECK_LEAK:
+                    options.append((-b.shape[1], leak, len(options), b, comp[0]))
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    checks = [(v, rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_POSES, 6)))
+              for v in np.concatenate([_DEFLATION_VALUES, rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)])]
+    for _, _, _, v0, c0 in sorted(options, key=lambda o: o[:3]):      # the most removed first, then the least leak
+        if all(_leak(_companions(pl, v, q, d), rots[k] @ v0) <= _TRIPLE_CHECK_LEAK
+               for v, q in checks for k, d in enumerate(pl.d3)):
+            break
+    else:
+        return None
+    best = (v0, None, c0)
+    # the removed eigenvalues (of V^T C V), the real ones as angles of the eigen-variable
+    lam = np.linalg.eigvals(v0.T @ best[2] @ v0)
+    real = lam[np.abs(lam.imag) < G6_REAL_TOL * (1 + np.abs(lam) ** 2)].real
+    spurious = tuple(sorted({round(float(g6.wrap_angle(pl.d3[0] + 2 * np.arctan(x))), 9) for x in real}))
+    r = v0.shape[1]
+    bases = []
+    for k in range(len(pl.d3)):
+        qv = np.linalg.qr(rots[k] @ v0, mode="complete")[0]
+        bases.append(np.concatenate([qv[:, r:], qv[:, :r]], axis=1))
+    return np.array(bases), 24 - r, spurious
+
+
+def _constant_eigenvectors(comp):
+    """The orthonormal basis (24, r) of the eigenvectors that the companion matrices comp
+    (m, 24, 24) share, for the eigenvalues they all share (within 1e-6; a cluster within 1e-4 as one
+    eigenvalue x, its mean): per x the null space of the stacked [C_1 - x I; ...; C_m - x I]
+    (singular values below 1e-8 of the largest), real and imaginary parts; None where there is
+    none. Unlike :func:`_shared_span` it keeps the eigenvectors every pose shares where the
+    generalised ones move with the pose (a multiple x = +-i whose Jordan chains do: the Panda's q6)."""
+    lam = np.linalg.eigvals(comp[0])
+    others = [np.linalg.eigvals(c) for c in comp[1:]]
+    groups = []
+    for x in lam:
+        if x.imag < -1e-9 * (1 + abs(x)) or not all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others):
+            continue
+        for g in groups:
+            if abs(np.mean(g) - x) < 1e-4 * (1 + abs(x)):
+                g.append(x)
+                break
+        else:
+            groups.append([x])
+    cols = []
+    for g in groups:
+        x = np.mean(g)
+        a = np.concatenate([c - x * np.eye(24) for c in comp])
+        _, s, vh = np.linalg.svd(a, full_matrices=False)
+        k = int(np.sum(s < 1e-8 * s[0]))
+        if k:
+            cols.append(vh[-k:].conj().T)
+    if not cols:
+        return None
+    v = np.concatenate(cols, 1)
+    u, sv, _ = np.linalg.svd(np.concatenate([v.real, v.imag], 1), full_matrices=False)
+    return u[:, :int(np.sum(sv > 1e-8 * sv[0]))]
+
+
 def c_plans(robot, joint: int) -> list:
     """The plans of the C kernel, the plan first and its rescue second: the reference's
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
-    deflation (:func:`_fixed_deflation`) than the reference's plan: that cut, where it works at every
+    deflation (:func:`_pair_deflation`) than the reference's plan by its eigenvectors
+    (:func:`_fixed_deflation`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
     (each pose solves a 14 x 14 to 20 x 20 eigenproblem instead of 24 x 24). With joint 3, 4 or 5
     held (the held link on the triple side of every cut) the cut and eigen-variable with the fewest
     poses sent to the rescue (:func:`_quiet_plan`), where it beats the reference's plan, with the
-    reference's plan as its rescue (the rescue's share decides, not the deflated size); else, where
+    reference's plan as its rescue (the rescue's share decides, but where only the reference's
+    plan deflates and sends few poses more to the rescue it comes first, :func:`_deflating_first`); else, where
     the reference's plan has no deflation of its shared eigenvectors but its rescue plan has
     (:func:`_triple_deflates`), the two swap (:func:`_deflating_rescue`; also for joints 2 and 6
     when the reference's plan has the held link on the triple side and no pair-side cut
@@ -148,9 +251,14 @@ def _c_plans(robot, joint: int) -> list:
         # reference's plans, swapped where only its rescue plan deflates
         quiet = _quiet_plan(pl, robot)
         if quiet is not None:
-            return [quiet, pl]
+            return _deflating_first(pl, quiet, robot)
         return _deflating_rescue(pl) or plans
-    best, best_keep = None, 24 if own is None else own[1]
+    # the bar: the reference's plan with its eigenvector-wise deflation (_fixed_deflation); a
+    # candidate's score (size after _pair_deflation, whether only _span_deflation reaches it): at
+    # the same size a cut whose eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the
+    # cuts that reach 16 only with _span_deflation run 15 % slower: multiple eigenvalues stay in
+    # the block)
+    best, best_keep = None, (24 if own is None else own[1], 0)
     for reverse in (False, True):
         for e in (1, 2):
             if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
@@ -175,12 +283,55 @@ def _c_plans(robot, joint: int) -> list:
                         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
                               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
                               f"deflation baked; the reference's plan is the rescue)")
-                    found = _fixed_deflation(cand)
-                    if found is not None and found[1] < best_keep:
-                        best, best_keep = cand, found[1]
+                    found = _pair_deflation(cand)
+                    if found is None:
+                        continue
+                    fixed = _fixed_deflation(cand)
+                    score = (found[1], int(fixed is None or fixed[1] > found[1]))
+                    if score < best_keep:
+                        best, best_keep = cand, score
     if best is None and not _held_on_pair_side(pl):
         return _deflating_rescue(pl) or plans
     return plans if best is None else [best, pl]
+
+
+#: The share of the poses that :func:`_deflating_first` lets the reference's plan send to the
+#: rescue beyond the quiet plan's: the rescue solves a 24 x 24 (or a deflated 16 x 16) again, about
+#: 35 us, where deflating 24 x 24 to 16 x 16 saves about 9 us per pose
+_DEFLATING_EXTRA_SUSPECTS = 0.15
+
+
+def _deflating_first(pl: free_joint.Plan, quiet: free_joint.Plan, robot) -> list:
+    """[quiet, pl] (:func:`_quiet_plan`'s choice, the reference's plan its rescue), unless the quiet
+    plan has no deflation of its shared eigenvectors and the reference's plan has
+    (:func:`_triple_deflates`) and sends at most :data:`_DEFLATING_EXTRA_SUSPECTS` of the poses more
+    to the rescue (:func:`_suspects` on :func:`_fewest_suspects`' configurations): then
+    [pl, quiet] (xArm7's q5: 25.7 against 34.8 us per pose, one rescued pose of 500 either way).
+    The decision is kept in the user cache under "<identity>-free-q<K>-cplan-first-<version>"."""
+    import json
+    from derive.cache import find_artifact, store_artifacts
+    if _triple_deflates(quiet) or not _triple_deflates(pl):
+        return [quiet, pl]
+    key = f"{robot.id}-free-q{pl.joint}-cplan-first-{__version__}"
+    found = find_artifact(key, "c_plan_first")
+    if found is not None:
+        first = json.loads(found.read_text(encoding="utf-8"))["reference_first"]
+    else:
+        from derive.kinematics.fk import fk
+        rng = np.random.default_rng(97 + pl.joint)          # _fewest_suspects' configurations
+        q = rng.uniform(-np.pi, np.pi, (_SUSPECT_POSES, 7))
+        poses, values = fk(robot, q), q[:, pl.joint - 1]
+        zero = np.zeros(len(q), dtype=int)
+        own = _suspects(pl, robot, poses, values, zero)[0]
+        theirs = _suspects(quiet, robot, poses, values, zero)[0]
+        first = bool(own - theirs <= _DEFLATING_EXTRA_SUSPECTS * len(q))
+        store_artifacts(key, {"c_plan_first": ("c_plan_first.json", json.dumps({"reference_first": first}))},
+                        {"robot": pl.robot, "free": f"q{pl.joint}"})
+    if not first:
+        return [quiet, pl]
+    return [dataclasses.replace(pl, alt=dataclasses.replace(quiet, alt=None),
+                                notes=pl.notes + " (its shared eigenvectors deflated per value; the plan with the "
+                                "fewest poses sent to the rescue is the rescue)"), quiet]
 
 
 def _deflating_rescue(pl: free_joint.Plan):
@@ -329,10 +480,10 @@ def _regular(pl: free_joint.Plan, reverse: bool, e: int, ev: int) -> bool:
 _TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK = 24, 4, 1e-10
 
 
-def _companions(pl: free_joint.Plan, v: float, q, d: float) -> np.ndarray:
+def _companions(pl: free_joint.Plan, v: float, q, d) -> np.ndarray:
     """The companion matrices (m, 24, 24) at offset d of the locked 6R's pencil (the reference's
     loop cut, :func:`derive.ik.general6r._cut_front`) with the joint held at v, at the poses of the
-    6R configurations q (m, 6)."""
+    6R configurations q (m, 6); d a sequence of offsets: (len(d), m, 24, 24), one pencil built."""
     from types import SimpleNamespace
 
     dd = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
@@ -342,13 +493,16 @@ def _companions(pl: free_joint.Plan, v: float, q, d: float) -> np.ndarray:
                         d3=pl.d3)
     _, target = g6._chain_frames(dd, q)
     mats = g6._cut_front(p, target)[-1]
-    mk = np.einsum("ak,naij->nkij", g6._half(d), mats)
-    with np.errstate(all="ignore"):
-        low = -g6._inv_safe(mk[:, 2]) @ np.concatenate([mk[:, 0], mk[:, 1]], axis=2)
-    comp = np.zeros((len(q), 24, 24))
-    comp[:, :12, 12:] = np.eye(12)
-    comp[:, 12:] = low
-    return comp
+    out = []
+    for dk in np.atleast_1d(d):
+        mk = np.einsum("ak,naij->nkij", g6._half(dk), mats)
+        with np.errstate(all="ignore"):
+            low = -g6._inv_safe(mk[:, 2]) @ np.concatenate([mk[:, 0], mk[:, 1]], axis=2)
+        comp = np.zeros((len(q), 24, 24))
+        comp[:, :12, 12:] = np.eye(12)
+        comp[:, 12:] = low
+        out.append(comp)
+    return out[0] if np.ndim(d) == 0 else np.array(out)
 
 
 def _leak(comp, v) -> float:
@@ -444,6 +598,57 @@ _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV = 160, (1, 2, 
 #: (near a value where the shared span is not analytic, or its samples inaccurate): the C kernel's
 #: leak check sends the poses at the others to the whole pencil
 _VALUE_MIN_SHARE = 0.75
+#: The piecewise basis (:func:`_piece_basis`, where the trigonometric one does not hold at every
+#: value): pieces of equal width over [-pi, pi), Chebyshev nodes sampled per piece, the degrees
+#: tried, the random values checked per piece, and the random poses per sample (the span is taken
+#: at the pose whose shared eigenvalues lie farthest from its others)
+_PIECES, _PIECE_SAMPLES, _PIECE_DEGREES, _PIECE_CHECK, _PIECE_POSES = 16, 24, (4, 6, 8, 12), 6, 5
+
+
+@dataclasses.dataclass(frozen=True)
+class ValueBasis:
+    """A basis V(v) (24 x r, at the offset d3[0]) of the eigenvectors every pose shares at the
+    held value v. ``kind`` "fourier": V(v) = sum_k h[k] h_k(v), h = (1, cos v, sin v, ...,
+    cos n v, sin n v), h (2n + 1, 24, r); "pieces": v wrapped to [-pi, pi) falls in one of
+    P = len(h) pieces of equal width, V = sum_k h[p, k] T_k(t) (Chebyshev polynomials of degree
+    at most n, t the value's place in the piece, in [-1, 1]), h (P, n + 1, 24, r); a piece
+    without a basis (``present`` false: its samples or its check failed) gives V = 0, the whole
+    pencil (the C kernel's deflation takes a zero basis as none)."""
+    kind: str
+    h: np.ndarray
+    n: int
+    present: tuple = ()
+
+    @property
+    def r(self) -> int:
+        return int(self.h.shape[-1])
+
+    def at(self, v) -> np.ndarray:
+        """V(v) (24, r)."""
+        v = float(v)
+        if self.kind == "fourier":
+            return np.einsum("k,kij->ij", _value_harmonics(v, self.n)[0], self.h)
+        p, t = _piece_of(v, len(self.h))
+        if not self.present[p]:
+            return np.zeros(self.h.shape[2:])
+        return np.einsum("k,kij->ij", _chebyshev(t, self.n), self.h[p])
+
+
+def _piece_of(v: float, pieces: int) -> tuple[int, float]:
+    """(piece, t in [-1, 1]) of the value v wrapped to [-pi, pi), as templates/free_joint.c.j2's
+    fj*_value_basis_at."""
+    w = math.remainder(v, 2 * math.pi)
+    width = 2 * math.pi / pieces
+    p = min(max(int(math.floor((w + math.pi) / width)), 0), pieces - 1)
+    return p, 2.0 * (w - (-math.pi + p * width)) / width - 1.0
+
+
+def _chebyshev(t, n: int) -> np.ndarray:
+    """(T_0(t), ..., T_n(t)) by the three-term recurrence (the C's order of operations)."""
+    out = [1.0, t]
+    for _ in range(2, n + 1):
+        out.append(2.0 * t * out[-1] - out[-2])
+    return np.array(out[:n + 1], dtype=float)
 
 
 def value_basis(pl: free_joint.Plan):
@@ -472,16 +677,19 @@ def _value_basis_stored(pl: free_joint.Plan):
     from derive.cache import find_artifact, step, store_artifacts, task
     tag = hashlib.sha256(repr((__version__, pl.joint, pl.reverse, pl.e, pl.ev, np.asarray(pl.offsets).tolist(),
                                _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV, _TRIPLE_CHECK_VALUES,
-                               _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK, _VALUE_MIN_SHARE)).encode()).hexdigest()[:16]
+                               _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK, _VALUE_MIN_SHARE, _PIECES, _PIECE_SAMPLES,
+                               _PIECE_DEGREES, _PIECE_CHECK, _PIECE_POSES)).encode()).hexdigest()[:16]
     key = f"{pl.robot_id}-free-q{pl.joint}-vb-{tag}"
     found = find_artifact(key, "value_basis")
     if found is not None:
         data = json.loads(found.read_text(encoding="utf-8"))
-        return None if data["h"] is None else (np.array(data["h"], dtype=float), int(data["n"]))
+        return None if data["h"] is None else ValueBasis(data["kind"], np.array(data["h"], dtype=float), int(data["n"]),
+                                                         tuple(bool(x) for x in data["present"]))
     with task(f"{pl.robot} q{pl.joint}"):
         step("fitting the deflation basis per value of the plan's loop cut")
         out = _value_basis(pl)
-    text = json.dumps({"h": None if out is None else out[0].tolist(), "n": None if out is None else out[1]})
+    text = json.dumps({"h": None, "n": None} if out is None else
+                      {"kind": out.kind, "h": out.h.tolist(), "n": out.n, "present": list(out.present)})
     store_artifacts(key, {"value_basis": ("value_basis.json", text)}, {"robot": pl.robot, "free": f"q{pl.joint}"})
     return out
 
@@ -494,11 +702,14 @@ def _value_harmonics(v, n: int) -> np.ndarray:
     return np.stack(cols, -1)
 
 
-def _shared_span(comp):
+def _shared_span(comp, own: bool = False):
     """The orthonormal basis (24, r) of the invariant subspace of the companion matrices comp
     (m, 24, 24) for the eigenvalues they all share (within 1e-6, a cluster within 1e-4 taken as one
     eigenvalue of its multiplicity k: the null space of (C - x I)^k, generalised eigenvectors
-    too), real and imaginary parts; None where none is shared."""
+    too), real and imaginary parts; None where none is shared. ``own``: only the clusters whose
+    subspace every matrix maps into itself (:func:`_leak` below 1e-6 on its real and imaginary
+    parts: a shared eigenvalue whose eigenvectors change with the pose, as those at x = +-i of
+    some plans, is left to the eigen-solver)."""
     lam = np.linalg.eigvals(comp[0])
     others = [np.linalg.eigvals(c) for c in comp[1:]]
     sel = [x for x in lam if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
@@ -516,22 +727,52 @@ def _shared_span(comp):
     for g in groups:
         x, k = np.mean(g), len(g)
         a = np.linalg.matrix_power(comp[0] - x * np.eye(24), k)
-        cols.append(np.linalg.svd(a)[2][-k:].conj().T)
+        g = np.linalg.svd(a)[2][-k:].conj().T
+        if own:
+            u, sv, _ = np.linalg.svd(np.concatenate([g.real, g.imag], 1), full_matrices=False)
+            if not _leak(comp, u[:, :int(np.sum(sv > 1e-8 * sv[0]))]) < 1e-6:
+                continue
+        cols.append(g)
+    if not cols:
+        return None
     v = np.concatenate(cols, 1)
     u, sv, _ = np.linalg.svd(np.concatenate([v.real, v.imag], 1), full_matrices=False)
     return u[:, :int(np.sum(sv > 1e-8 * sv[0]))]
 
 
 def _value_basis(pl: free_joint.Plan):
+    """The trigonometric basis (:func:`_fourier_basis`) where it holds at every check value (the
+    piecewise one instead where that holds on every piece with fewer terms), else
+    the piecewise one (:func:`_piece_basis`) where its pieces cover at least half of [-pi, pi) and
+    a larger share than the check values the trigonometric one holds at, else the trigonometric
+    one where it holds at :data:`_VALUE_MIN_SHARE` of them; None where neither does."""
+    four = _fourier_basis(pl)
+    if four is not None and four[2] == 1.0:
+        if 2 * four[1] + 1 <= _PIECE_DEGREES[-1] + 1:
+            return ValueBasis("fourier", four[0], four[1])
+        # a trigonometric degree past 6: the pieces where they all hold with fewer terms (the C
+        # evaluates 13 terms per pose at most, against 2 n + 1: 49 for gen3 q3, 65 for panda q3)
+        pieces = _piece_basis(pl)
+        if pieces is not None and all(pieces.present) and pieces.n + 1 < 2 * four[1] + 1:
+            return pieces
+        return ValueBasis("fourier", four[0], four[1])
+    pieces = _piece_basis(pl)
+    if pieces is not None and sum(pieces.present) >= _PIECES // 2 and (
+            four is None or sum(pieces.present) / _PIECES > four[2]):
+        return pieces
+    return None if four is None else ValueBasis("fourier", four[0], four[1])
+
+
+def _fourier_basis(pl: free_joint.Plan):
+    """(h, n, the share of the check values where it holds) of the trigonometric fit, or None."""
     rng = np.random.default_rng(37)
     vs = 2 * np.pi * np.arange(_VALUE_SAMPLES) / _VALUE_SAMPLES
     rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
     spans = []
     for v in vs:
-        q = rng.uniform(-np.pi, np.pi, (4, 6))
+        comps = _companions(pl, v, rng.uniform(-np.pi, np.pi, (4, 6)), pl.d3)
         best = (None, np.inf)
-        for k, d in enumerate(pl.d3):           # the first offset whose span is accurate, else the best
-            comp = _companions(pl, v, q, d)
+        for k, comp in enumerate(comps):        # the first offset whose span is accurate, else the best
             if not np.all(np.isfinite(comp)):
                 continue
             b = _shared_span(comp)
@@ -557,7 +798,7 @@ def _value_basis(pl: free_joint.Plan):
     y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good])         # P(v) V0: linear in P
     test = rng.uniform(-np.pi, np.pi, _TRIPLE_CHECK_VALUES)
     test_q = rng.uniform(-np.pi, np.pi, (_TRIPLE_CHECK_VALUES, _TRIPLE_CHECK_POSES, 6))
-    found = None
+    found, checks = None, [None] * len(test)
     for n in _VALUE_DEGREES:
         if 2 * n + 1 > len(good) // 2:
             break
@@ -569,14 +810,132 @@ def _value_basis(pl: free_joint.Plan):
                 break                           # this degree cannot reach the share any more
             b = np.einsum("k,kij->ij", _value_harmonics(v, n)[0], h)
             sv = np.linalg.svd(b, compute_uv=False)
+            if checks[j] is None:
+                checks[j] = _companions(pl, v, test_q[j], pl.d3)
             passed += bool(sv[-1] > _VALUE_MIN_SV * sv[0]) and all(
-                _leak(_companions(pl, v, test_q[j], d), np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK
-                for k, d in enumerate(pl.d3))
+                _leak(checks[j][k], np.linalg.qr(rots[k] @ b)[0]) <= _TRIPLE_CHECK_LEAK for k in range(len(pl.d3)))
         if passed == len(test):
-            return h, n
+            return h, n, 1.0
         if passed >= _VALUE_MIN_SHARE * len(test) and (found is None or passed > found[2]):
             found = (h, n, passed)
-    return None if found is None else found[:2]
+    return None if found is None else (found[0], found[1], found[2] / len(test))
+
+
+def _separated_span(comp):
+    """(V (24, r), leak) of :func:`_shared_span` (its clusters that every matrix maps into
+    itself) of the companion matrices comp (m, 24, 24), the span taken at the matrix whose shared
+    eigenvalues lie farthest from its other eigenvalues (near a value where pose-dependent
+    eigenvalues pass close to the shared ones the span of one pose is ill-conditioned, not the
+    span itself); (None, inf) where none is shared."""
+    if not np.all(np.isfinite(comp)):
+        return None, np.inf
+    lams = np.linalg.eigvals(comp)
+    near = np.abs(lams[:, :, None, None] - lams[None, None]).min(-1)       # (pose i, eigenvalue, pose j)
+    sep = []
+    for i, lam in enumerate(lams):
+        shared = np.all(np.delete(near[i], i, axis=1) < 1e-6 * (1 + np.abs(lam))[:, None], axis=1)
+        sep.append(np.min(np.abs(lam[shared][:, None] - lam[~shared][None]), initial=np.inf) if shared.any()
+                   and (~shared).any() else (0.0 if not shared.any() else np.inf))
+    i = int(np.argmax(sep))
+    if not sep[i] > 0.0:
+        return None, np.inf
+    b = _shared_span(np.concatenate([comp[i:i + 1], comp[:i], comp[i + 1:]]), own=True)
+    return (None, np.inf) if b is None else (b, _leak(comp, b))
+
+
+def _piece_basis(pl: free_joint.Plan):
+    """The piecewise basis (:class:`ValueBasis` "pieces"): [-pi, pi) in :data:`_PIECES` pieces,
+    each fitted by :func:`_fit_piece`; a piece where no fit holds is split in two halves, each
+    fitted on its own; the result has 2 :data:`_PIECES` pieces of equal width where a split was
+    needed (the unsplit pieces' polynomials re-expanded on their halves: exact, the same degree),
+    else :data:`_PIECES`. A piece without a fit has none (the whole pencil there: near v = pi or
+    0 on some plans the span turns fast or its samples are inaccurate). The degree is the largest
+    any piece needs (the others' padded with zeros). None where no piece has a basis."""
+    from numpy.polynomial import chebyshev as cheb
+    rng = np.random.default_rng(53)
+    rots = [_offset_rotation(pl, k) for k in range(len(pl.d3))]
+    width = 2 * np.pi / _PIECES
+    fits, r = [], [None]
+    for p in range(_PIECES):
+        a = -np.pi + p * width
+        f = _fit_piece(pl, a, a + width, rng, rots, r)
+        fits.append(f if f is not None else [_fit_piece(pl, a + i * width / 2, a + (i + 1) * width / 2, rng, rots, r)
+                                              for i in (0, 1)])
+    if r[0] is None or not any(f is not None for f in fits for f in (f if isinstance(f, list) else [f])):
+        return None
+    if any(isinstance(f, list) for f in fits):
+        halves = []
+        for f in fits:
+            if isinstance(f, list):
+                halves += f
+                continue
+            n = len(f) - 1
+            nodes = np.cos(np.pi * (np.arange(n + 1) + 0.5) / (n + 1))
+            for s in (-1.0, 1.0):            # t' on the half is t = (t' + s) / 2 on the piece
+                y = np.moveaxis(cheb.chebval((nodes + s) / 2, f), -1, 0).reshape(n + 1, -1)
+                halves.append(cheb.chebfit(nodes, y, n).reshape(n + 1, 24, r[0]))
+        fits = halves
+    n = max(len(f) for f in fits if f is not None) - 1
+    h = np.zeros((len(fits), n + 1, 24, r[0]))
+    for p, f in enumerate(fits):
+        if f is not None:
+            h[p, :len(f)] = f
+    return ValueBasis("pieces", h, n, tuple(f is not None for f in fits))
+
+
+def _fit_piece(pl: free_joint.Plan, a: float, b: float, rng, rots, r: list):
+    """The Chebyshev coefficients (n + 1, 24, r) of the basis on the values [a, b] (t = -1 at a,
+    1 at b), or None: the spans (:func:`_separated_span` on :data:`_PIECE_POSES` random poses, the
+    first offset whose leak is below :data:`_VALUE_SAMPLE_LEAK`, rotated back to d3[0]) at
+    :data:`_PIECE_SAMPLES` Chebyshev nodes, each projected on the piece's fixed basis V0 (the
+    middle good sample's), fitted by least squares, the smallest degree of :data:`_PIECE_DEGREES`
+    that holds (:func:`_leak` at most :data:`_TRIPLE_CHECK_LEAK` at every offset, smallest singular
+    value above :data:`_VALUE_MIN_SV`) at :data:`_PIECE_CHECK` random values of the piece on
+    :data:`_TRIPLE_CHECK_POSES` random poses. r[0]: the span's dimension (set by the first piece
+    with samples, the most common there)."""
+    nodes = np.cos(np.pi * (np.arange(_PIECE_SAMPLES) + 0.5) / _PIECE_SAMPLES)
+    spans = []
+    for t in nodes:
+        v = a + (t + 1) * (b - a) / 2
+        comps = _companions(pl, v, rng.uniform(-np.pi, np.pi, (_PIECE_POSES, 6)), pl.d3)
+        best = (None, np.inf)
+        for k in range(len(pl.d3)):
+            s, leak = _separated_span(comps[k])
+            if s is not None and leak < best[1]:
+                best = (rots[k].T @ s, leak)
+            if leak < _VALUE_SAMPLE_LEAK:
+                break
+        spans.append(best)
+    dims = [s.shape[1] for s, leak in spans if s is not None and leak < _VALUE_SAMPLE_LEAK]
+    if r[0] is None and dims:
+        r[0] = max(set(dims), key=dims.count)
+    good = [i for i, (s, leak) in enumerate(spans) if s is not None and leak < _VALUE_SAMPLE_LEAK
+            and s.shape[1] == r[0]]
+    if r[0] is None or not 2 <= r[0] <= 12 or len(good) <= _PIECE_DEGREES[0] + 1:
+        return None
+    v0 = spans[good[len(good) // 2]][0]
+    y = np.array([spans[i][0] @ (spans[i][0].T @ v0) for i in good]).reshape(len(good), -1)
+    test = rng.uniform(a, b, _PIECE_CHECK)
+    test_q = rng.uniform(-np.pi, np.pi, (_PIECE_CHECK, _TRIPLE_CHECK_POSES, 6))
+    checks = [None] * _PIECE_CHECK
+    for n in _PIECE_DEGREES:
+        if n + 2 > len(good):
+            break
+        h = np.polynomial.chebyshev.chebfit(nodes[good], y, n).reshape(n + 1, 24, r[0])
+        ok = True
+        for j, v in enumerate(test):
+            s = np.einsum("k,kij->ij", _chebyshev(2 * (v - a) / (b - a) - 1, n), h)
+            sv = np.linalg.svd(s, compute_uv=False)
+            if checks[j] is None:
+                checks[j] = _companions(pl, v, test_q[j], pl.d3)
+            if not (sv[-1] > _VALUE_MIN_SV * sv[0] and all(
+                    _leak(checks[j][k], np.linalg.qr(rots[k] @ s)[0]) <= _TRIPLE_CHECK_LEAK
+                    for k in range(len(pl.d3)))):
+                ok = False
+                break
+        if ok:
+            return h
+    return None
 
 
 def _deflation(pl: free_joint.Plan):
@@ -598,7 +957,7 @@ def _deflation(pl: free_joint.Plan):
         return None
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
     general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
-    found = _fixed_deflation(pl) if general else None
+    found = _pair_deflation(pl) if general else None
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
     if found is None:
@@ -606,7 +965,7 @@ def _deflation(pl: free_joint.Plan):
         vb = value_basis(pl) if general and not _held_on_pair_side(pl) else None
         if vb is not None:                        # joints 3-5: the basis per value (the caller's)
             from derive.codegen.general6r import _arr
-            r = vb[0].shape[2]
+            r = vb.r
             rot = [[np.cos(0.5 * (d - pl.d3[0])), np.sin(0.5 * (d - pl.d3[0]))] for d in pl.d3]
             off = dict(off, runtime=True, n=r, keep=24 - r, rot=_arr(np.array(rot)))
         return off
@@ -650,6 +1009,25 @@ def _triple_side(pl: free_joint.Plan, v: float) -> np.ndarray:
     depend on the pose: the cut's triple side holds links 1-5 of the locked 6R, never the pose link)."""
     d = free_joint.locked_chain(pl.c, pl.joint, [v])[0]
     return g6._triple_coefs(g6._reverse(d) if pl.reverse else d, pl.e)
+
+
+def triple_constant(pl: free_joint.Plan):
+    """(14, 27): the triple side Y of a plan where it is the same at every held value (the held
+    joint's link off the cut's triple side, :func:`_held_on_pair_side`), checked at
+    :data:`_DEFLATION_VALUES` (equal within 1e-13 of its largest entry); else None. The C kernel
+    then bakes it (templates/free_joint.c.j2) instead of evaluating its harmonics per value."""
+    if not _held_on_pair_side(pl):
+        return None
+    y = _triple_side(pl, 0.0)
+    tol = 1e-13 * max(1.0, float(np.abs(y).max()))
+    if any(float(np.abs(_triple_side(pl, v) - y).max()) > tol for v in _DEFLATION_VALUES):
+        return None
+    return y
+
+
+def _yc(pl: free_joint.Plan):
+    key = (pl.robot_id, pl.joint, pl.reverse, pl.e, pl.ev)
+    return memo("free-joint-triple-constant", key, lambda: triple_constant(pl))
 
 
 def _harmonics(v) -> np.ndarray:
@@ -750,7 +1128,8 @@ def c_source(robot, joint: int) -> str:
         robot=robot, k=joint, version=__version__, id=_identifier(robot, joint), cores=cores, cq_width=int(width.group(1)),
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
-                "yh": _arr(triple_harmonics(p).reshape(7, 14, 27)), "vb": _value_basis_context(p)} for p in plans],
+                "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
+                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
         # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
         newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
@@ -767,8 +1146,11 @@ def _value_basis_context(pl: free_joint.Plan):
     ctx = _deflation(pl)
     if not (ctx or {}).get("runtime"):
         return None
-    h, n = value_basis(pl)
-    return {"h": _arr(h), "n": int(n), "r": int(h.shape[2])}
+    vb = value_basis(pl)
+    out = {"kind": vb.kind, "h": _arr(vb.h), "n": int(vb.n), "r": vb.r}
+    if vb.kind == "pieces":
+        out.update(pieces=len(vb.h), present=", ".join(str(int(x)) for x in vb.present))
+    return out
 
 
 def _load(text: str, ident: str, compile_fn):

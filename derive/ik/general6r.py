@@ -70,7 +70,7 @@ from derive.errors import BudgetError, DeriveError
 from derive.ik.tolerances import (G6_ACCEPT, G6_GOOD_COND, G6_LEADING_COND, G6_NEWTON_MAX,
                                   G6_NEAR_SINGULAR, G6_PERTURB, G6_PERTURB_TRIALS, G6_RANK_TOL,
                                   G6_REAL_TOL, G6_SINGULAR, MERGE_TOL)
-from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP
+from derive.ik.tolerances import G6_NEWTON_DONE, G6_NEWTON_STOP, G6_REF_NEWTON_FAR
 from derive.kinematics.fk import _pose_error, fk
 from derive.kinematics.pose import as_pose_batch
 from derive.model.geometry import numeric_chain
@@ -1093,7 +1093,8 @@ def _solve_chunk(robot, pl: Plan, poses):
     q6 = np.arctan2(np.einsum("mi,mi->m", x[1], u), np.einsum("mi,mi->m", x[0], u))
     qc[:, 5] = q6
     _x_rot(x, np.cos(q6)[:, None], np.sin(q6)[:, None])
-    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])))
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, _x_times(x, c[6])),
+                           far=(NEWTON_FAR, degen[ip]))
     if pl.reverse:
         qc = -qc[:, ::-1]
         jac = None                     # the reversed chain's Jacobian: the forward one is made again
@@ -1252,52 +1253,64 @@ def _near_pair_candidates(mk, ip, x3, v):
     tight = same & (gap <= CLUSTER_TOL * rel)
     mk144 = mk.reshape(len(mk), 3, 144)
 
-    def pencil(i, x):
-        return (np.array([1.0, x, x * x]) @ mk144[i]).reshape(12, 12)
+    def pencils(pos, x):
+        """M(x) (p, 12, 12) of the poses at sorted positions pos: (1, x, x^2) times the
+        pencil's three matrices, pose by pose."""
+        return (np.stack([np.ones_like(x), x, x * x], 1)[:, None, :] @ mk144[ips[pos]]).reshape(-1, 12, 12)
 
+    # runs of close gaps: members s .. e (sorted positions), whole arrays (no loop per run)
     edge = np.diff(np.concatenate([[0], close.astype(np.int8), [0]]))
-    runs = list(zip(np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]))   # members: s .. e
-    # the clusters' heads whose null directions are counted, all in one batched SVD
-    heads = []                                                # (run, head position, members)
-    for r, (s, e) in enumerate(runs):
-        if bool(np.all(tight[s:e])) or e - s + 1 <= NEAR_CHAIN_MAX:
-            te = np.diff(np.concatenate([[0], tight[s:e].astype(np.int8), [0]]))
-            for cs, ce in zip(np.nonzero(te == 1)[0] + s, np.nonzero(te == -1)[0] + s):
-                heads.append((r, cs, ce - cs + 1))
-    narrow = np.zeros(len(runs), dtype=bool)
-    if heads:
-        sv = np.linalg.svd(np.stack([pencil(ips[cs], xs[cs]) for _, cs, _ in heads]), compute_uv=False)
-        few = np.sum(sv < 1e-7 * sv[:, :1], axis=1) < np.array([n for _, _, n in heads])
-        for (r, _, _), f in zip(heads, few):
-            narrow[r] |= bool(f)
-    groups = []                                               # sorted positions
-    for r, (s, e) in enumerate(runs):
-        wide = bool(np.any(~tight[s:e]))
-        if not (wide or narrow[r]):
-            continue
-        if e - s + 1 <= NEAR_CHAIN_MAX:
-            groups.append(np.arange(s, e + 1))
-        else:
-            groups += [np.array([g, g + 1]) for g in range(s, e) if not tight[g]]
-    extra_i, extra_v = [], []
-    if groups:
-        vt = np.linalg.svd(np.stack([pencil(ips[m[0]], float(np.mean(xs[m]))) for m in groups]))[2]
-        sizes = np.array([len(m) for m in groups])
-        vecs = [None] * len(groups)
-        for d in np.unique(sizes):                            # the groups of one size at once
-            at = np.nonzero(sizes == d)[0]
-            for g, w in zip(at, _shift_vectors(np.swapaxes(vt[at, -d:], 1, 2))):
-                vecs[g] = w
-        for members, w in zip(groups, vecs):
-            if not np.all(np.isfinite(w)):
-                continue
-            d = len(members)
-            extra_i += [order[m] for m in members for _ in range(d)]
-            extra_v.append(np.tile(w, (d, 1)))
-    if not extra_i:
+    rs, re_ = np.nonzero(edge == 1)[0], np.nonzero(edge == -1)[0]
+    loose = np.concatenate([[0], np.cumsum(close & ~tight)])
+    wide = loose[re_] - loose[rs] > 0                         # some gap past CLUSTER_TOL
+    short = re_ - rs + 1 <= NEAR_CHAIN_MAX
+    # the clusters (runs of tight gaps, each inside one run) whose heads' null directions are
+    # counted: those of the runs all tight or short, all in one batched SVD
+    tedge = np.diff(np.concatenate([[0], tight.astype(np.int8), [0]]))
+    cs, ce = np.nonzero(tedge == 1)[0], np.nonzero(tedge == -1)[0]
+    run_of = np.searchsorted(rs, cs, side="right") - 1
+    keep = ~wide[run_of] | short[run_of]
+    cs, ce, run_of = cs[keep], ce[keep], run_of[keep]
+    narrow = np.zeros(len(rs), dtype=bool)
+    if len(cs):
+        sv = np.linalg.svd(pencils(cs, xs[cs]), compute_uv=False)
+        few = np.sum(sv < 1e-7 * sv[:, :1], axis=1) < ce - cs + 1
+        narrow[run_of[few]] = True
+    # groups (contiguous sorted positions: first, size): a short run whole, a long one pair by
+    # pair (its gaps past CLUSTER_TOL), in the order of the runs
+    todo = wide | narrow
+    gs, gd = [rs[todo & short]], [re_[todo & short] - rs[todo & short] + 1]
+    for r in np.nonzero(todo & ~short)[0]:
+        g = np.arange(rs[r], re_[r])
+        gs.append(g[~tight[g]])
+        gd.append(np.full(len(gs[-1]), 2))
+    first, size = np.concatenate(gs).astype(np.int64), np.concatenate(gd).astype(np.int64)
+    at_order = np.argsort(first, kind="stable")               # the runs' order, then the pairs'
+    first, size = first[at_order], size[at_order]
+    if len(first) == 0:
         return ip, x3, v
-    idx = np.array(extra_i)
-    extra = np.concatenate(extra_v).reshape(-1, 4, 3)
+    mean = np.empty(len(first))
+    for d in np.unique(size):
+        at = np.nonzero(size == d)[0]
+        mean[at] = np.mean(xs[first[at, None] + np.arange(d)], axis=1)
+    vt = np.linalg.svd(pencils(first, mean))[2]
+    extra_i, extra_v, extra_at = [], [], []
+    for d in np.unique(size):                                 # the groups of one size at once
+        at = np.nonzero(size == d)[0]
+        w = _shift_vectors(np.swapaxes(vt[at, -d:], 1, 2))    # (p, d, 12)
+        ok = np.all(np.isfinite(w), axis=(1, 2))
+        at, w = at[ok], w[ok]
+        # member j of the group with each of its d vectors: rows j * d + k
+        members = order[first[at, None] + np.arange(d)]       # (p, d)
+        extra_i.append(np.repeat(members, d, axis=1).ravel())
+        extra_v.append(np.tile(w, (1, d, 1)).reshape(-1, 12))
+        extra_at.append(np.repeat(at, d * d))
+    idx = np.concatenate(extra_i)
+    if len(idx) == 0:
+        return ip, x3, v
+    back = np.argsort(np.concatenate(extra_at), kind="stable")   # the groups' order
+    idx = idx[back]
+    extra = np.concatenate(extra_v)[back].reshape(-1, 4, 3)
     return np.concatenate([ip, ip[idx]]), np.concatenate([x3, x3[idx]]), np.concatenate([v, extra])
 
 
@@ -1540,22 +1553,31 @@ def _solve_chunk_cut(robot, pl: Plan, poses):
     cq[:, e - 1], sq[:, e - 1] = np.cos(qe), np.sin(qe)
     _x_rot(x, cq[:, e - 1, None], sq[:, e - 1, None])
     x = _chain_x(c, cq, sq, zs, ps, x=x, start=e)
-    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x))
+    qc, err, jac = _newton(c, qc, tp, with_error=True, first=(zs, ps, x), far=(NEWTON_FAR, degen[ip]))
     return _collect(robot, pl, poses, ip, wrap_angle(qc), n, degen, err, jac)
 
 
 #: Newton stops after a step below this (rad, every joint): derive.ik.tolerances.G6_NEWTON_DONE.
 NEWTON_DONE = G6_NEWTON_DONE
+#: The first solve's Newton gives up on a far candidate of a pose not flagged degenerate from
+#: this step on (:func:`_newton`'s ``far``): derive.ik.tolerances.G6_REF_NEWTON_FAR.
+NEWTON_FAR = G6_REF_NEWTON_FAR
 
 
-def _newton(c, q, target, steps=None, with_error=False, first=None):
+def _newton(c, q, target, steps=None, with_error=False, first=None, far=None):
     """Damped Newton steps on the product-form FK (geometric Jacobian), each candidate until its
     error (scaled lengths and rad) is below 1e-13, or after a step below :data:`NEWTON_DONE`
     from an error below it, or when G6_NEWTON_MAX steps are done. ``first``: the chain at q
     ((zs, ps, end) of :func:`_frames_x`) when the caller has it. With ``with_error``, also the
     last error measured per candidate (max of scaled position and rotation; after a last step
     below NEWTON_DONE, the bound on the error it leaves) and the Jacobian
-    there (m, 6, 6) (at the returned q, or before that last step)."""
+    there (m, 6, 6) (at the returned q, or before that last step). ``far``: (step, patient (m,)
+    bool): from that step on, a candidate not patient whose error is above 1e-6 and not below
+    half the previous step's stops (a spurious candidate with no root near, which would take
+    every step to G6_NEWTON_MAX, each step costing the whole batch's overhead, and then be
+    dropped: the C kernels' rule G6_NEWTON_FAR, with more patience, :data:`NEWTON_FAR`);
+    patient: the candidates of a pose already flagged degenerate, whose singular roots Newton
+    approaches linearly. None: every step for every candidate."""
     q = q.copy()
     last = np.full(len(q), np.inf)
     last_jt = np.zeros((len(q), 6, 6))
@@ -1566,10 +1588,12 @@ def _newton(c, q, target, steps=None, with_error=False, first=None):
         else:
             err, jt = _err_jt(target[idx], *_frames_x(c, q[idx]))
         size = np.max(np.abs(err), axis=1)
+        todo = size > G6_NEWTON_STOP
+        if far is not None and k >= far[0]:
+            todo &= far[1][idx] | ~((size > 1e-6) & (size > 0.5 * last[idx]))
         last[idx] = size
         if with_error:
             last_jt[idx] = jt
-        todo = size > G6_NEWTON_STOP
         if not np.all(todo):
             idx, err, jt, size = idx[todo], err[todo], jt[todo], size[todo]
         if len(idx) == 0 or k == G6_NEWTON_MAX:

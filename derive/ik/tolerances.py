@@ -273,3 +273,11 @@ POLISH_LAST_STEP = 1e-9
 #: angle, each compared): the nominal's miss within SEED_REACH deviations
 #: (derive.ik.nearclass._near_reach) and the arm's own mismatch on top.
 SEED_KEEP = SEED_REACH + 1.0
+#: General 6R numpy reference (derive.ik.general6r._newton, the pose's own solve): from this
+#: Newton step on, a candidate whose error is above 1e-6 and not below half the previous step's
+#: stops (a spurious candidate, no root near, that would take every step to G6_NEWTON_MAX and
+#: be dropped; the steps left cost the whole batch's per-step overhead). The C and numpy
+#: kernels stop such a candidate from step 3 (G6_NEWTON_FAR); the reference waits longer (the
+#: slowest true candidates of random poses converge by step 8). A pose flagged degenerate before
+#: Newton, and the nearby-pose path's carrying back, take every step. G6_NEWTON_MAX: no stop.
+G6_REF_NEWTON_FAR = 10
