@@ -269,18 +269,17 @@ def g6_comment(text: str) -> str:
 
 
 def tables_context(pl) -> dict | None:
-    """The standard elimination's pose tables for the C kernels (None for a loop cut): ``qkt``
-    (K x 112) and ``r0t`` (K x 14), so that Q and the pose terms are sums of rows times the K
-    pose monomials, and the C expressions the kernel emits for them, ``q_sums`` (112) and
-    ``r0_sums`` (14): each entry's sum over its nonzero coefficients (:func:`_sparse_sum`; 85 %
-    of xarm6's table is exact zeros)."""
+    """The standard elimination's pose terms for the C kernels (None for a loop cut): Q's 112
+    entries and the 14 pose terms are sums of coefficients times the K pose monomials; the C
+    expressions the kernel emits for them, ``q_sums`` (112) and ``r0_sums`` (14), are each
+    entry's sum over its nonzero coefficients only (:func:`_sparse_sum`; 85 % of xarm6's
+    coefficients are exact zeros)."""
     if pl.cut:
         return None
     el = pl.elim
     qk = el.q.reshape(112, -1)
     r0 = np.asarray(el.r0)
-    return {"qkt": _arr(qk.T), "r0t": _arr(r0.T), "q_sums": [_sparse_sum(row) for row in qk],
-            "r0_sums": [_sparse_sum(row) for row in r0]}
+    return {"q_sums": [_sparse_sum(row) for row in qk], "r0_sums": [_sparse_sum(row) for row in r0]}
 
 
 def _sparse_sum(coefs) -> str:
