@@ -175,18 +175,18 @@ def _span_deflation(pl: free_joint.Plan):
     return np.array(bases), 24 - r, spurious
 
 
-def _constant_eigenvectors(comp):
-    """The orthonormal basis (24, r) of the eigenvectors that the companion matrices comp
-    (m, 24, 24) share, for the eigenvalues they all share (within 1e-6; a cluster within 1e-4 as one
-    eigenvalue x, its mean): per x the null space of the stacked [C_1 - x I; ...; C_m - x I]
-    (singular values below 1e-8 of the largest), real and imaginary parts; None where there is
-    none. Unlike :func:`_shared_span` it keeps the eigenvectors every pose shares where the
-    generalised ones move with the pose (a multiple x = +-i whose Jordan chains do: the Panda's q6)."""
+def _shared_groups(comp, upper: bool = False) -> list:
+    """The eigenvalues of comp[0] that every other matrix of the stack (m, 24, 24) shares (each
+    within 1e-6 (1 + |x|) of one of its eigenvalues), in clusters: an eigenvalue within
+    1e-4 (1 + |x|) of a cluster's mean joins it. ``upper``: only those whose imaginary part is not
+    below -1e-9 (1 + |x|) (one of each conjugate pair). Lists of eigenvalues, in comp[0]'s order."""
     lam = np.linalg.eigvals(comp[0])
     others = [np.linalg.eigvals(c) for c in comp[1:]]
     groups = []
     for x in lam:
-        if x.imag < -1e-9 * (1 + abs(x)) or not all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others):
+        if upper and x.imag < -1e-9 * (1 + abs(x)):
+            continue
+        if not all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others):
             continue
         for g in groups:
             if abs(np.mean(g) - x) < 1e-4 * (1 + abs(x)):
@@ -194,6 +194,17 @@ def _constant_eigenvectors(comp):
                 break
         else:
             groups.append([x])
+    return groups
+
+
+def _constant_eigenvectors(comp):
+    """The orthonormal basis (24, r) of the eigenvectors that the companion matrices comp
+    (m, 24, 24) share, for the eigenvalues they all share (within 1e-6; a cluster within 1e-4 as one
+    eigenvalue x, its mean): per x the null space of the stacked [C_1 - x I; ...; C_m - x I]
+    (singular values below 1e-8 of the largest), real and imaginary parts; None where there is
+    none. Unlike :func:`_shared_span` it keeps the eigenvectors every pose shares where the
+    generalised ones move with the pose (a multiple x = +-i whose Jordan chains do: the Panda's q6)."""
+    groups = _shared_groups(comp, upper=True)
     cols = []
     for g in groups:
         x = np.mean(g)
@@ -710,19 +721,9 @@ def _shared_span(comp, own: bool = False):
     subspace every matrix maps into itself (:func:`_leak` below 1e-6 on its real and imaginary
     parts: a shared eigenvalue whose eigenvectors change with the pose, as those at x = +-i of
     some plans, is left to the eigen-solver)."""
-    lam = np.linalg.eigvals(comp[0])
-    others = [np.linalg.eigvals(c) for c in comp[1:]]
-    sel = [x for x in lam if all(np.min(np.abs(r - x)) < 1e-6 * (1 + abs(x)) for r in others)]
-    if not sel:
+    groups = _shared_groups(comp)
+    if not groups:
         return None
-    groups = []
-    for x in sel:
-        for g in groups:
-            if abs(np.mean(g) - x) < 1e-4 * (1 + abs(x)):
-                g.append(x)
-                break
-        else:
-            groups.append([x])
     cols = []
     for g in groups:
         x, k = np.mean(g), len(g)
