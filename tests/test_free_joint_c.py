@@ -269,7 +269,7 @@ def test_triple_side_plan_deflates(name, k, keep):
     (their span does not move): the eigenproblem is keep x keep, not 24 x 24."""
     pl = cfree.c_plans(name, k)[0]
     assert not cfree._held_on_pair_side(pl)
-    defl = cfree._core_context(pl)["defl"]
+    defl = cfree._core_context(pl, name)["defl"]
     assert bool(defl.get("runtime")) == (name == "xarm7") and (defl["on"] or defl.get("runtime"))
     assert defl["keep"] == keep
 
@@ -359,3 +359,30 @@ def test_plans_carry_the_robots_identity_for_their_caches():
     for pl in cfree.c_plans(robot, 3):
         assert pl.robot_id == robot.id
         assert pl.alt is None or pl.alt.robot_id == robot.id
+
+
+@needs_gcc
+def test_c_free_joint_of_a_seven_joint_arm_from_a_file(tmp_path, monkeypatch):
+    """A seven-joint arm read from a YAML file by path, under a name the library does not have
+    (xArm7's file, its elbow offset 0.0531 m instead of 0.0525 so that its identity is its own):
+    derive.kernels(path, "c", free="q6") builds (the C plans' deflation looks up the route of the
+    robot itself, not of a library robot by the plan's name) and its solutions equal the "numpy"
+    backend's (the numpy reference solver) and reproduce the pose by the plain matrix FK."""
+    text = (derive.model.robot.LIBRARY_DIR / "xarm7.yaml").read_text(encoding="utf-8")
+    assert "name: xarm7\n" in text and "[0.0525, 0, 0]" in text
+    path = tmp_path / "my-arm7.yaml"
+    path.write_text(text.replace("name: xarm7\n", "name: my_arm7\n").replace("[0.0525, 0, 0]", "[0.0531, 0, 0]"),
+                    encoding="utf-8")
+    robot = derive.load_robot(path)
+    assert robot.name == "my_arm7" and robot.id != derive.load_robot("xarm7").id
+    monkeypatch.setenv("DQ_DERIVE_CFLAGS", "-std=c99 -O0")      # quick to build; the flags are in the digest
+    kc, kn = derive.kernels(path, "c", free="q6"), derive.kernels(path, "numpy", free="q6")
+    q = _inside(robot, 6, np.random.default_rng(5))
+    poses = reference.fk(robot, q)
+    (cq, cc), (nq, nc) = kc.ik(poses, free=q[:, 5]), kn.ik(poses, free=q[:, 5])
+    np.testing.assert_array_equal(cc, nc)
+    assert cc.sum() >= 12
+    for i in range(len(q)):
+        assert _same_set(cq[i, :cc[i]], nq[i, :nc[i]]), i
+    valid = np.arange(cq.shape[1])[None] < cc[:, None]
+    assert np.abs(reference.fk_matrix(robot, cq[valid]) - reference.fk_matrix(robot, q)[np.nonzero(valid)[0]]).max() < 1e-10

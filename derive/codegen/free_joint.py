@@ -939,14 +939,16 @@ def _fit_piece(pl: free_joint.Plan, a: float, b: float, rng, rots, r: list):
     return None
 
 
-def _deflation(pl: free_joint.Plan):
+def _deflation(pl: free_joint.Plan, robot):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value
     (:func:`_fixed_deflation`): joint 1 or 7 held (the held link is the first or last, so the
     locked 6R's loop links 1-5 are the same for every value and the value moves only the pose
     link), or the held link on the pair side of the cut (joint 2 or 6, :func:`c_plans`); with the
     held link on the triple side the pose-independent eigenvalues and eigenvectors change with
-    the value, so there is none. As the general 6R kernels'
+    the value, so there is none. ``robot`` is the plan's robot (its route, not reloaded by
+    ``pl.robot``, the name: a robot from a file is not in the library, and a library robot of
+    the same name may be another arm). As the general 6R kernels'
     template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
     given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
     module has no such context (a template without the deflation)."""
@@ -957,7 +959,7 @@ def _deflation(pl: free_joint.Plan):
     if make is None:
         return None
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
-    general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
+    general = pl.joint in (1, 7) or free_joint.route(robot, pl.joint) == "general"
     found = _pair_deflation(pl) if general else None
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
@@ -974,10 +976,11 @@ def _deflation(pl: free_joint.Plan):
     return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
 
 
-def _core_context(pl: free_joint.Plan) -> dict:
+def _core_context(pl: free_joint.Plan, robot) -> dict:
     """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
     (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
-    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2)."""
+    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2).
+    ``robot``: the plan's robot (or its library name), for :func:`_deflation`."""
     from derive.codegen.general6r import _arr, _lit
     e, ev = int(pl.e), int(pl.ev)
     triple, pair = g6._cut_joints(e)
@@ -990,7 +993,7 @@ def _core_context(pl: free_joint.Plan) -> dict:
                 old[order[0]], old[order[1]], old[order[2]] = a, b, c
                 perm.append(9 * old[0] + 3 * old[1] + old[2])
     return _Context({
-        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl, robot), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
         "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
         "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
@@ -1118,7 +1121,7 @@ def c_source(robot, joint: int) -> str:
     core = env.get_template("general6r.c.j2")
     cores = []
     for i, p in enumerate(plans):
-        text = core.render(ik={"general": _core_context(p)})
+        text = core.render(ik={"general": _core_context(p, robot)})
         cores.append(re.sub(r"\bg6_", f"fj{i}_", text))
     # the width of the core's candidate rows (6 joints, and more where the core stores flags there)
     width = re.search(r"static int fj0_candidates\([^)]*\(\*DQ_RESTRICT cq\)\[(\d+)\]", cores[0])
@@ -1130,7 +1133,7 @@ def c_source(robot, joint: int) -> str:
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
                 "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
-                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p)} for p in plans],
+                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p, robot)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
         # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
         newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
@@ -1140,11 +1143,11 @@ def c_source(robot, joint: int) -> str:
         max_solutions=MAX_SOLUTIONS)
 
 
-def _value_basis_context(pl: free_joint.Plan):
+def _value_basis_context(pl: free_joint.Plan, robot):
     """The per-value deflation basis of a plan for templates/free_joint.c.j2 (its coefficients,
     degree and columns), where :func:`_deflation` uses it (the core's ``defl.runtime``), else None."""
     from derive.codegen.general6r import _arr
-    ctx = _deflation(pl)
+    ctx = _deflation(pl, robot)
     if not (ctx or {}).get("runtime"):
         return None
     vb = value_basis(pl)
