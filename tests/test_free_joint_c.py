@@ -277,12 +277,14 @@ def test_triple_side_plan_deflates(name, k, keep):
 @pytest.mark.parametrize("name,k,kind", [("xarm7", 3, "fourier"), ("panda", 4, "pieces")])
 def test_value_basis_is_invariant_at_random_values_and_poses(name, k, kind):
     """xArm7 with q3 held (a trigonometric polynomial in the value) and the Panda with q4 held
-    (piecewise: no trigonometric fit holds; the pieces near v = 0 and pi have none): the
+    (piecewise: no trigonometric fit holds; a basis on more than half of the pieces, which pieces
+    depending on the fit: near v = 0 and pi some may have none): the
     per-value basis V(v) (cfree.value_basis, rotated to each offset) spans a subspace that every
     pose's companion matrix at that value maps into itself, on pencils built by the reference's
     per-value fit at values and poses it was not fitted at; the eigenvalues of the kept block and
     of the removed block together are the whole matrix's (no solution removed), and the removed
-    ones are the same at every pose of a value. Where a piece has no basis V is zero."""
+    ones are the same at every pose of a value. Where a piece has no basis (if any) V is zero
+    (the C kernel's answers on such values: test_c_triple_side_deflation_matches_the_reference)."""
     robot = derive.load_robot(name)
     pl = cfree.c_plans(robot, k)[0]
     vb = cfree.value_basis(pl)
@@ -290,9 +292,10 @@ def test_value_basis_is_invariant_at_random_values_and_poses(name, k, kind):
     rng = np.random.default_rng(41)
     values = rng.uniform(-np.pi, np.pi, 4)
     if kind == "pieces":
-        assert 8 <= sum(vb.present) < len(vb.present)
-        absent = vb.present.index(False)
-        assert not np.any(vb.at(-np.pi + (absent + 0.5) * 2 * np.pi / len(vb.present)))
+        # a basis on most of the range (whether or not every piece has one)
+        assert len(vb.present) == len(vb.h) and 2 * sum(vb.present) > len(vb.present)
+        for absent in [p for p, there in enumerate(vb.present) if not there]:
+            assert not np.any(vb.at(-np.pi + (absent + 0.5) * 2 * np.pi / len(vb.present)))
         values = [v for v in rng.uniform(-np.pi, np.pi, 40) if vb.present[cfree._piece_of(v, len(vb.present))[0]]][:4]
     for v in values:
         q = _inside(robot, 4, rng)
