@@ -389,3 +389,40 @@ def test_c_free_joint_of_a_seven_joint_arm_from_a_file(tmp_path, monkeypatch):
         assert _same_set(cq[i, :cc[i]], nq[i, :nc[i]]), i
     valid = np.arange(cq.shape[1])[None] < cc[:, None]
     assert np.abs(reference.fk_matrix(robot, cq[valid]) - reference.fk_matrix(robot, q)[np.nonzero(valid)[0]]).max() < 1e-10
+
+
+def _dummy_plan(**kw):
+    args = dict(robot="xarm7", joint=4, c=np.zeros((7, 4, 4)), scale=1.0, reverse=False, e=2, ev=1,
+                offsets=np.array([0.3, -0.7, 1.1]), d3=1.1 + np.array([0.0, 2.0, 4.0]), notes="a plan")
+    return free_joint.Plan(**{**args, **kw})
+
+
+def test_plan_choices_in_the_user_cache_are_keyed_on_their_plans_and_constants(tmp_path, monkeypatch):
+    """The C plan choices kept in the user cache (_quiet_plan's cut, _deflating_first's order) are
+    made again, not taken from the cache, when the plans or the constants they were made with
+    differ (a test's or a benchmark's monkeypatched constants within the same code), and taken
+    from it when they are the same (stubs count the choices made)."""
+    monkeypatch.setenv("DQ_DERIVE_CACHE", str(tmp_path / "cache"))
+    robot = derive.load_robot("xarm7")
+    made = []
+    monkeypatch.setattr(cfree, "_fewest_suspects", lambda pl, r: made.append(pl.ev))
+    pl = _dummy_plan()
+    assert cfree._quiet_plan(pl, robot) is None and cfree._quiet_plan(pl, robot) is None
+    assert len(made) == 1                                   # the second from the cache
+    cfree._quiet_plan(_dummy_plan(ev=2), robot)             # another plan
+    monkeypatch.setattr(cfree, "_SUSPECT_POSES", cfree._SUSPECT_POSES + 1)
+    cfree._quiet_plan(pl, robot)                            # another constant
+    assert len(made) == 3
+
+    quiet = _dummy_plan(reverse=True, e=1, ev=0)
+    monkeypatch.setattr(cfree, "_triple_deflates", lambda p: p is pl)
+    suspects = {}
+    monkeypatch.setattr(cfree, "_suspects", lambda p, *a: (suspects.setdefault(p.reverse, 0), 1.0))
+    monkeypatch.setattr(cfree, "_SUSPECT_POSES", 10)
+    suspects.update({False: 1, True: 0})                    # the reference's plan: 1 of 10 more
+    assert [p.reverse for p in cfree._deflating_first(pl, quiet, robot)] == [False, True]
+    suspects.update({False: 9, True: 0})                    # the same plans and constants: cached
+    assert [p.reverse for p in cfree._deflating_first(pl, quiet, robot)] == [False, True]
+    monkeypatch.setattr(cfree, "_DEFLATING_EXTRA_SUSPECTS", 0.05)
+    suspects.update({False: 1, True: 0})                    # 1 of 10 more: above the new share
+    assert [p.reverse for p in cfree._deflating_first(pl, quiet, robot)] == [True, False]

@@ -318,12 +318,13 @@ def _deflating_first(pl: free_joint.Plan, quiet: free_joint.Plan, robot) -> list
     (:func:`_triple_deflates`) and sends at most :data:`_DEFLATING_EXTRA_SUSPECTS` of the poses more
     to the rescue (:func:`_suspects` on :func:`_fewest_suspects`' configurations): then
     [pl, quiet] (xArm7's q5: 25.7 against 34.8 us per pose, one rescued pose of 500 either way).
-    The decision is kept in the user cache under "<identity>-free-q<K>-cplan-first-<version>"."""
+    The decision is kept in the user cache under "<identity>-free-q<K>-cplan-first-<tag>"
+    (:func:`_choice_key`)."""
     import json
     from derive.cache import find_artifact, store_artifacts
     if _triple_deflates(quiet) or not _triple_deflates(pl):
         return [quiet, pl]
-    key = f"{robot.id}-free-q{pl.joint}-cplan-first-{__version__}"
+    key = _choice_key(robot, "cplan-first", pl, quiet, _SUSPECT_POSES, _DEFLATING_EXTRA_SUSPECTS)
     found = find_artifact(key, "c_plan_first")
     if found is not None:
         first = json.loads(found.read_text(encoding="utf-8"))["reference_first"]
@@ -388,10 +389,11 @@ def _suspects(pl: free_joint.Plan, robot, poses, values, counts) -> tuple[int, f
 
 def _quiet_plan(pl: free_joint.Plan, robot):
     """:func:`_fewest_suspects`, its choice kept in the user cache (once per code version: it
-    solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan"."""
+    solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan-<tag>"
+    (:func:`_choice_key`)."""
     import json
     from derive.cache import find_artifact, store_artifacts
-    key = f"{robot.id}-free-q{pl.joint}-cplan"
+    key = _choice_key(robot, "cplan", pl, _SUSPECT_POSES, _DEFLATION_VALUES)
     found = find_artifact(key, "c_plan")
     if found is not None:
         choice = json.loads(found.read_text(encoding="utf-8"))["choice"]
@@ -407,6 +409,26 @@ def _quiet_plan(pl: free_joint.Plan, robot):
         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the fewest poses sent to the rescue: the "
               f"reference's plan is the rescue)")
+
+
+def _choice_key(robot, kind: str, *on) -> str:
+    """The user cache's key "<identity>-free-q<K>-<kind>-<tag>" of a plan choice: ``tag`` a digest
+    of this code's version and of ``on``, the plans (their joint, direction, cut, eigen-variable
+    and offsets) and the constants the choice depends on. (The cache's folder carries the
+    version and a digest of the package's files already, :func:`derive.cache.user_folder`: the
+    tag keeps a choice made with other constants or plans in the same code, a test's or a
+    benchmark's monkeypatched ones, from being taken.)"""
+    import hashlib
+
+    def part(x):
+        if isinstance(x, free_joint.Plan):
+            return ("plan", x.joint, bool(x.reverse), int(x.e), int(x.ev), np.asarray(x.offsets).tolist(),
+                    np.asarray(x.d3).tolist())
+        return np.asarray(x).tolist() if isinstance(x, (tuple, list, np.ndarray)) else x
+
+    joint = next(x.joint for x in on if isinstance(x, free_joint.Plan))
+    tag = hashlib.sha256(repr((__version__, kind, [part(x) for x in on])).encode()).hexdigest()[:16]
+    return f"{robot.id}-free-q{joint}-{kind}-{tag}"
 
 
 def _fewest_suspects(pl: free_joint.Plan, robot):
