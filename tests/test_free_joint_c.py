@@ -426,3 +426,24 @@ def test_plan_choices_in_the_user_cache_are_keyed_on_their_plans_and_constants(t
     monkeypatch.setattr(cfree, "_DEFLATING_EXTRA_SUSPECTS", 0.05)
     suspects.update({False: 1, True: 0})                    # 1 of 10 more: above the new share
     assert [p.reverse for p in cfree._deflating_first(pl, quiet, robot)] == [True, False]
+
+
+def test_pair_side_plans_are_ranked_by_one_measure(monkeypatch):
+    """c_plans ranks the reference's plan and the candidate cuts of joints 1, 2, 6, 7 by the same
+    measure (cfree._pair_score: the block the C kernel's baked deflation leaves, then whether only
+    the span deflation reaches it). The Gen3's q1: the reference's plan reaches 16 only by the span
+    deflation (its eigenvector-wise one leaves 20); with the eigenvector-wise deflation taken
+    from every other cut (so they too reach at best 16 only by the span) none beats the
+    reference's plan, which stays first; unpatched, a cut that reaches 16 by its eigenvectors
+    alone comes first."""
+    robot = derive.load_robot("gen3")
+    pl = free_joint.plan(robot, 1)
+    assert cfree._pair_score(pl) == (16, 1) and cfree._fixed_deflation(pl)[1] == 20
+    first = cfree._c_plans(robot, 1)[0]
+    assert (first.reverse, first.e, first.ev) != (pl.reverse, pl.e, pl.ev) and cfree._pair_score(first) == (16, 0)
+    real = cfree._fixed_deflation
+    mine = (pl.reverse, pl.e, pl.ev, tuple(pl.offsets))
+    monkeypatch.setattr(cfree, "_fixed_deflation", lambda p, *a, **kw:
+                        real(p, *a, **kw) if (p.reverse, p.e, p.ev, tuple(p.offsets)) == mine else None)
+    got = cfree._c_plans(robot, 1)
+    assert [(p.reverse, p.e, p.ev) for p in got] == [(pl.reverse, pl.e, pl.ev), (pl.alt.reverse, pl.alt.e, pl.alt.ev)]

@@ -225,8 +225,8 @@ def c_plans(robot, joint: int) -> list:
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
-    deflation (:func:`_pair_deflation`) than the reference's plan by its eigenvectors
-    (:func:`_fixed_deflation`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
+    deflation (:func:`_pair_deflation`) than the reference's plan by the same measure
+    (:func:`_pair_score`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
@@ -254,7 +254,7 @@ def _c_plans(robot, joint: int) -> list:
         # here; the Panda's q7 (reached only by calling the free-joint kernels directly, as the
         # benchmarks do) keeps the reference's plans
         return plans
-    own = _fixed_deflation(pl)
+    own = _pair_score(pl)
     if own is None and not any(_held_on_pair_side(dataclasses.replace(pl, reverse=r, e=e))
                                for r in (False, True) for e in (1, 2)):
         # the held link on the triple side of every cut (joints 3-5): no baked deflation; the cut
@@ -264,12 +264,12 @@ def _c_plans(robot, joint: int) -> list:
         if quiet is not None:
             return _deflating_first(pl, quiet, robot)
         return _deflating_rescue(pl) or plans
-    # the bar: the reference's plan with its eigenvector-wise deflation (_fixed_deflation); a
-    # candidate's score (size after _pair_deflation, whether only _span_deflation reaches it): at
-    # the same size a cut whose eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the
-    # cuts that reach 16 only with _span_deflation run 15 % slower: multiple eigenvalues stay in
-    # the block)
-    best, best_keep = None, (24 if own is None else own[1], 0)
+    # the bar: the reference's plan by the candidates' measure (_pair_score: the size after
+    # _pair_deflation, as the C kernel deflates it, and whether only _span_deflation reaches it;
+    # 24 where it has none, the held link on its triple side): at the same size a cut whose
+    # eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the cuts that reach 16 only
+    # with _span_deflation run 15 % slower: multiple eigenvalues stay in the block)
+    best, best_keep = None, (24, 0) if own is None else own
     for reverse in (False, True):
         for e in (1, 2):
             if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
@@ -294,16 +294,23 @@ def _c_plans(robot, joint: int) -> list:
                         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
                               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
                               f"deflation baked; the reference's plan is the rescue)")
-                    found = _pair_deflation(cand)
-                    if found is None:
-                        continue
-                    fixed = _fixed_deflation(cand)
-                    score = (found[1], int(fixed is None or fixed[1] > found[1]))
-                    if score < best_keep:
+                    score = _pair_score(cand)
+                    if score is not None and score < best_keep:
                         best, best_keep = cand, score
     if best is None and not _held_on_pair_side(pl):
         return _deflating_rescue(pl) or plans
     return plans if best is None else [best, pl]
+
+
+def _pair_score(pl: free_joint.Plan):
+    """(the size of the block :func:`_pair_deflation` leaves, 1 where only :func:`_span_deflation`
+    reaches it else 0), the measure :func:`c_plans` ranks the plans of joints 1, 2, 6 and 7 by
+    (smaller first); None where the plan has no such deflation (the held link on its triple side)."""
+    found = _pair_deflation(pl)
+    if found is None:
+        return None
+    fixed = _fixed_deflation(pl)
+    return found[1], int(fixed is None or fixed[1] > found[1])
 
 
 #: The share of the poses that :func:`_deflating_first` lets the reference's plan send to the
