@@ -388,7 +388,25 @@ def test_c_free_joint_of_a_seven_joint_arm_from_a_file(tmp_path, monkeypatch):
     for i in range(len(q)):
         assert _same_set(cq[i, :cc[i]], nq[i, :nc[i]]), i
     valid = np.arange(cq.shape[1])[None] < cc[:, None]
-    assert np.abs(reference.fk_matrix(robot, cq[valid]) - reference.fk_matrix(robot, q)[np.nonzero(valid)[0]]).max() < 1e-10
+    target = reference.fk_matrix(robot, q)[np.nonzero(valid)[0]]
+    assert np.abs(reference.fk_matrix(robot, cq[valid]) - target).max() < 1e-10
+
+
+def test_c_free_joint_of_a_file_arm_named_like_a_library_arm(tmp_path):
+    """A file arm named like a library arm of another class (xArm7's file, its elbow 0.0531 m,
+    named "iiwa14", an SRS arm whose q6 is a class route): its C plan for q6 is on the general
+    route and deflates as its own route says (the block _pair_deflation leaves, not 24: the
+    library iiwa14's route would turn the deflation off)."""
+    text = (derive.model.robot.LIBRARY_DIR / "xarm7.yaml").read_text(encoding="utf-8")
+    path = tmp_path / "arm.yaml"
+    path.write_text(text.replace("name: xarm7\n", "name: iiwa14\n").replace("[0.0525, 0, 0]", "[0.0531, 0, 0]"),
+                    encoding="utf-8")
+    robot = derive.load_robot(path)
+    assert robot.name == "iiwa14" and free_joint.route(robot, 6) == "general"
+    assert free_joint.route("iiwa14", 6) != "general"
+    pl = cfree.c_plans(robot, 6)[0]
+    defl = cfree._core_context(pl, robot)["defl"]
+    assert defl["on"] and defl["keep"] == cfree._pair_deflation(pl)[1] < 24
 
 
 def _dummy_plan(**kw):
