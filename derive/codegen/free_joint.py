@@ -225,8 +225,8 @@ def c_plans(robot, joint: int) -> list:
     (:func:`derive.ik.free_joint.plan` and its rescue), unless a cut with the held link off the
     triple side (:func:`_held_on_pair_side`: joint 1 or 7 held, any cut; joint 2 or 6, the forward or
     reversed locked 6R cut at its joint 2; never joints 3-5) removes more eigenvectors by a baked
-    deflation (:func:`_pair_deflation`) than the reference's plan by its eigenvectors
-    (:func:`_fixed_deflation`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
+    deflation (:func:`_pair_deflation`) than the reference's plan by the same measure
+    (:func:`_pair_score`; at the same size a cut whose eigenvectors alone reach it first): that cut, where it works at every
     value of :data:`_DEFLATION_VALUES` (:func:`derive.ik.general6r._check_cut`), with the
     eigen-variable that check chose most often or another one regular there without shared real
     roots (:func:`_regular`), is then the C kernel's plan and the reference's plan its rescue
@@ -254,7 +254,7 @@ def _c_plans(robot, joint: int) -> list:
         # here; the Panda's q7 (reached only by calling the free-joint kernels directly, as the
         # benchmarks do) keeps the reference's plans
         return plans
-    own = _fixed_deflation(pl)
+    own = _pair_score(pl)
     if own is None and not any(_held_on_pair_side(dataclasses.replace(pl, reverse=r, e=e))
                                for r in (False, True) for e in (1, 2)):
         # the held link on the triple side of every cut (joints 3-5): no baked deflation; the cut
@@ -264,12 +264,12 @@ def _c_plans(robot, joint: int) -> list:
         if quiet is not None:
             return _deflating_first(pl, quiet, robot)
         return _deflating_rescue(pl) or plans
-    # the bar: the reference's plan with its eigenvector-wise deflation (_fixed_deflation); a
-    # candidate's score (size after _pair_deflation, whether only _span_deflation reaches it): at
-    # the same size a cut whose eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the
-    # cuts that reach 16 only with _span_deflation run 15 % slower: multiple eigenvalues stay in
-    # the block)
-    best, best_keep = None, (24 if own is None else own[1], 0)
+    # the bar: the reference's plan by the candidates' measure (_pair_score: the size after
+    # _pair_deflation, as the C kernel deflates it, and whether only _span_deflation reaches it;
+    # 24 where it has none, the held link on its triple side): at the same size a cut whose
+    # eigenvectors alone reach it first (on the Gen3's q1, q2 and q7 the cuts that reach 16 only
+    # with _span_deflation run 15 % slower: multiple eigenvalues stay in the block)
+    best, best_keep = None, (24, 0) if own is None else own
     for reverse in (False, True):
         for e in (1, 2):
             if not _held_on_pair_side(dataclasses.replace(pl, reverse=reverse, e=e)):
@@ -294,16 +294,23 @@ def _c_plans(robot, joint: int) -> list:
                         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
                               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the held link off the triple side: the "
                               f"deflation baked; the reference's plan is the rescue)")
-                    found = _pair_deflation(cand)
-                    if found is None:
-                        continue
-                    fixed = _fixed_deflation(cand)
-                    score = (found[1], int(fixed is None or fixed[1] > found[1]))
-                    if score < best_keep:
+                    score = _pair_score(cand)
+                    if score is not None and score < best_keep:
                         best, best_keep = cand, score
     if best is None and not _held_on_pair_side(pl):
         return _deflating_rescue(pl) or plans
     return plans if best is None else [best, pl]
+
+
+def _pair_score(pl: free_joint.Plan):
+    """(the size of the block :func:`_pair_deflation` leaves, 1 where only :func:`_span_deflation`
+    reaches it else 0), the measure :func:`c_plans` ranks the plans of joints 1, 2, 6 and 7 by
+    (smaller first); None where the plan has no such deflation (the held link on its triple side)."""
+    found = _pair_deflation(pl)
+    if found is None:
+        return None
+    fixed = _fixed_deflation(pl)
+    return found[1], int(fixed is None or fixed[1] > found[1])
 
 
 #: The share of the poses that :func:`_deflating_first` lets the reference's plan send to the
@@ -318,12 +325,13 @@ def _deflating_first(pl: free_joint.Plan, quiet: free_joint.Plan, robot) -> list
     (:func:`_triple_deflates`) and sends at most :data:`_DEFLATING_EXTRA_SUSPECTS` of the poses more
     to the rescue (:func:`_suspects` on :func:`_fewest_suspects`' configurations): then
     [pl, quiet] (xArm7's q5: 25.7 against 34.8 us per pose, one rescued pose of 500 either way).
-    The decision is kept in the user cache under "<identity>-free-q<K>-cplan-first-<version>"."""
+    The decision is kept in the user cache under "<identity>-free-q<K>-cplan-first-<tag>"
+    (:func:`_choice_key`)."""
     import json
     from derive.cache import find_artifact, store_artifacts
     if _triple_deflates(quiet) or not _triple_deflates(pl):
         return [quiet, pl]
-    key = f"{robot.id}-free-q{pl.joint}-cplan-first-{__version__}"
+    key = _choice_key(robot, "cplan-first", pl, quiet, _SUSPECT_POSES, _DEFLATING_EXTRA_SUSPECTS)
     found = find_artifact(key, "c_plan_first")
     if found is not None:
         first = json.loads(found.read_text(encoding="utf-8"))["reference_first"]
@@ -388,10 +396,11 @@ def _suspects(pl: free_joint.Plan, robot, poses, values, counts) -> tuple[int, f
 
 def _quiet_plan(pl: free_joint.Plan, robot):
     """:func:`_fewest_suspects`, its choice kept in the user cache (once per code version: it
-    solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan"."""
+    solves 120 poses for each cut and eigen-variable, 0.4-4 s) under "<identity>-free-q<K>-cplan-<tag>"
+    (:func:`_choice_key`)."""
     import json
     from derive.cache import find_artifact, store_artifacts
-    key = f"{robot.id}-free-q{pl.joint}-cplan"
+    key = _choice_key(robot, "cplan", pl, _SUSPECT_POSES, _DEFLATION_VALUES)
     found = find_artifact(key, "c_plan")
     if found is not None:
         choice = json.loads(found.read_text(encoding="utf-8"))["choice"]
@@ -407,6 +416,26 @@ def _quiet_plan(pl: free_joint.Plan, robot):
         notes=f"{'reversed' if reverse else 'forward'} 6R, cut at its joint {e}, eigen-variable "
               f"q{g6._cut_joints(e)[0][ev]} of the 6R (the fewest poses sent to the rescue: the "
               f"reference's plan is the rescue)")
+
+
+def _choice_key(robot, kind: str, *on) -> str:
+    """The user cache's key "<identity>-free-q<K>-<kind>-<tag>" of a plan choice: ``tag`` a digest
+    of this code's version and of ``on``, the plans (their joint, direction, cut, eigen-variable
+    and offsets) and the constants the choice depends on. (The cache's folder carries the
+    version and a digest of the package's files already, :func:`derive.cache.user_folder`: the
+    tag keeps a choice made with other constants or plans in the same code, a test's or a
+    benchmark's monkeypatched ones, from being taken.)"""
+    import hashlib
+
+    def part(x):
+        if isinstance(x, free_joint.Plan):
+            return ("plan", x.joint, bool(x.reverse), int(x.e), int(x.ev), np.asarray(x.offsets).tolist(),
+                    np.asarray(x.d3).tolist())
+        return np.asarray(x).tolist() if isinstance(x, (tuple, list, np.ndarray)) else x
+
+    joint = next(x.joint for x in on if isinstance(x, free_joint.Plan))
+    tag = hashlib.sha256(repr((__version__, kind, [part(x) for x in on])).encode()).hexdigest()[:16]
+    return f"{robot.id}-free-q{joint}-{kind}-{tag}"
 
 
 def _fewest_suspects(pl: free_joint.Plan, robot):
@@ -939,14 +968,16 @@ def _fit_piece(pl: free_joint.Plan, a: float, b: float, rng, rots, r: list):
     return None
 
 
-def _deflation(pl: free_joint.Plan):
+def _deflation(pl: free_joint.Plan, robot):
     """The deflation of the pencil's pose-independent eigenvectors (as the general 6R kernel's,
     :func:`derive.ik.general6r._deflation`) where it holds for every value
     (:func:`_fixed_deflation`): joint 1 or 7 held (the held link is the first or last, so the
     locked 6R's loop links 1-5 are the same for every value and the value moves only the pose
     link), or the held link on the pair side of the cut (joint 2 or 6, :func:`c_plans`); with the
     held link on the triple side the pose-independent eigenvalues and eigenvectors change with
-    the value, so there is none. As the general 6R kernels'
+    the value, so there is none. ``robot`` is the plan's robot (its route, not reloaded by
+    ``pl.robot``, the name: a robot from a file is not in the library, and a library robot of
+    the same name may be another arm). As the general 6R kernels'
     template context ``defl`` (their ``_deflation_context`` of :mod:`derive.codegen.general6r`,
     given a plan-like record with ``deflate``, ``deflate_keep``, ``spurious``); None where that
     module has no such context (a template without the deflation)."""
@@ -957,7 +988,7 @@ def _deflation(pl: free_joint.Plan):
     if make is None:
         return None
     # on a class route (the Panda's q7 only, see _c_plans) the deflation of joints 1 and 7
-    general = pl.joint in (1, 7) or free_joint.route(pl.robot, pl.joint) == "general"
+    general = pl.joint in (1, 7) or free_joint.route(robot, pl.joint) == "general"
     found = _pair_deflation(pl) if general else None
     if found is None and general and not _held_on_pair_side(pl):
         found = _triple_side_deflation(pl)        # joints 3-5: where the shared span stays put
@@ -974,10 +1005,11 @@ def _deflation(pl: free_joint.Plan):
     return make(SimpleNamespace(deflate=np.asarray(b, dtype=float), deflate_keep=int(keep), spurious=tuple(spurious)))
 
 
-def _core_context(pl: free_joint.Plan) -> dict:
+def _core_context(pl: free_joint.Plan, robot) -> dict:
     """The context of templates/general6r.c.j2 in runtime mode for one plan of the general route
     (:func:`derive.ik.free_joint.plan`): the cut, eigen-variable, offsets and direction baked in;
-    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2)."""
+    the locked chain and the coefficients are the solver core's runtime data (templates/free_joint.c.j2).
+    ``robot``: the plan's robot (or its library name), for :func:`_deflation`."""
     from derive.codegen.general6r import _arr, _lit
     e, ev = int(pl.e), int(pl.ev)
     triple, pair = g6._cut_joints(e)
@@ -990,7 +1022,7 @@ def _core_context(pl: free_joint.Plan) -> dict:
                 old[order[0]], old[order[1]], old[order[2]] = a, b, c
                 perm.append(9 * old[0] + 3 * old[1] + old[2])
     return _Context({
-        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
+        "runtime": True, "mode": {"kind": "runtime"}, "defl": _deflation(pl, robot), "reverse": bool(pl.reverse), "scale": _lit(pl.scale),
         "perm": perm, "order": order, "triple": [j - 1 for j in triple], "pair": [j - 1 for j in pair],
         "last": e - 1, "t45": _arr(g6._t45(pl.offsets[0], pl.offsets[1])), "d4": _lit(pl.offsets[0]),
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
@@ -1118,7 +1150,7 @@ def c_source(robot, joint: int) -> str:
     core = env.get_template("general6r.c.j2")
     cores = []
     for i, p in enumerate(plans):
-        text = core.render(ik={"general": _core_context(p)})
+        text = core.render(ik={"general": _core_context(p, robot)})
         cores.append(re.sub(r"\bg6_", f"fj{i}_", text))
     # the width of the core's candidate rows (6 joints, and more where the core stores flags there)
     width = re.search(r"static int fj0_candidates\([^)]*\(\*DQ_RESTRICT cq\)\[(\d+)\]", cores[0])
@@ -1130,7 +1162,7 @@ def c_source(robot, joint: int) -> str:
         plans=[{"notes": " ".join(p.notes.split()).replace("*/", "* /"), "reverse": bool(p.reverse), "e": int(p.e),
                 "triple": g6._cut_joints(int(p.e))[0], "pair": g6._cut_joints(int(p.e))[1],
                 "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
-                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p)} for p in plans],
+                "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p, robot)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
         # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
         newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
@@ -1140,11 +1172,11 @@ def c_source(robot, joint: int) -> str:
         max_solutions=MAX_SOLUTIONS)
 
 
-def _value_basis_context(pl: free_joint.Plan):
+def _value_basis_context(pl: free_joint.Plan, robot):
     """The per-value deflation basis of a plan for templates/free_joint.c.j2 (its coefficients,
     degree and columns), where :func:`_deflation` uses it (the core's ``defl.runtime``), else None."""
     from derive.codegen.general6r import _arr
-    ctx = _deflation(pl)
+    ctx = _deflation(pl, robot)
     if not (ctx or {}).get("runtime"):
         return None
     vb = value_basis(pl)
