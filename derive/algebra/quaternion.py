@@ -66,9 +66,47 @@ def dual_hamilton(a, b) -> tuple:
     return tuple(real) + tuple(x + y for x, y in zip(d1, d2))
 
 
+#: From this many numbers in an operand on, :func:`_mul` of float64 arrays takes the path of
+#: contiguous components and in-place operations (:func:`_mul_large`).
+_LARGE = 4096
+
+
+def _mul_large(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`hamilton` on large float64 arrays (..., 4): the same operations in the same order
+    (so the same bits), on contiguous copies of the components and into preallocated rows,
+    instead of strided components and a temporary per operation."""
+    ac = np.ascontiguousarray(np.moveaxis(a, -1, 0))
+    bc = np.ascontiguousarray(np.moveaxis(b, -1, 0))
+    aw, ax, ay, az = ac
+    bw, bx, by, bz = bc
+    shape = np.broadcast_shapes(a.shape[:-1], b.shape[:-1])
+    res = np.empty((4,) + shape)
+    tmp = np.empty(shape)
+    # w = aw bw - ax bx - ay by - az bz, x = aw bx + ax bw + ay bz - az by,
+    # y = aw by - ax bz + ay bw + az bx, z = aw bz + ax by - ay bx + az bw (left to right)
+    for r, terms in zip(res, (((aw, bw), (ax, bx, np.subtract), (ay, by, np.subtract), (az, bz, np.subtract)),
+                              ((aw, bx), (ax, bw, np.add), (ay, bz, np.add), (az, by, np.subtract)),
+                              ((aw, by), (ax, bz, np.subtract), (ay, bw, np.add), (az, bx, np.add)),
+                              ((aw, bz), (ax, by, np.add), (ay, bx, np.subtract), (az, bw, np.add)))):
+        np.multiply(*terms[0], out=r)
+        for u, v, op in terms[1:]:
+            np.multiply(u, v, out=tmp)
+            op(r, tmp, out=r)
+    return np.ascontiguousarray(np.moveaxis(res, 0, -1))
+
+
 def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a b on arrays (..., 4)."""
-    return np.stack(hamilton(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0)), axis=-1)
+    a, b = np.asanyarray(a), np.asanyarray(b)
+    if a.dtype == np.float64 and b.dtype == np.float64 and max(a.size, b.size) >= _LARGE:
+        return _mul_large(a, b)
+    w, x, y, z = hamilton((a[..., 0], a[..., 1], a[..., 2], a[..., 3]),
+                          (b[..., 0], b[..., 1], b[..., 2], b[..., 3]))
+    # the four components written into one array: what np.stack(..., axis=-1) makes, without
+    # its overhead (and that of moving the axes), which dominates for a few poses
+    out = np.empty(np.shape(w) + (4,), dtype=np.result_type(w, x, y, z))
+    out[..., 0], out[..., 1], out[..., 2], out[..., 3] = w, x, y, z
+    return out
 
 
 def _conj(q: np.ndarray) -> np.ndarray:

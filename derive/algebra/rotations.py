@@ -14,12 +14,20 @@ import numpy as np
 def rot_z(t) -> np.ndarray:
     """Rz(t), shape t.shape + (3, 3)."""
     c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+    # filled in place: the same matrices as stacking the rows, without the nested np.stack
+    # calls, whose overhead dominates for the few angles of a one-pose search
+    m = np.zeros(np.shape(c) + (3, 3), dtype=np.result_type(c, s))
+    m[..., 0, 0], m[..., 0, 1] = c, -s
+    m[..., 1, 0], m[..., 1, 1] = s, c
+    m[..., 2, 2] = 1.0
+    return m
 
 
 def rot_y(t) -> np.ndarray:
     """Ry(t), shape t.shape + (3, 3)."""
     c, s = np.cos(t), np.sin(t)
-    z, o = np.zeros_like(c), np.ones_like(c)
-    return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
+    m = np.zeros(np.shape(c) + (3, 3), dtype=np.result_type(c, s))
+    m[..., 0, 0], m[..., 0, 2] = c, s
+    m[..., 1, 1] = 1.0
+    m[..., 2, 0], m[..., 2, 2] = -s, c
+    return m

@@ -110,6 +110,49 @@ def _same(a, b) -> bool:
 # --------------------------------------------------------------------------- #
 # Solvers (built once per robot and options)
 # --------------------------------------------------------------------------- #
+class _Numeric:
+    """A CasADi Function called on float arrays through its evaluation buffer
+    (``casadi.Function.buffer``): the same numeric evaluation as ``f(*args)``, without the
+    conversion of every argument and result to and from DM, which dominates a call of a small
+    function (about 45 us against 6 us for the 6R ``residual``). Returns the outputs as dense
+    float arrays of their shapes (a 1 x 1 output as a float). Holds the buffer's memory: one per
+    :func:`refine` call, not shared between threads."""
+
+    def __init__(self, f):
+        self.buf, self.eval = f.buffer()
+        self.args = [np.zeros(f.nnz_in(i)) for i in range(f.n_in())]
+        self.dense_in = [f.sparsity_in(i).is_dense() for i in range(f.n_in())]
+        if not all(self.dense_in):
+            raise DeriveError(f"{f.name()}: sparse inputs are not supported here")
+        self.res = [np.zeros(f.nnz_out(i)) for i in range(f.n_out())]
+        self.out = []
+        for i in range(f.n_out()):
+            sp = f.sparsity_out(i)
+            rows, cols = sp.get_triplet()
+            self.out.append((sp.size1(), sp.size2(), sp.is_dense(), np.array(rows, dtype=np.intp),
+                             np.array(cols, dtype=np.intp)))
+        for i, a in enumerate(self.args):
+            self.buf.set_arg(i, memoryview(a))
+        for i, r in enumerate(self.res):
+            self.buf.set_res(i, memoryview(r))
+
+    def __call__(self, *args):
+        for a, x in zip(self.args, args, strict=True):
+            a[:] = np.ravel(np.asarray(x, dtype=float), order="F")
+        self.eval()
+        out = []
+        for r, (n1, n2, dense, rows, cols) in zip(self.res, self.out):
+            if n1 == 1 and n2 == 1:
+                out.append(float(r[0]) if dense else 0.0)
+            elif dense:
+                out.append(r.reshape((n1, n2), order="F").copy())
+            else:
+                m = np.zeros((n1, n2))
+                m[rows, cols] = r
+                out.append(m)
+        return out
+
+
 def _lm(resid, q, target, w, lam, q_ref, max_iter: int, tol: float):
     """Levenberg-Marquardt on the weighted residual [W e(q); sqrt(lambda) (q - q_ref)], e and
     its Jacobian from CasADi (algorithmic differentiation). Returns (q, iterations)."""
@@ -387,7 +430,7 @@ def refine(robot, pose, q0=None, *, weights=(1.0, 1.0), q_ref=None, regularizati
             raise InputError(f"q0: expected ({n},) or (k, {n}), got {seeds.shape}")
     qr = None if q_ref is None else as_finite_array(q_ref, "q_ref", last_dim=n)
     fns = functions(robot)
-    err, resid = fns["pose_error"], fns["residual"]
+    err, resid = _Numeric(fns["pose_error"]), _Numeric(fns["residual"])
     lim = robot.limits
     lbx = np.where(np.isfinite(lim[:, 0]), lim[:, 0], -np.inf)
     ubx = np.where(np.isfinite(lim[:, 1]), lim[:, 1], np.inf)
