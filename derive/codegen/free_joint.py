@@ -1164,8 +1164,9 @@ def c_source(robot, joint: int) -> str:
                 "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
                 "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p, robot)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
-        # fj_singular_flags) where 108 x 100 x G6_SINGULAR leaves a margin of 10 over G6_NEAR_SINGULAR
-        newton_clears=int(width.group(1)) >= 7 and 108 * 100 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
+        # fj_singular_flags) where 108 x 10 x G6_SINGULAR (its threshold, templates/general6r.c.j2's
+        # G6_CLEAR in the runtime mode) leaves a margin of 10 over G6_NEAR_SINGULAR
+        newton_clears=int(width.group(1)) >= 7 and 108 * 10 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
