@@ -5,6 +5,7 @@ against the numpy reference :func:`derive.ik.free_joint.solve`, the plain 4x4-ma
 IK program in C): tests/test_free_joint_srs_c.py."""
 
 import math
+import re
 import shutil
 import subprocess
 
@@ -284,19 +285,33 @@ def test_value_basis_is_invariant_at_random_values_and_poses(name, k, kind):
     per-value fit at values and poses it was not fitted at; the eigenvalues of the kept block and
     of the removed block together are the whole matrix's (no solution removed), and the removed
     ones are the same at every pose of a value. Where a piece has no basis (if any) V is zero
-    (the C kernel's answers on such values: test_c_triple_side_deflation_matches_the_reference)."""
+    (the C kernel's answers on such values: test_c_triple_side_deflation_matches_the_reference).
+    The C's table of the pieces (each to its own degree, one after the other) gives the same V."""
     robot = derive.load_robot(name)
     pl = cfree.c_plans(robot, k)[0]
     vb = cfree.value_basis(pl)
     assert vb.kind == kind and vb.r == 8
     rng = np.random.default_rng(41)
-    values = rng.uniform(-np.pi, np.pi, 4)
+    values = list(rng.uniform(-np.pi, np.pi, 4))
     if kind == "pieces":
-        # a basis on most of the range (whether or not every piece has one)
+        # a basis on most of the range (whether or not every piece has one); V = 0 where none
         assert len(vb.present) == len(vb.h) and 2 * sum(vb.present) > len(vb.present)
         for absent in [p for p, there in enumerate(vb.present) if not there]:
             assert not np.any(vb.at(-np.pi + (absent + 0.5) * 2 * np.pi / len(vb.present)))
         values = [v for v in rng.uniform(-np.pi, np.pi, 40) if vb.present[cfree._piece_of(v, len(vb.present))[0]]][:4]
+        ctx = cfree._value_basis_context(pl, robot)
+        flat = np.array([float(x) for x in re.findall(r"[-+0-9.eE]+", ctx["h"])])
+        offsets = [int(x) for x in ctx["offsets"].split(",")]
+        degrees = [int(x) for x in ctx["degrees"].split(",")]
+        assert len(flat) == ctx["size"] and len(offsets) == len(degrees) == len(vb.present) == ctx["pieces"]
+        for v in rng.uniform(-np.pi, np.pi, 16):
+            p, t = cfree._piece_of(v, ctx["pieces"])
+            if degrees[p] < 0:                        # no basis: V = 0
+                assert not vb.present[p] and not np.any(vb.at(v))
+                continue
+            h = flat[offsets[p]:offsets[p] + (degrees[p] + 1) * 24 * 8].reshape(degrees[p] + 1, 24, 8)
+            tk = np.polynomial.chebyshev.chebvander(t, degrees[p])[0]
+            np.testing.assert_allclose(np.einsum("k,kij->ij", tk, h), vb.at(v), rtol=0, atol=1e-15)
     for v in values:
         q = _inside(robot, 4, rng)
         q[:, k - 1] = v
