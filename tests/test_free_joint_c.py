@@ -144,6 +144,20 @@ def test_c_free_joint_source_compiles_as_c99_and_cxx17(tmp_path, k):
     assert_compiles_strict(src)
 
 
+@needs_gcc
+@pytest.mark.parametrize("k", [1, 7])
+def test_c_free_joint_source_of_the_end_joints_compiles_unoptimised_without_warnings(tmp_path, k):
+    """With joint 1 or 7 given no link comes before or after the held one: the source compiles
+    at -O0 (where gcc's -Wall looks at code that optimisation would drop) with warnings as errors
+    (with joint 1, fj_locked's loop over the links before it made gcc -O0 warn of a write before
+    its array)."""
+    src = tmp_path / f"xarm7_q{k}.c"
+    src.write_text(cfree.c_source("xarm7", k))
+    res = subprocess.run(["gcc", "-std=c99", "-O0", "-Wall", "-Wextra", "-Werror", "-c", "-o", "/dev/null", str(src)],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-3000:]
+
+
 def test_c_free_joint_kernels_api():
     """derive.kernels("xarm7", "c", free="q4"): ik of one pose and a batch (details, within
     limits), ik_sweep and nearest through the C kernel agree with the numpy kernels."""
