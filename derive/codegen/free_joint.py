@@ -633,6 +633,12 @@ def _triple_side_deflation_uncached(pl: free_joint.Plan):
     return None
 
 
+#: The seven-joint cores' Newton bound |det J| / |J|_F^6 (at the last step's start) at or above
+#: which a solution is regular without fj_singular_flags' LU (templates/general6r.c.j2's G6_CLEAR in
+#: the runtime mode), in units of G6_SINGULAR: 108 times it bounds sigma_min / sigma_max from below,
+#: and c_source keeps its margin of 10 over G6_NEAR_SINGULAR (the last step, below 1e-6 rad, moves
+#: the bound by about 1 %: a random-chain check found at most a factor 1.012)
+_NEWTON_CLEAR = 10.0
 #: The per-value deflation basis (:func:`value_basis`): values sampled, the degrees tried, the
 #: largest fitting leak accepted at a sample and the smallest singular value of the fitted basis
 _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV = 160, (1, 2, 4, 8, 12, 16, 24, 32), 1e-11, 1e-3
@@ -887,9 +893,9 @@ def _piece_basis(pl: free_joint.Plan):
     each fitted by :func:`_fit_piece`; a piece where no fit holds is split in two halves, each
     fitted on its own; the result has 2 :data:`_PIECES` pieces of equal width where a split was
     needed (the unsplit pieces' polynomials re-expanded on their halves: exact, the same degree),
-    else :data:`_PIECES`. A piece without a fit has none (the whole pencil there: since the
-    twelfth session only next to v = pi on xArm7's q4 and one piece of the Panda's q4 rescue
-    plan, see :func:`_fit_piece`). The degree is the largest any piece needs (the others' padded with zeros: the C
+    else :data:`_PIECES`. A piece without a fit has none (the whole pencil there: next to the
+    values where the shared eigenvalues come near x = +-i, where even the exact span's check
+    leaks, e.g. xArm7's q4 near v = pi and -0.5, the Gen3's q4 near 0; docs/ik.md). The degree is the largest any piece needs (the others' padded with zeros: the C
     evaluates each piece to its own degree, :func:`_value_basis_context`). None where no piece
     has a basis."""
     from numpy.polynomial import chebyshev as cheb
@@ -1077,7 +1083,7 @@ def _core_context(pl: free_joint.Plan, robot) -> dict:
         "d5": _lit(pl.offsets[1]), "d3": [_lit(d) for d in pl.d3], "halves": [_arr(g6._half(d)) for d in pl.d3],
         "n_d3": len(pl.d3), "start": _arr(g6._START), "nudge": _lit(g6._NUDGE),
         "cluster_tol": _lit(g6.CLUSTER_TOL), "accept": _lit(G6_ACCEPT), "real_tol": _lit(G6_REAL_TOL),
-        "newton_max": int(G6_NEWTON_MAX), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
+        "newton_max": int(G6_NEWTON_MAX), "newton_clear": _lit(_NEWTON_CLEAR), "singular": _lit(G6_SINGULAR), "good_cond": _lit(G6_GOOD_COND),
         "leading_cond": _lit(G6_LEADING_COND), "rank_tol": _lit(G6_RANK_TOL), "merge_tol": _lit(MERGE_TOL),
         "max_solutions": MAX_SOLUTIONS, "n_perturb": 0, "notes": [" ".join(pl.notes.split())],
         "how": ("the loop cut at joint %d of the %s locked 6R (pair %s eliminated linearly, triple %s, "
@@ -1213,9 +1219,9 @@ def c_source(robot, joint: int) -> str:
                 "yh": None if _yc(p) is not None else _arr(triple_harmonics(p).reshape(7, 14, 27)),
                 "y_const": None if _yc(p) is None else _arr(_yc(p)), "vb": _value_basis_context(p, robot)} for p in plans],
         # Newton's bound in the core clears a solution as regular (templates/free_joint.c.j2,
-        # fj_singular_flags) where 108 x 10 x G6_SINGULAR (its threshold, templates/general6r.c.j2's
-        # G6_CLEAR in the runtime mode) leaves a margin of 10 over G6_NEAR_SINGULAR
-        newton_clears=int(width.group(1)) >= 7 and 108 * 10 * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
+        # fj_singular_flags) where 108 x _NEWTON_CLEAR x G6_SINGULAR (its threshold, templates/
+        # general6r.c.j2's G6_CLEAR in the runtime mode) leaves a margin of 10 over G6_NEAR_SINGULAR
+        newton_clears=int(width.group(1)) >= 7 and 108 * _NEWTON_CLEAR * G6_SINGULAR >= 10 * G6_NEAR_SINGULAR,
         c7=_arr(np.reshape(c7, (8, 16))), scale=_lit(pl.scale), samples=[_lit(v) for v in g6._SAMPLES],
         sample_sc=_arr(np.stack([np.sin(g6._SAMPLES), np.cos(g6._SAMPLES)], 1)), k2inv=_arr(free_joint._KRON2_INV),
         accept=_lit(G6_ACCEPT), merge_tol=_lit(MERGE_TOL), singular=_lit(G6_SINGULAR), near_singular=_lit(G6_NEAR_SINGULAR),
