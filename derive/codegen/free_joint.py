@@ -656,6 +656,11 @@ _PIECES, _PIECE_SAMPLES, _PIECE_DEGREES, _PIECE_CHECK, _PIECE_POSES = 16, 23, (4
 _PIECE_STAGES = ((2, (4, 6, 8)), (1, (8, 12, 16, 20)))
 #: The largest leak of a sample where the accurate ones are too few (:func:`_fit_piece`)
 _PIECE_SAMPLE_LOOSE = 1e-10
+#: A trigonometric basis of at most this many terms (2 n + 1) is taken as it is; a longer one
+#: gives way to the pieces where they all hold with fewer (:func:`_value_basis`)
+_FOURIER_TERMS_TAKEN = 13
+#: The version of the stored value basis's fit and format, in its cache key (:func:`_value_basis_stored`)
+_VALUE_BASIS_FORMAT = 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -731,7 +736,7 @@ def _value_basis_stored(pl: free_joint.Plan):
     tag = hashlib.sha256(repr((__version__, pl.joint, pl.reverse, pl.e, pl.ev, np.asarray(pl.offsets).tolist(),
                                _VALUE_SAMPLES, _VALUE_DEGREES, _VALUE_SAMPLE_LEAK, _VALUE_MIN_SV, _TRIPLE_CHECK_VALUES,
                                _TRIPLE_CHECK_POSES, _TRIPLE_CHECK_LEAK, _VALUE_MIN_SHARE, _PIECES, _PIECE_SAMPLES,
-                               _PIECE_DEGREES, _PIECE_CHECK, _PIECE_POSES, _PIECE_SAMPLE_LOOSE, _PIECE_STAGES, 3)).encode()).hexdigest()[:16]
+                               _PIECE_DEGREES, _PIECE_CHECK, _PIECE_POSES, _PIECE_SAMPLE_LOOSE, _PIECE_STAGES, _VALUE_BASIS_FORMAT)).encode()).hexdigest()[:16]
     key = f"{pl.robot_id}-free-q{pl.joint}-vb-{tag}"
     found = find_artifact(key, "value_basis")
     if found is not None:
@@ -792,10 +797,10 @@ def _value_basis(pl: free_joint.Plan):
     one where it holds at :data:`_VALUE_MIN_SHARE` of them; None where neither does."""
     four = _fourier_basis(pl)
     if four is not None and four[2] == 1.0:
-        if 2 * four[1] + 1 <= 13:
+        if 2 * four[1] + 1 <= _FOURIER_TERMS_TAKEN:
             return ValueBasis("fourier", four[0], four[1])
-        # a trigonometric degree past 6: the pieces where they all hold with fewer terms (the C
-        # evaluates 13 terms per pose at most, against 2 n + 1: 49 for gen3 q3, 65 for panda q3)
+        # a trigonometric degree past 6: the pieces where they all hold with fewer terms (2 n + 1
+        # terms per pose: 49 for gen3 q3, 65 for panda q3)
         pieces = _piece_basis(pl)
         if pieces is not None and all(pieces.present) and pieces.n + 1 < 2 * four[1] + 1:
             return pieces
